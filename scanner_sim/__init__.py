@@ -1,0 +1,1 @@
+"""scanner_sim: the survey-mission simulator around the MULS lidar model."""
