@@ -306,6 +306,7 @@ class LasWriter:
         self._writer = None
         self._closed = False
         self.point_count = 0
+        self._extra_range: dict[str, tuple[float, float]] = {}
 
     # -- context management -----------------------------------------------------------------
     def __enter__(self) -> "LasWriter":
@@ -356,6 +357,7 @@ class LasWriter:
         if self._writer is None:
             self.open()
         try:
+            self._set_extra_bytes_ranges()
             self._writer.close()
             self._fh.flush()
             self._fh.close()
@@ -381,6 +383,28 @@ class LasWriter:
         if atomic is not None:
             with contextlib.suppress(BaseException):
                 atomic.__exit__(type(exc), exc, exc.__traceback__)
+
+    def _set_extra_bytes_ranges(self) -> None:
+        """Write the true min and max of every extra dimension into the extra bytes VLR.
+
+        laspy 2.7 sets the descriptors' min/max option bits but fills the values from the first
+        point of each chunk (it indexes ``points[..., 0]`` on a 1-D field), which would make the
+        file claim wrong ranges. LAS 1.4 R15 (Table 24) stores them as the 8-byte type of the
+        field's kind (uint64, int64 or double). With no points, the min/max bits are cleared.
+        """
+        for vlr in self._writer.header.vlrs:
+            if type(vlr).__name__ != "ExtraBytesVlr":
+                continue
+            for struct_ in vlr.extra_bytes_structs:
+                name = bytes(struct_.name).rstrip(b"\0").decode()
+                rng = self._extra_range.get(name)
+                if rng is None:
+                    struct_.options &= ~(struct_.MIN_BIT_MASK | struct_.MAX_BIT_MASK)
+                    continue
+                long_type = struct_._long_type()
+                np.frombuffer(struct_._min, dtype=long_type)[:1] = rng[0]
+                np.frombuffer(struct_._max, dtype=long_type)[:1] = rng[1]
+                struct_.options |= struct_.MIN_BIT_MASK | struct_.MAX_BIT_MASK
 
     # -- packing ------------------------------------------------------------------------------
     def _pack(self, r: PointRecords):
@@ -418,7 +442,13 @@ class LasWriter:
         pts.point_source_id = np.full(n, self.file_source_id, dtype=np.uint16)
         pts.gps_time = self.gps_time_offset_s + r.gps_time_s
         for name, (dtype, _) in EXTRA_DIMENSIONS.items():
-            pts[name] = getattr(r, name).astype(dtype, copy=False)
+            values = getattr(r, name).astype(dtype, copy=False)
+            pts[name] = values
+            lo, hi = values.min().item(), values.max().item()
+            if name in self._extra_range:
+                old_lo, old_hi = self._extra_range[name]
+                lo, hi = min(lo, old_lo), max(hi, old_hi)
+            self._extra_range[name] = (lo, hi)
         return pts
 
 
@@ -791,7 +821,8 @@ def write_scene_ply(path: PathLike, vertices, faces, face_label, face_object_id)
 
     The file is ``binary_little_endian 1.0`` with ``element face`` properties
     ``list uchar int vertex_indices``, ``uchar label``, ``int object_id``: trimesh, Open3D (geometry
-    only), CloudCompare and MeshLab read it; trimesh exposes the labels in ``mesh.face_attributes``.
+    only), CloudCompare and MeshLab read it; ``trimesh.load(path, process=False)`` keeps the labels in
+    ``mesh.metadata["_ply_raw"]["face"]["data"]["label"]`` (and ``"object_id"``).
     """
     v = np.asarray(vertices, dtype=np.float64)
     if v.ndim != 2 or v.shape[1] != 3:
