@@ -1,0 +1,383 @@
+"""Pictures of a pass: rendered point clouds (pyvista, off-screen), waveform and overlap plots.
+
+This is the only module of ``scanner_sim`` that imports plotting or rendering libraries, and it
+imports them inside the functions, so ``import scanner_sim`` stays light and works without a
+display. Every picture is written atomically (:func:`scanner_sim.io.atomic_path`).
+
+Class colours (:data:`CLASS_COLOURS`) are keyed by the scene's label *names*; the codes come from
+the scene label table (``scanner_sim.scene.LABELS``, ``docs/scene-format.md``):
+
+=================  =========================  ==========
+label name         colour                     RGB
+=================  =========================  ==========
+seabed, sand, mud  sand                       214 189 133
+rock               grey                       128 128 128
+cable              orange                     255 140   0
+pipeline           yellow                     240 215  30
+mine               red                        230  25  25
+tether             dark pink                  170  40 110
+panel, target      white                      245 245 245
+wreck              brown                      140  85  40
+vegetation, algae  green                       60 160  60
+unlabelled, none   dark grey                   70  70  70
+=================  =========================  ==========
+
+Other names take a colour from a fixed qualitative cycle indexed by their code.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .io import atomic_path
+
+__all__ = [
+    "CLASS_COLOURS",
+    "SCALAR_COLOUR_MAPS",
+    "class_table",
+    "plot_overlap",
+    "plot_waveforms",
+    "render_point_cloud",
+]
+
+#: Label name -> RGB colour (0..255).
+CLASS_COLOURS: dict[str, tuple[int, int, int]] = {
+    "seabed": (214, 189, 133),
+    "ground": (214, 189, 133),
+    "sand": (214, 189, 133),
+    "mud": (150, 120, 80),
+    "rock": (128, 128, 128),
+    "cable": (255, 140, 0),
+    "pipeline": (240, 215, 30),
+    "mine": (230, 25, 25),
+    "tether": (170, 40, 110),
+    "panel": (245, 245, 245),
+    "target": (245, 245, 245),
+    "wreck": (140, 85, 40),
+    "vegetation": (60, 160, 60),
+    "algae": (60, 160, 60),
+    "unlabelled": (70, 70, 70),
+    "none": (70, 70, 70),
+}
+
+_CYCLE = [(31, 119, 180), (44, 160, 44), (148, 103, 189), (23, 190, 207), (188, 189, 34),
+          (227, 119, 194), (255, 187, 120), (152, 223, 138), (197, 176, 213), (158, 218, 229)]
+
+#: Fallback code -> name table, used only when ``scanner_sim.scene.LABELS`` cannot be read.
+_FALLBACK_CLASS_NAMES: dict[int, str] = {0: "unlabelled", 2: "seabed"}
+
+#: ``color_by`` value -> (matplotlib colour map, scalar bar title, symmetric limits?).
+SCALAR_COLOUR_MAPS: dict[str, tuple[str, str, bool]] = {
+    "intensity": ("viridis", "intensity", False),
+    "channel": ("Set1", "channel", False),
+    "range_error": ("coolwarm", "range error [m]", True),
+    "snr": ("magma", "SNR", False),
+    "amplitude": ("viridis", "amplitude [LSB]", False),
+    "incidence": ("plasma", "incidence [deg]", False),
+}
+
+_BACKGROUND = "#0b1a2a"  # deep-water navy: white panels and the grey truth mesh stay visible
+
+
+def class_table(class_names: Mapping[int, str] | None = None) -> dict[int, str]:
+    """Class code -> label name.
+
+    ``class_names`` wins when given; otherwise the scene label table ``scanner_sim.scene.LABELS``
+    (either name -> code or code -> name), and a minimal fallback if the scene module is absent.
+    """
+    if class_names is not None:
+        return {int(k): str(v) for k, v in class_names.items()}
+    try:
+        from .scene import LABELS  # the geometry's label table
+    except Exception:  # noqa: BLE001 - no scene module (yet): fall back, colours still work
+        return dict(_FALLBACK_CLASS_NAMES)
+    table: dict[int, str] = {}
+    items = LABELS.items() if isinstance(LABELS, Mapping) else enumerate(LABELS)
+    for k, v in items:
+        code, name = (v, k) if isinstance(k, str) else (k, v)
+        code = getattr(code, "code", code)
+        try:
+            table[int(code)] = str(getattr(name, "name", name))
+        except (TypeError, ValueError):
+            return dict(_FALLBACK_CLASS_NAMES)
+    return table
+
+
+def _class_colour(code: int, name: str | None) -> tuple[int, int, int]:
+    if name is not None and name.lower() in CLASS_COLOURS:
+        return CLASS_COLOURS[name.lower()]
+    return _CYCLE[code % len(_CYCLE)]
+
+
+def _write_png(path_png, rgb: np.ndarray) -> None:
+    from matplotlib import image as mpimg
+
+    with atomic_path(path_png) as tmp:
+        with open(tmp, "wb") as fh:
+            mpimg.imsave(fh, rgb, format="png")
+
+
+def _figure_to_png(fig, path_png) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    with atomic_path(path_png) as tmp:
+        with open(tmp, "wb") as fh:
+            fig.savefig(fh, format="png", dpi=fig.dpi)
+
+
+def render_point_cloud(
+    path_png,
+    xyz,
+    classification=None,
+    *,
+    truth_vertices=None,
+    truth_faces=None,
+    title: str | None = None,
+    color_by: str = "class",
+    scalars=None,
+    class_names: Mapping[int, str] | None = None,
+    window_size: Sequence[int] = (1600, 1000),
+    point_size: float = 3.0,
+    max_points: int = 2_000_000,
+) -> None:
+    """Render a point cloud off-screen to a PNG, over the faded truth mesh.
+
+    Parameters
+    ----------
+    path_png : str or PathLike
+        Output picture (written atomically).
+    xyz : (n, 3) float [m]
+        Points in the world frame.
+    classification : (n,) int or None
+        Class codes; required for ``color_by="class"``.
+    truth_vertices : (n_vertices, 3) float [m], truth_faces : (n_faces, 3) int, optional
+        Truth meshes, drawn light grey at opacity 0.25.
+    title : str, optional
+        Text at the top left.
+    color_by : str
+        ``"class"`` (colours of :data:`CLASS_COLOURS`, legend of the classes present), or a scalar
+        colouring with a scalar bar: ``"intensity"``, ``"channel"``, ``"range_error"`` (diverging,
+        symmetric about 0), ``"snr"``, ``"amplitude"``, ``"incidence"``, or any other name (viridis);
+        then ``scalars`` (n,) gives the values.
+    class_names : dict code -> name, optional
+        Overrides the scene label table for names and colours.
+    window_size : (width, height) pixels
+    point_size : float [pixels]
+    max_points : int
+        Larger clouds are thinned by a fixed stride (deterministic) before rendering.
+
+    The camera looks at the points' bounding box obliquely from the south-west and above (z up),
+    fitted to the points, not to the (usually larger) truth mesh. Coordinates are shifted to the
+    points' centre before they reach VTK, so large world coordinates render without float32 jitter.
+    """
+    pts = np.asarray(xyz, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"xyz: shape {pts.shape} is not allowed; expected (n, 3)")
+    n = pts.shape[0]
+    if color_by == "class":
+        if classification is None:
+            raise ValueError("classification: required when color_by='class'")
+        values = np.asarray(classification)
+        name = "classification"
+    else:
+        if scalars is None:
+            raise ValueError(f"scalars: required when color_by={color_by!r} (one value per point)")
+        values = np.asarray(scalars, dtype=np.float64)
+        name = "scalars"
+    if values.shape != (n,):
+        raise ValueError(f"{name}: shape {values.shape} is not allowed; expected ({n},)")
+    if (truth_vertices is None) != (truth_faces is None):
+        raise ValueError("truth_vertices and truth_faces: give both or neither")
+    if len(window_size) != 2 or min(window_size) < 16:
+        raise ValueError(f"window_size: {window_size!r} is not allowed; expected (width, height) >= 16 pixels")
+    if max_points < 1:
+        raise ValueError(f"max_points: {max_points!r} is not allowed; expected >= 1")
+
+    import pyvista as pv
+
+    pv.OFF_SCREEN = True
+    if n > max_points:
+        stride = int(np.ceil(n / max_points))
+        pts, values = pts[::stride], values[::stride]
+    finite = np.all(np.isfinite(pts), axis=1)
+    pts, values = pts[finite], values[finite]
+    if len(pts):
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+    elif truth_vertices is not None and len(truth_vertices):
+        tv = np.asarray(truth_vertices, dtype=np.float64)
+        lo, hi = tv.min(axis=0), tv.max(axis=0)
+    else:
+        lo, hi = np.zeros(3), np.ones(3)
+    centre = (lo + hi) / 2.0
+    half = np.maximum((hi - lo) / 2.0, 0.5)
+
+    plotter = pv.Plotter(off_screen=True, window_size=[int(window_size[0]), int(window_size[1])])
+    try:
+        plotter.set_background(_BACKGROUND)
+        if truth_vertices is not None:
+            tv = np.asarray(truth_vertices, dtype=np.float64) - centre
+            tf = np.asarray(truth_faces, dtype=np.int64)
+            if tv.ndim != 2 or tv.shape[1] != 3 or tf.ndim != 2 or tf.shape[1] != 3:
+                raise ValueError(
+                    f"truth_vertices {tv.shape} / truth_faces {tf.shape}: expected (n_vertices, 3) and (n_faces, 3)"
+                )
+            if len(tf):
+                cells = np.column_stack([np.full(len(tf), 3, dtype=np.int64), tf]).ravel()
+                plotter.add_mesh(pv.PolyData(tv, cells), color="lightgrey", opacity=0.25,
+                                 smooth_shading=False, show_edges=False)
+        if len(pts):
+            cloud = pv.PolyData(pts - centre)
+            if color_by == "class":
+                table = class_table(class_names)
+                codes = values.astype(np.int64)
+                present = np.unique(codes)
+                lut = {int(c): _class_colour(int(c), table.get(int(c))) for c in present}
+                rgb = np.zeros((len(codes), 3), dtype=np.uint8)
+                for c, col in lut.items():
+                    rgb[codes == c] = col
+                cloud["rgb"] = rgb
+                plotter.add_mesh(cloud, scalars="rgb", rgb=True, point_size=point_size,
+                                 render_points_as_spheres=False)
+                legend = [[f"{table.get(c, 'class')} ({c})", np.array(col) / 255.0] for c, col in lut.items()]
+                plotter.add_legend(labels=legend, bcolor=(0.1, 0.1, 0.1), size=(0.18, 0.04 * len(legend) + 0.02),
+                                   loc="upper right", face="circle")
+            else:
+                cmap, bar_title, symmetric = SCALAR_COLOUR_MAPS.get(color_by, ("viridis", color_by, False))
+                good = values[np.isfinite(values)]
+                if good.size == 0:
+                    clim = (0.0, 1.0)
+                elif symmetric:
+                    m = float(np.percentile(np.abs(good), 99)) or 1.0
+                    clim = (-m, m)
+                elif color_by == "channel":
+                    clim = (float(good.min()), float(good.max()) if good.max() > good.min() else float(good.min()) + 1)
+                else:
+                    a, b = np.percentile(good, [1, 99])
+                    clim = (float(a), float(b) if b > a else float(a) + 1.0)
+                cloud[bar_title] = values
+                plotter.add_mesh(cloud, scalars=bar_title, cmap=cmap, clim=clim, point_size=point_size,
+                                 render_points_as_spheres=False, nan_color="magenta",
+                                 n_colors=int(clim[1] - clim[0]) + 1 if color_by == "channel" else 256,
+                                 scalar_bar_args={"title": bar_title, "vertical": True, "color": "white"})
+        if title:
+            plotter.add_text(title, position="upper_left", font_size=14, color="white")
+
+        view = np.array([-0.55, -1.0, 0.85])
+        view /= np.linalg.norm(view)
+        radius = float(np.linalg.norm(half))
+        plotter.camera.focal_point = (0.0, 0.0, 0.0)
+        plotter.camera.position = tuple(view * radius * 3.0)
+        plotter.camera.up = (0.0, 0.0, 1.0)
+        plotter.reset_camera(bounds=(-half[0], half[0], -half[1], half[1], -half[2], half[2]))
+        plotter.camera.zoom(1.15)
+        img = plotter.screenshot(return_img=True)
+    finally:
+        plotter.close()
+    _write_png(path_png, np.ascontiguousarray(img[..., :3]))
+
+
+def plot_waveforms(
+    path_png,
+    time_ns,
+    channels: Mapping[str, np.ndarray],
+    noise_free: Mapping[str, np.ndarray] | None = None,
+    title: str | None = None,
+    *,
+    adc_max_lsb: float | None = None,
+) -> None:
+    """Digitised records of one pulse, one panel per channel, over their noise-free curves.
+
+    Like the MULS paper's Figures 7 and 8: amplitude [LSB] against time [ns] for CH0..CH3.
+
+    Parameters
+    ----------
+    time_ns : (n_samples,) float [ns]
+        Sample times from emission.
+    channels : dict name -> (n_samples,) array [LSB]
+        Noisy digitised records, drawn as steps; panels in the dict's order.
+    noise_free : dict name -> (n_samples,) array [LSB], optional
+        The same channels without noise (and without quantisation), drawn dashed.
+    adc_max_lsb : float, optional
+        Full-scale code (e.g. 1023 for 10 bits), drawn as a dotted saturation line.
+    """
+    t = np.asarray(time_ns, dtype=np.float64)
+    if t.ndim != 1:
+        raise ValueError(f"time_ns: shape {t.shape} is not allowed; expected (n_samples,)")
+    if not isinstance(channels, Mapping) or not channels:
+        raise ValueError("channels: expected a non-empty dict of name -> (n_samples,) array")
+    for label, group in (("channels", channels), ("noise_free", noise_free or {})):
+        for name, data in group.items():
+            if np.shape(data) != t.shape:
+                raise ValueError(f"{label}[{name!r}]: shape {np.shape(data)} is not allowed; expected {t.shape}")
+    unknown = set(noise_free or {}) - set(channels)
+    if unknown:
+        raise ValueError(f"noise_free: channels {sorted(unknown)} are not in channels ({list(channels)})")
+
+    from matplotlib.figure import Figure
+
+    n = len(channels)
+    fig = Figure(figsize=(9.0, 1.9 * n + 0.8), dpi=110, layout="constrained")
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (name, data) in zip(axes, channels.items()):
+        ax.plot(t, np.asarray(data, dtype=np.float64), drawstyle="steps-mid", lw=0.9, color="tab:blue",
+                label="digitised")
+        if noise_free is not None and name in noise_free:
+            ax.plot(t, np.asarray(noise_free[name], dtype=np.float64), "--", lw=1.2, color="k", label="noise-free")
+        if adc_max_lsb is not None:
+            ax.axhline(adc_max_lsb, ls=":", color="tab:red", lw=1.0, label="full scale")
+        ax.set_ylabel(f"{name} [LSB]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time from emission [ns]")
+    if title:
+        fig.suptitle(title)
+    _figure_to_png(fig, path_png)
+
+
+def plot_overlap(
+    path_png,
+    distance_m,
+    raycast,
+    analytic,
+    *,
+    title: str | None = None,
+    raycast_label: str = "ray-cast (sub-rays in FOV and visible)",
+    analytic_label: str = "MULS Eq. 11",
+) -> None:
+    """Overlap factor against distance: the ray-cast estimate over the analytic Eq. 11 curve.
+
+    Parameters
+    ----------
+    distance_m : (n,) float [m]
+        Distance to the flat target.
+    raycast : (n,) float [1]
+        Fraction of beam energy passing the receiver check (markers); NaN entries are skipped.
+    analytic : (n,) float [1]
+        Eq. 11 overlap at the same distances (line).
+    """
+    d = np.asarray(distance_m, dtype=np.float64)
+    if d.ndim != 1:
+        raise ValueError(f"distance_m: shape {d.shape} is not allowed; expected (n,)")
+    r = np.asarray(raycast, dtype=np.float64)
+    a = np.asarray(analytic, dtype=np.float64)
+    for name, arr in (("raycast", r), ("analytic", a)):
+        if arr.shape != d.shape:
+            raise ValueError(f"{name}: shape {arr.shape} is not allowed; expected {d.shape}")
+
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7.5, 4.5), dpi=110, layout="constrained")
+    ax = fig.subplots()
+    ax.plot(d, a, "-", color="k", lw=1.5, label=analytic_label)
+    ax.plot(d, r, "o", ms=4, color="tab:orange", label=raycast_label)
+    ax.set_xlabel("distance to target [m]")
+    ax.set_ylabel("overlap factor O(z)")
+    ax.set_ylim(-0.02, 1.05)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    if title:
+        ax.set_title(title)
+    _figure_to_png(fig, path_png)
