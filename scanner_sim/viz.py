@@ -18,6 +18,8 @@ mine               red                        230  25  25
 tether             dark pink                  170  40 110
 panel, target      white                      245 245 245
 wreck              brown                      140  85  40
+object             light blue                 110 180 230
+debris             olive                      150 140  90
 vegetation, algae  green                       60 160  60
 unlabelled, none   dark grey                   70  70  70
 =================  =========================  ==========
@@ -56,6 +58,8 @@ CLASS_COLOURS: dict[str, tuple[int, int, int]] = {
     "panel": (245, 245, 245),
     "target": (245, 245, 245),
     "wreck": (140, 85, 40),
+    "object": (110, 180, 230),
+    "debris": (150, 140, 90),
     "vegetation": (60, 160, 60),
     "algae": (60, 160, 60),
     "unlabelled": (70, 70, 70),
@@ -66,7 +70,7 @@ _CYCLE = [(31, 119, 180), (44, 160, 44), (148, 103, 189), (23, 190, 207), (188, 
           (227, 119, 194), (255, 187, 120), (152, 223, 138), (197, 176, 213), (158, 218, 229)]
 
 #: Fallback code -> name table, used only when ``scanner_sim.scene.LABELS`` cannot be read.
-_FALLBACK_CLASS_NAMES: dict[int, str] = {0: "unlabelled", 2: "seabed"}
+_FALLBACK_CLASS_NAMES: dict[int, str] = {0: "unlabelled", 40: "seabed"}
 
 #: ``color_by`` value -> (matplotlib colour map, scalar bar title, symmetric limits?).
 SCALAR_COLOUR_MAPS: dict[str, tuple[str, str, bool]] = {
@@ -346,6 +350,8 @@ def plot_overlap(
     title: str | None = None,
     raycast_label: str = "ray-cast (sub-rays in FOV and visible)",
     analytic_label: str = "MULS Eq. 11",
+    dense_distance_m=None,
+    dense_analytic=None,
 ) -> None:
     """Overlap factor against distance: the ray-cast estimate over the analytic Eq. 11 curve.
 
@@ -357,6 +363,8 @@ def plot_overlap(
         Fraction of beam energy passing the receiver check (markers); NaN entries are skipped.
     analytic : (n,) float [1]
         Eq. 11 overlap at the same distances (line).
+    dense_distance_m, dense_analytic : (m,) float, optional
+        A finer Eq. 11 curve to draw instead of ``analytic`` (which then only checks shapes).
     """
     d = np.asarray(distance_m, dtype=np.float64)
     if d.ndim != 1:
@@ -366,12 +374,23 @@ def plot_overlap(
     for name, arr in (("raycast", r), ("analytic", a)):
         if arr.shape != d.shape:
             raise ValueError(f"{name}: shape {arr.shape} is not allowed; expected {d.shape}")
+    if (dense_distance_m is None) != (dense_analytic is None):
+        raise ValueError("dense_distance_m and dense_analytic: give both or neither")
+    if dense_distance_m is not None:
+        curve_d = np.asarray(dense_distance_m, dtype=np.float64)
+        curve_a = np.asarray(dense_analytic, dtype=np.float64)
+        if curve_d.ndim != 1 or curve_a.shape != curve_d.shape:
+            raise ValueError(
+                f"dense_distance_m {curve_d.shape} / dense_analytic {curve_a.shape}: expected two (m,) arrays"
+            )
+    else:
+        curve_d, curve_a = d, a
 
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7.5, 4.5), dpi=110, layout="constrained")
     ax = fig.subplots()
-    ax.plot(d, a, "-", color="k", lw=1.5, label=analytic_label)
+    ax.plot(curve_d, curve_a, "-", color="k", lw=1.5, label=analytic_label)
     ax.plot(d, r, "o", ms=4, color="tab:orange", label=raycast_label)
     ax.set_xlabel("distance to target [m]")
     ax.set_ylabel("overlap factor O(z)")

@@ -29,7 +29,7 @@ def _scene(n=3000, seed=0):
     rng = np.random.default_rng(seed)
     xy = rng.uniform([-10, -5], [10, 5], (n, 2))
     z = 0.02 * rng.normal(size=n)
-    cls = np.full(n, 2)
+    cls = np.full(n, 40)
     cable = np.abs(xy[:, 1]) < 0.4
     cls[cable], z[cable] = 64, 0.3
     mine = np.hypot(xy[:, 0] - 4, xy[:, 1] - 2) < 0.8
@@ -44,7 +44,7 @@ def test_render_by_class_over_truth_mesh(tmp_path):
     xyz, cls, verts, faces = _scene()
     out = tmp_path / "render.png"
     viz.render_point_cloud(out, xyz, cls, truth_vertices=verts, truth_faces=faces, title="cable_survey",
-                           class_names={2: "seabed", 64: "cable", 65: "mine"}, window_size=(800, 500))
+                           window_size=(800, 500))
     assert out.stat().st_size > 10_000
     assert _distinct_colours(out) > MIN_DISTINCT_COLOURS
     assert os.listdir(tmp_path) == ["render.png"]
@@ -69,6 +69,14 @@ def test_render_rejects_bad_input(tmp_path):
     assert os.listdir(tmp_path) == []
 
 
+def test_class_table_reads_the_scene_labels():
+    from scanner_sim.scene import LABELS
+
+    table = viz.class_table()
+    assert table[LABELS["cable"]] == "cable" and table[LABELS["seabed"]] == "seabed"
+    assert viz.class_table({7: "noise"}) == {7: "noise"}
+
+
 def test_class_colours_are_fixed():
     assert viz.CLASS_COLOURS["cable"] == (255, 140, 0)
     assert viz.CLASS_COLOURS["mine"] == (230, 25, 25)
@@ -84,7 +92,8 @@ def test_plot_waveforms_and_overlap(tmp_path):
     assert _distinct_colours(tmp_path / "waveforms.png") > MIN_DISTINCT_COLOURS
     d = np.linspace(0.5, 6, 40)
     analytic = np.clip((d - 1.68) / 2.5, 0, 1)
-    viz.plot_overlap(tmp_path / "overlap.png", d, analytic + rng.normal(0, 0.01, d.size), analytic)
+    viz.plot_overlap(tmp_path / "overlap.png", d, analytic + rng.normal(0, 0.01, d.size), analytic,
+                     dense_distance_m=np.linspace(0, 6, 400), dense_analytic=np.clip((np.linspace(0, 6, 400) - 1.68) / 2.5, 0, 1))
     assert _distinct_colours(tmp_path / "overlap.png") > MIN_DISTINCT_COLOURS
     with pytest.raises(ValueError, match=r"noise_free\['CH1'\]: shape"):
         viz.plot_waveforms(tmp_path / "x.png", t, noisy, {"CH1": t[:5]}, None)
