@@ -1,0 +1,174 @@
+"""``scanner-sim`` command line.
+
+Subcommands live in :data:`SUBCOMMANDS`, a registry of builder functions: adding one (``run``, ``bench``,
+``coverage``, ``view``...) is a small, separate edit: write ``def _add_name(sub)`` that adds its parser and
+sets ``func``, and decorate it with ``@subcommand("name")``. A ``ValueError`` (bad scene file, bad
+parameter) becomes one line on stderr and exit code 2, without a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Callable
+
+SUBCOMMANDS: dict[str, Callable] = {}
+
+
+def subcommand(name: str):
+    """Register a builder ``f(subparsers) -> None`` that adds subcommand ``name``."""
+
+    def deco(builder):
+        SUBCOMMANDS[name] = builder
+        return builder
+
+    return deco
+
+
+# -- scenes ---------------------------------------------------------------------------------------------
+@subcommand("scenes")
+def _add_scenes(sub):
+    p = sub.add_parser("scenes", help="list the shipped scenes, one line each")
+    p.set_defaults(func=_cmd_scenes)
+
+
+def _cmd_scenes(args) -> int:
+    from .config import load_scene, shipped_scenes
+
+    for name in shipped_scenes():
+        cfg = load_scene(name)
+        first = cfg.description.strip().splitlines()[0] if cfg.description.strip() else ""
+        print(f"{name:18s} {first}")
+    return 0
+
+
+# -- validate -------------------------------------------------------------------------------------------
+@subcommand("validate")
+def _add_validate(sub):
+    p = sub.add_parser("validate", help="check a scene file (shipped name or path); exit 2 when it is wrong")
+    p.add_argument("scene", help="shipped scene name (see `scanner-sim scenes`) or path to a YAML file")
+    p.add_argument("--build", action="store_true", help="also build the meshes and the trajectory")
+    p.set_defaults(func=_cmd_validate)
+
+
+def _cmd_validate(args) -> int:
+    from .config import load_scene
+
+    cfg = load_scene(args.scene)
+    cfg.water_model()
+    inst = cfg.instrument_model()
+    extra = ""
+    if args.build:
+        from .scene import build_scene
+        from .trajectory import build_trajectory
+
+        scene = build_scene(cfg)
+        traj = build_trajectory(cfg, scene)
+        extra = f", {scene.n_faces:,} triangles, pass {traj.duration_s:.1f} s"
+    print(f"OK {cfg.name}: water {cfg.water.preset or 'custom'}, instrument {inst.name}, "
+          f"{len(cfg.objects)} objects, platform {cfg.platform.mode}, scanner {cfg.scanner.mode}{extra}")
+    return 0
+
+
+# -- overlap --------------------------------------------------------------------------------------------
+@subcommand("overlap")
+def _add_overlap(sub):
+    p = sub.add_parser("overlap", help="ray-cast overlap on a perpendicular plate vs MULS Eq. 11")
+    p.add_argument("--distances-m", type=float, nargs="+", default=[1, 1.5, 2, 2.5, 3, 4, 5, 6, 7, 8])
+    p.add_argument("--subrays", type=int, default=61, help="beam sub-rays: 1, 7, 19, 37, 61, 91, 127, ...")
+    p.add_argument("--profile", default="top_hat", choices=["top_hat", "gaussian"])
+    p.add_argument("--instrument", default="mul2023", help="muls instrument preset (geometry only)")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--out", help="write a PNG plot here")
+    p.set_defaults(func=_cmd_overlap)
+
+
+def _cmd_overlap(args) -> int:
+    import numpy as np
+
+    from muls.errors import ParameterError
+    from muls.instrument import instrument_preset
+    from muls.water import water_preset
+
+    from .raycast import raycast_overlap
+
+    dist = np.asarray(args.distances_m, float)
+    if np.any(~np.isfinite(dist)) or np.any(dist <= 0):
+        raise ParameterError(f"--distances-m = {args.distances_m}: must all be finite and > 0")
+    geometry = instrument_preset(args.instrument, water_preset("coastal_ocean")).geometry
+    ray = raycast_overlap(dist, geometry, args.subrays, args.profile)
+    ana = geometry.overlap(dist)
+    result = {
+        "distance_m": dist.tolist(),
+        "raycast": [round(float(v), 6) for v in ray],
+        "analytic": [round(float(v), 6) for v in ana],
+        "max_abs_error": round(float(np.abs(ray - ana).max()), 6),
+        "subrays": args.subrays,
+        "profile": args.profile,
+        "instrument": args.instrument,
+        "blind_zone_m": round(geometry.blind_zone_m, 4),
+        "full_overlap_m": round(geometry.full_overlap_m, 4),
+    }
+    if args.out:
+        from .viz_overlap import plot_overlap
+
+        dense = np.linspace(0.0, float(dist.max()) * 1.05, 400)
+        plot_overlap(dist, ray, ana, args.out, args.subrays, dense, geometry.overlap(dense))
+        result["plot"] = str(args.out)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{'distance_m':>10s} {'raycast':>8s} {'Eq. 11':>8s} {'error':>8s}")
+        for z, r, a in zip(dist, ray, ana):
+            print(f"{z:10.3f} {r:8.4f} {a:8.4f} {r - a:+8.4f}")
+        print(f"max |error| {result['max_abs_error']:.4f} with {args.subrays} sub-rays")
+    return 0
+
+
+# -- bench-rays -----------------------------------------------------------------------------------------
+@subcommand("bench-rays")
+def _add_bench_rays(sub):
+    p = sub.add_parser("bench-rays", help="ray throughput: the pipeline's ray stage vs raw embreex, same rays")
+    p.add_argument("scene", nargs="?", default="cable_survey")
+    p.add_argument("--pulses", type=int, default=20000, help="scan-ordered pulses in the chunk")
+    p.add_argument("--subrays", type=int, default=19)
+    p.add_argument("--repeat", type=int, default=3, help="best of this many timings")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_bench_rays)
+
+
+def _cmd_bench_rays(args) -> int:
+    from .raybench import bench_rays
+
+    result = bench_rays(args.scene, args.pulses, args.subrays, args.repeat)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for k, v in result.items():
+            print(f"{k:28s} {v}")
+    return 0
+
+
+# -- main -----------------------------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="scanner-sim", description="Underwater lidar survey simulator (MULS)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for builder in SUBCOMMANDS.values():
+        builder(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ValueError as exc:  # ConfigError / ParameterError: one line, no traceback
+        print(f"scanner-sim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
