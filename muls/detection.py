@@ -1,0 +1,226 @@
+"""From optical power to digitised records: beam splitter and gains (Eq. 12), range gate, dark and shot
+noise, sampling with a random phase, quantisation and clipping (Eq. 13); CH0 the reference photodiode.
+
+Two record modes share this code: ``full`` synthesises every sample of the record, ``windowed`` only
+windows around the emission (for CH0) and around each echo. Noise is keyed by (seed, pulse id, channel,
+sample index), so both modes and any batching see identical samples where they overlap.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .errors import check_choice
+from .noise import (FIRST_SIGNAL_STREAM, PHASE_STREAM, REFERENCE_STREAM, normal_at, normal_pair_at, seed_key,
+                    stream_base, uniform_at)
+from .waveform import OpticalModel, PulseBatch, optical_power, pulse_value, shot_noise_lsb2_per_w
+
+RECORD_MODES = ("windowed", "full")
+
+#: Windowed mode: samples of the CH0 reference record (the emitted pulse peaks ~21 samples in).
+REFERENCE_SAMPLES = 40
+#: Windowed mode: samples per echo window, and how many of them precede an echo's start.
+WINDOW_SAMPLES = 64
+WINDOW_LEAD_S = 8e-9
+#: Samples after an echo's start that its window must hold (a strongly clipped echo's run is ~50 ns long).
+WINDOW_NEED_S = 56e-9
+
+
+@dataclass(frozen=True)
+class Records:
+    """Digitised records of a batch (struct of arrays).
+
+    reference: (n_pulses, n_ref) uint16 CH0 record from sample 0 (the whole record in ``full`` mode).
+    codes: (n_windows, n_channels, n_samples) uint16 signal-channel windows, channel j is
+    ``instrument.channels[j]``. window_pulse: (n_windows,) batch index of each window's pulse;
+    window_start: (n_windows,) index of the window's first sample in the full record. Sample k of the full
+    record is taken at ``-pretrigger_s + k / sample_rate_hz + phase_s[pulse]``. noise_free_lsb and
+    reference_noise_free_lsb: same shapes (float32, before noise, rounding and clipping) when asked for.
+    """
+
+    reference: np.ndarray
+    codes: np.ndarray
+    window_pulse: np.ndarray
+    window_start: np.ndarray
+    phase_s: np.ndarray
+    mode: str
+    noise_free_lsb: np.ndarray | None = None
+    reference_noise_free_lsb: np.ndarray | None = None
+
+    @property
+    def n_pulses(self) -> int:
+        return int(self.phase_s.shape[0])
+
+    def sample_times_s(self, model: OpticalModel) -> np.ndarray:
+        """(n_windows, n_samples) sample times [s] after emission."""
+        dig = model.instrument.digitizer
+        k = self.window_start[:, None] + np.arange(self.codes.shape[2])[None, :]
+        return -dig.pretrigger_s + k * dig.sample_interval_s + self.phase_s[self.window_pulse][:, None]
+
+    def reference_times_s(self, model: OpticalModel) -> np.ndarray:
+        """(n_pulses, n_ref) sample times [s] of the CH0 record."""
+        dig = model.instrument.digitizer
+        k = np.arange(self.reference.shape[1])[None, :]
+        return -dig.pretrigger_s + k * dig.sample_interval_s + self.phase_s[:, None]
+
+
+@dataclass(frozen=True)
+class ChannelArrays:
+    """Per-channel constants of the kernels, index 0 = CH0 reference, 1.. = signal channels."""
+
+    lsb_per_w: np.ndarray
+    gate_open_s: np.ndarray
+    gate_close_s: np.ndarray
+    dark_mean_lsb: np.ndarray
+    dark_std_lsb: np.ndarray
+    shot_lsb2_per_w: np.ndarray
+
+    @classmethod
+    def of(cls, model: OpticalModel) -> "ChannelArrays":
+        ins = model.instrument
+        dig = ins.digitizer
+        chans = ins.channels
+        lsb = np.array([0.0] + [ch.volts_per_watt * dig.lsb_per_volt for ch in chans])  # MULS Eqs. 12, 13
+        gate_open = np.array([-np.inf] + [ch.gate_delay_s if ch.gated else -np.inf for ch in chans])
+        gate_close = np.array([np.inf] + [ch.gate_delay_s + ch.gate_width_s if ch.gated else np.inf for ch in chans])
+        mean = np.array([ins.reference.dark_mean_lsb] + [ch.dark_mean_lsb for ch in chans])
+        std = np.array([ins.reference.dark_std_lsb] + [ch.dark_std_lsb for ch in chans])
+        shot = np.array([0.0] + [shot_noise_lsb2_per_w(ch, dig.bandwidth_hz, dig.lsb_per_volt) for ch in chans])
+        return cls(lsb, gate_open, gate_close, mean, std, shot)
+
+
+def sampling_phase_s(key: np.uint64, pulse_id: np.ndarray, sample_interval_s: float) -> np.ndarray:
+    """Random sampling phase of each pulse in [0, sample interval) [s] (the ADC clock is free-running)."""
+    return _phases(key, np.asarray(pulse_id, np.int64)) * sample_interval_s
+
+
+@numba.njit(cache=True)
+def _phases(key, pulse_id):
+    out = np.empty(pulse_id.shape[0])
+    for i in range(pulse_id.shape[0]):
+        out[i] = uniform_at(stream_base(key, pulse_id[i], PHASE_STREAM), 0)
+    return out
+
+
+def plan_windows(model: OpticalModel, batch: PulseBatch, offsets, delay, energy, mode: str):
+    """(window_pulse, window_start, n_samples) of the signal-channel records to synthesise."""
+    check_choice("record_mode", mode, RECORD_MODES)
+    dig = model.instrument.digitizer
+    n = batch.n_pulses
+    if mode == "full":
+        return np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64), dig.n_samples
+    first = np.floor((delay + dig.pretrigger_s - WINDOW_LEAD_S) * dig.sample_rate_hz).astype(np.int64)
+    usable = (energy > 0.0) & (first < dig.n_samples - WINDOW_SAMPLES)
+    pulses, starts = _plan(offsets, np.maximum(first, 0), usable, WINDOW_SAMPLES,
+                           int(math.ceil(WINDOW_NEED_S * dig.sample_rate_hz)))
+    return pulses, starts, WINDOW_SAMPLES
+
+
+@numba.njit(cache=True)
+def _plan(offsets, first, usable, width, need):
+    """Greedy windows per pulse: one at each echo that the previous window does not hold whole. Windows may
+    overlap; ranging keeps a peak found in two of them once."""
+    n = offsets.shape[0] - 1
+    out_p = np.empty(first.shape[0], np.int64)
+    out_s = np.empty(first.shape[0], np.int64)
+    m = 0
+    for p in range(n):
+        starts = np.sort(first[offsets[p]:offsets[p + 1]][usable[offsets[p]:offsets[p + 1]]])
+        cur = -(1 << 40)
+        for s in starts:
+            if cur <= s and s + need <= cur + width:
+                continue
+            cur = s
+            out_p[m] = p
+            out_s[m] = cur
+            m += 1
+    return out_p[:m], out_s[:m]
+
+
+def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
+             keep_noise_free: bool = False, noise: bool = True) -> Records:
+    """Digitised records of every channel for a batch of pulses (MULS Eqs. 1, 12, 13).
+
+    ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
+    """
+    ins = model.instrument
+    dig = ins.digitizer
+    key = seed_key(seed)
+    offsets, delay, energy = model.echo_delays_energies(batch)
+    window_pulse, window_start, n_samples = plan_windows(model, batch, offsets, delay, energy, mode)
+    phase = sampling_phase_s(key, batch.pulse_id, dig.sample_interval_s)
+    chans = ChannelArrays.of(model)
+    n_ref = dig.n_samples if mode == "full" else REFERENCE_SAMPLES
+    shape, ref_shape = (window_pulse.shape[0], len(ins.channels), n_samples), (batch.n_pulses, n_ref)
+    codes, reference = np.empty(shape, np.uint16), np.empty(ref_shape, np.uint16)
+    clean = np.empty(shape if keep_noise_free else (0, 0, 0), np.float32)
+    ref_clean = np.empty(ref_shape if keep_noise_free else (0, 0), np.float32)
+    tb = model.tables
+    pulse = ins.pulse
+    pulse_id = batch.pulse_id.astype(np.int64)
+    scale = 1.0 if noise else 0.0
+    _digitise(codes, clean, window_pulse, window_start, phase, pulse_id, key,
+              -dig.pretrigger_s, dig.sample_interval_s, model.basis, tb.s0a, tb.s1a, tb.s0b, tb.step_s,
+              2.0 * batch.column_cut_m / model.water.speed_m_s, batch.column_cut_weight, offsets, delay, energy,
+              batch.background_w, pulse.duration_s, chans.lsb_per_w[1:], chans.gate_open_s[1:],
+              chans.gate_close_s[1:], chans.dark_mean_lsb[1:], chans.dark_std_lsb[1:], chans.shot_lsb2_per_w[1:],
+              float(dig.max_code), scale)
+    _reference(reference, ref_clean, phase, pulse_id, key, -dig.pretrigger_s, dig.sample_interval_s, model.basis,
+               ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
+               chans.dark_std_lsb[0], float(dig.max_code), scale)
+    return Records(reference, codes, window_pulse, window_start, phase, mode,
+                   clean if keep_noise_free else None, ref_clean if keep_noise_free else None)
+
+
+@numba.njit(cache=True, inline="always")
+def _quantise(u, max_code):
+    u = math.floor(u + 0.5)  # MULS Eq. 13: rounding, then clipping to [0, 2^bits - 1]
+    return 0 if u < 0.0 else (max_code if u > max_code else u)
+
+
+@numba.njit(cache=True, parallel=True)
+def _reference(reference, clean, phase, pulse_id, key, t0, dt, basis, lsb_per_density, dark_mean, dark_std,
+               max_code, noise_scale):
+    n_pulses, n_ref = reference.shape
+    keep = clean.shape[0] > 0
+    for p in numba.prange(n_pulses):
+        base = stream_base(key, pulse_id[p], REFERENCE_STREAM)
+        for k in range(n_ref):
+            level = lsb_per_density * pulse_value(t0 + k * dt + phase[p], basis)
+            if keep:
+                clean[p, k] = level + dark_mean
+            reference[p, k] = _quantise(level + dark_mean + noise_scale * dark_std * normal_at(base, k), max_code)
+
+
+@numba.njit(cache=True, parallel=True)
+def _digitise(codes, clean, window_pulse, window_start, phase, pulse_id, key, t0, dt, basis, s0a, s1a, s0b,
+              step, cut_tau, cut_w, offsets, delay, energy, background, extent, lsb_per_w, gate_open,
+              gate_close, dark_mean, dark_std, shot_lsb2_per_w, max_code, noise_scale):
+    n_windows, n_chan, n_samples = codes.shape
+    n_pairs = (n_chan + 1) // 2
+    keep = clean.shape[0] > 0
+    for w in numba.prange(n_windows):
+        p = window_pulse[w]
+        bases = np.empty(n_pairs, np.uint64)
+        for j in range(n_pairs):
+            bases[j] = stream_base(key, pulse_id[p], FIRST_SIGNAL_STREAM + j)
+        normals = np.empty(2 * n_pairs)
+        for k in range(n_samples):
+            index = window_start[w] + k
+            t = t0 + index * dt + phase[p]
+            power = optical_power(t, p, basis, s0a, s1a, s0b, step, cut_tau, cut_w, offsets, delay, energy,
+                                  background, extent)
+            for j in range(n_pairs):
+                normals[2 * j], normals[2 * j + 1] = normal_pair_at(bases[j], index)
+            for c in range(n_chan):
+                gated = power if gate_open[c] <= t < gate_close[c] else 0.0
+                level = lsb_per_w[c] * gated  # MULS Eq. 12 in LSB (Eq. 13 without noise)
+                var = dark_std[c] * dark_std[c] + shot_lsb2_per_w[c] * gated
+                if keep:
+                    clean[w, c, k] = level + dark_mean[c]
+                codes[w, c, k] = _quantise(level + dark_mean[c] + noise_scale * math.sqrt(var) * normals[c],
+                                           max_code)  # MULS Eq. 13

@@ -1,0 +1,85 @@
+"""Received power terms of the lidar equation: window (Eq. 3), column (Eq. 4), target (Eq. 7), background
+(Eqs. 8-10). Functions are vectorised over their array arguments.
+
+Energy form: the pulse shape is normalised to unit area (DESIGN.md section 4), so each echo is
+E_t * F * w(t - delay) with F the dimensionless factor of its equation and P_t = E_t / dt replaced by
+E_t * w(t). The peak-power forms of the paper follow by replacing E_t * w by P_t.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .instrument import Instrument
+from .water import Water
+
+
+def two_way_transmission(instrument: Instrument) -> float:
+    """eta_t eta_o (1 - T_s)^2: optics and the window crossed out and back [-]."""
+    rx, tx = instrument.receiver, instrument.transmitter
+    return tx.efficiency * rx.efficiency * (1.0 - rx.window_reflectance) ** 2
+
+
+def target_factor(instrument: Instrument, water: Water, range_m, weight_per_sr):
+    """Echo energy over emitted energy for hits at ``range_m`` [m] (any shape).
+
+    weight_per_sr = sum over the footprint of w_j (rho_j / pi) cos(theta_j) times the receiver weight,
+    which for a flat Lambertian plate at normal incidence is (rho / pi) O(Z), giving exactly Eq. 7.
+    """
+    r = np.asarray(range_m, dtype=float)
+    k = water.two_way_attenuation_per_m
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = (instrument.receiver.area_m2 * np.asarray(weight_per_sr, float) * two_way_transmission(instrument)
+             * np.exp(-2.0 * k * r) / r**2)  # MULS Eq. 7
+    return np.where(r > 0.0, f, 0.0)
+
+
+def lambertian_weight(instrument: Instrument, range_m, reflectance, incidence_rad=0.0):
+    """weight_per_sr of a flat Lambertian target filling the beam: (rho / pi) cos(theta) O(Z) (Eq. 7, 11)."""
+    return (np.asarray(reflectance, float) / np.pi * np.cos(incidence_rad)
+            * instrument.geometry.overlap(range_m))
+
+
+def column_density_per_m(instrument: Instrument, water: Water, z_m):
+    """Water-column backscatter per unit range, over emitted energy [1/m] (MULS Eq. 4).
+
+    The column power is P_C(t) = E_t integral of this (z) w(t - 2 z / c_w) dz. The receiver's field-stop
+    limit (``TransceiverGeometry.collection_limit``) keeps A_r O(z) / z^2 finite near the window.
+    """
+    z = np.asarray(z_m, dtype=float)
+    geometry = instrument.geometry
+    k = water.two_way_attenuation_per_m
+    with np.errstate(divide="ignore", invalid="ignore"):
+        density = (instrument.receiver.area_m2 * geometry.overlap(z) * geometry.collection_limit(z)
+                   * water.beta_pi_per_m_sr * two_way_transmission(instrument) * np.exp(-2.0 * k * z) / z**2)  # MULS Eq. 4
+    return np.where(z > 0.0, density, 0.0)
+
+
+def window_factor(instrument: Instrument) -> float:
+    """Window return energy over emitted energy [-] (MULS Eq. 3); 0 for non-coaxial optics (O = 0)."""
+    rx, tx = instrument.receiver, instrument.transmitter
+    return (rx.area_m2 * rx.window_coupling * tx.efficiency * rx.efficiency * rx.window_reflectance
+            / rx.window_distance_m**2)  # MULS Eq. 3
+
+
+def background_power_w(instrument: Instrument, water: Water, spectral_radiance_w_m2_sr_nm: float,
+                       range_m, reflectance):
+    """Background light power [W] (MULS Eqs. 8-10) for targets at ``range_m`` with ``reflectance``.
+
+    spectral_radiance_w_m2_sr_nm: L_b of the artificial light [W/(m^2 sr nm)]; 0 in deep, dark water.
+    A pulse that meets nothing has no target term; its scattered term uses the record's far end.
+    """
+    if spectral_radiance_w_m2_sr_nm == 0.0:
+        return np.zeros(np.shape(range_m))
+    rx = instrument.receiver
+    theta_r = rx.fov_full_rad
+    band_nm = rx.filter_bandwidth_m * 1e9
+    r = np.asarray(range_m, dtype=float)
+    far = water.speed_m_s * instrument.digitizer.record_length_s / 2.0
+    r = np.where(np.isfinite(r), r, far)
+    rho = np.where(np.isfinite(np.asarray(range_m, float)), reflectance, 0.0)
+    attenuation = np.exp(-2.0 * water.two_way_attenuation_per_m * r)
+    common = spectral_radiance_w_m2_sr_nm * rx.area_m2 * rx.efficiency * band_nm * attenuation
+    p_target = common * rho * theta_r**2 / 4.0  # MULS Eq. 9
+    p_scatter = common * water.beta_pi_per_m_sr * np.pi * theta_r**2 / 4.0  # MULS Eq. 10
+    return p_target + p_scatter  # MULS Eq. 8

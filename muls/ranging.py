@@ -1,0 +1,355 @@
+"""Ranging as the instrument does it (MULS Eq. 14, DESIGN.md section 4): peaks over the local baseline,
+sub-sample refinement, time from the CH0 reference peak, channel choice, several returns, dropout cause.
+
+The baseline of each channel is the calibrated no-target record of the water (column backscatter plus
+background, as measured in open water), and its noise the dark noise plus the shot noise of that baseline:
+the processor knows its own noise model. A peak is the maximum of a run of samples whose residual over the
+baseline exceeds half the threshold, kept when the maximum exceeds the threshold (hysteresis stops noise
+on a peak's shoulder from splitting one echo in two). Echoes closer than a pulse merge into one run, and
+its range is biased, as in a real instrument.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .detection import ChannelArrays, Records
+from .waveform import OpticalModel, PulseBatch, column_value, optical_power, pulse_value
+
+DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
+NO_DROPOUT = -1
+
+#: Most peaks kept per window and channel (more means noise, not echoes).
+MAX_PEAKS_PER_WINDOW = 8
+
+
+@dataclass(frozen=True)
+class Peaks:
+    """Every peak of every signal channel (struct of arrays, shape (n,) each).
+
+    pulse: batch index; channel: 1-based index into ``instrument.channels``; time_s: after emission;
+    range_m: Eq. 14 range from the CH0 peak; amplitude_lsb: residual over the baseline at the peak;
+    snr: amplitude over the local noise; saturated: the run touched the top code.
+    """
+
+    pulse: np.ndarray
+    channel: np.ndarray
+    time_s: np.ndarray
+    range_m: np.ndarray
+    amplitude_lsb: np.ndarray
+    snr: np.ndarray
+    saturated: np.ndarray
+
+    def select(self, mask) -> "Peaks":
+        return Peaks(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
+
+
+@dataclass(frozen=True)
+class Ranging:
+    """Result of ranging a batch: chosen returns, all peaks, and each pulse's dropout cause.
+
+    returns: one row per return (channel chosen), with ``return_number`` / ``number_of_returns`` (n,) uint8;
+    dropout_cause: (n_pulses,) int8, index into DROPOUT_CAUSES, or NO_DROPOUT when the pulse has a return.
+    reference_time_s: (n_pulses,) refined CH0 peak time.
+    """
+
+    returns: Peaks
+    return_number: np.ndarray
+    number_of_returns: np.ndarray
+    peaks: Peaks
+    dropout_cause: np.ndarray
+    reference_time_s: np.ndarray
+
+
+def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records) -> tuple[Peaks, np.ndarray]:
+    """All peaks of all signal channels, with Eq. 14 ranges, and the CH0 reference times (n_pulses,) [s]."""
+    ins = model.instrument
+    dig = ins.digitizer
+    proc = ins.processing
+    chans = ChannelArrays.of(model)
+    tb = model.tables
+    n_windows, n_chan, _ = records.codes.shape
+    cap = n_windows * n_chan * MAX_PEAKS_PER_WINDOW
+    out_w = np.empty(cap, np.int64)
+    out_c = np.empty(cap, np.int64)
+    out_idx = np.empty(cap)
+    out_amp = np.empty(cap)
+    out_snr = np.empty(cap)
+    out_sat = np.empty(cap, np.bool_)
+    counts = np.zeros(n_windows * n_chan, np.int64)
+    gaussian = proc.peak_fit == "gaussian"
+    _peaks(records.codes, records.window_pulse, records.window_start, records.phase_s, -dig.pretrigger_s,
+           dig.sample_interval_s, model.basis, tb.s0a, tb.s1a, tb.s0b, tb.step_s, batch.background_w,
+           chans.lsb_per_w[1:], chans.gate_open_s[1:], chans.gate_close_s[1:], chans.dark_mean_lsb[1:],
+           chans.dark_std_lsb[1:], chans.shot_lsb2_per_w[1:], proc.threshold_sigma, float(dig.max_code), gaussian,
+           ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)), *clip_tables(model),
+           out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts)
+    ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], gaussian)
+    slot = (np.arange(cap) % MAX_PEAKS_PER_WINDOW) < np.repeat(counts, MAX_PEAKS_PER_WINDOW)
+    w, c, idx = out_w[slot], out_c[slot] + 1, out_idx[slot]
+    pulse = records.window_pulse[w]
+    phase = records.phase_s
+    time_s = -dig.pretrigger_s + idx * dig.sample_interval_s + phase[pulse]
+    ref_time = -dig.pretrigger_s + ref_index * dig.sample_interval_s + phase
+    offsets = np.array([0.0] + [ch.range_offset_m for ch in ins.channels])
+    range_m = 0.5 * model.water.speed_m_s * (time_s - ref_time[pulse]) + offsets[c]  # MULS Eq. 14
+    order = np.lexsort((idx, c, pulse))
+    # Overlapping windows find a run they both hold twice, identically: keep one.
+    unique = np.ones(order.size, bool)
+    unique[1:] = (pulse[order][1:] != pulse[order][:-1]) | (c[order][1:] != c[order][:-1]) | (
+        idx[order][1:] != idx[order][:-1])
+    order = order[unique]
+    order = order[np.lexsort((time_s[order], pulse[order]))]
+    peaks = Peaks(pulse[order], c[order], time_s[order], range_m[order], out_amp[slot][order],
+                  out_snr[slot][order], out_sat[slot][order])
+    return peaks, ref_time
+
+
+@numba.njit(cache=True, parallel=True)
+def _reference_peaks(reference, dark_mean, gaussian):
+    """Sub-sample index of the CH0 peak of each pulse."""
+    n_pulses, n_ref = reference.shape
+    out = np.empty(n_pulses)
+    for p in numba.prange(n_pulses):
+        best = 1
+        for k in range(1, n_ref - 1):
+            if reference[p, k] > reference[p, best]:
+                best = k
+        out[p] = best + _refine(reference[p, best - 1] - dark_mean, reference[p, best] - dark_mean,
+                                reference[p, best + 1] - dark_mean, gaussian)
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _refine(y0, y1, y2, gaussian):
+    """Sub-sample offset of a peak from three samples (Gaussian or parabolic three-point fit)."""
+    if gaussian and y0 > 0.0 and y1 > 0.0 and y2 > 0.0:
+        l0, l1, l2 = math.log(y0), math.log(y1), math.log(y2)
+        den = l0 - 2.0 * l1 + l2
+    else:
+        l0, l2 = y0, y2
+        den = y0 - 2.0 * y1 + y2
+    if den >= 0.0:
+        return 0.0
+    d = 0.5 * (l0 - l2) / den
+    return min(0.5, max(-0.5, d))
+
+
+@numba.njit(cache=True, parallel=True)
+def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0b, step, background,
+           lsb_per_w, gate_open, gate_close, dark_mean, dark_std, shot, k_sigma, max_code, gaussian,
+           peak_delay, peak_density, clip_ratio, clip_width, clip_offset,
+           out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts):
+    n_windows, n_chan, n_samples = codes.shape
+    cap = out_w.shape[0] // max(1, n_windows * n_chan)
+    for w in numba.prange(n_windows):
+        p = window_pulse[w]
+        times = np.empty(n_samples)
+        base_w = np.empty(n_samples)
+        for k in range(n_samples):
+            times[k] = t0 + (window_start[w] + k) * dt + phase[p]
+            base_w[k] = background[p] + column_value(times[k], np.inf, basis, s0a, s1a, s0b, step)
+        resid = np.empty(n_samples)
+        sigma = np.empty(n_samples)
+        open_ = np.empty(n_samples, np.bool_)
+        found_t = np.empty(cap)
+        found_a = np.empty(cap)
+        for c in range(n_chan):
+            slot = w * n_chan + c
+            for k in range(n_samples):
+                open_[k] = gate_open[c] <= times[k] < gate_close[c]
+                base = base_w[k] if open_[k] else 0.0
+                resid[k] = codes[w, c, k] - dark_mean[c] - lsb_per_w[c] * base
+                sigma[k] = math.sqrt(dark_std[c] ** 2 + shot[c] * base + 1.0 / 12.0)
+            n_found = 0
+            k = 0
+            while k < n_samples:
+                if n_found > 0:  # take off the tails of the echoes already found (known pulse shape)
+                    resid[k] -= _tails(times[k], found_t, found_a, n_found, basis, peak_delay, peak_density)
+                if resid[k] <= 0.5 * k_sigma * sigma[k]:
+                    k += 1
+                    continue
+                start = k
+                top = k
+                clipped_first = -1
+                clipped_last = -1
+                while True:
+                    if resid[k] > resid[top]:
+                        top = k
+                    if codes[w, c, k] >= max_code:
+                        if clipped_first < 0:
+                            clipped_first = k
+                        clipped_last = k
+                    k += 1
+                    if k >= n_samples:
+                        break
+                    if n_found > 0:
+                        resid[k] -= _tails(times[k], found_t, found_a, n_found, basis, peak_delay, peak_density)
+                    if resid[k] <= 0.5 * k_sigma * sigma[k]:
+                        break
+                # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears
+                # the threshold there.
+                if start == 0 or k >= n_samples or top == start or not open_[top - 1]:
+                    continue
+                if clipped_first < 0 and resid[top] <= k_sigma * sigma[top]:
+                    continue
+                if n_found >= cap:
+                    continue
+                if clipped_first >= 0:
+                    # Clipped: the plateau width gives amplitude and peak time through the known pulse shape.
+                    level = resid[clipped_first]
+                    width = (clipped_last - clipped_first + 1) * dt
+                    ratio = np.interp(width, clip_width, clip_ratio)
+                    idx = 0.5 * (clipped_first + clipped_last) + np.interp(width, clip_width, clip_offset) / dt
+                    amp = level / ratio
+                else:
+                    idx = top + _refine(resid[top - 1], resid[top], resid[top + 1], gaussian)
+                    amp = resid[top]
+                found_t[n_found] = t0 + (window_start[w] + idx) * dt + phase[p]
+                found_a[n_found] = amp
+                n_found += 1
+                j = slot * cap + counts[slot]
+                out_w[j] = w
+                out_c[j] = c
+                out_idx[j] = window_start[w] + idx
+                out_amp[j] = amp
+                out_snr[j] = amp / sigma[top]
+                out_sat[j] = clipped_first >= 0
+                counts[slot] += 1
+
+
+@numba.njit(cache=True, inline="always")
+def _tails(t, found_t, found_a, n_found, basis, peak_delay, peak_density):
+    total = 0.0
+    for i in range(n_found):
+        total += found_a[i] * pulse_value(t - found_t[i] + peak_delay, basis) / peak_density
+    return total
+
+
+def clip_tables(model: OpticalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For a pulse clipped at ``ratio`` of its peak: (ratio, plateau width [s], peak minus plateau centre [s]),
+    sorted by width, so a clipped run's width gives the echo's amplitude and peak time."""
+    pulse = model.instrument.pulse
+    u = np.linspace(0.0, 2.0 * pulse.duration_s, 40001)
+    f = pulse(u) / pulse(pulse.peak_delay_s)
+    i_peak = int(np.argmax(f))
+    ratio = np.geomspace(1e-7, 0.999, 400)[::-1]
+    rising = np.interp(ratio, f[: i_peak + 1], u[: i_peak + 1])
+    falling = np.interp(ratio, f[i_peak:][::-1], u[i_peak:][::-1])
+    return ratio, falling - rising, pulse.peak_delay_s - 0.5 * (rising + falling)
+
+
+def choose_returns(model: OpticalModel, peaks: Peaks):
+    """Group peaks of different channels into returns and keep one channel per return.
+
+    The unsaturated peak with the best SNR wins (CH3 inside its gate, by its gain); a return whose every
+    peak is clipped keeps the lowest-gain channel under ``saturation_policy = "keep"`` and is dropped under
+    ``"drop"``. Returns (chosen Peaks, return_number, number_of_returns, pulses with a dropped return).
+    """
+    proc = model.instrument.processing
+    n = peaks.pulse.shape[0]
+    if n == 0:
+        empty = np.zeros(0, np.uint8)
+        return peaks, empty, empty, np.zeros(0, np.int64)
+    new = np.ones(n, bool)
+    new[1:] = (peaks.pulse[1:] != peaks.pulse[:-1]) | (np.diff(peaks.time_s) > proc.merge_window_s)
+    cluster = np.cumsum(new) - 1
+    gain = np.array([0.0] + [ch.volts_per_watt for ch in model.instrument.channels])
+    score = np.where(peaks.saturated, -gain[peaks.channel], peaks.snr)
+    order = np.lexsort((score, ~peaks.saturated, cluster))
+    last = np.ones(n, bool)
+    last[:-1] = cluster[order][1:] != cluster[order][:-1]
+    best = order[last]
+    all_clipped = peaks.saturated[best]
+    dropped = peaks.pulse[best[all_clipped]] if proc.saturation_policy == "drop" else np.zeros(0, np.int64)
+    if proc.saturation_policy == "drop":
+        best = best[~all_clipped]
+    chosen = peaks.select(np.sort(best))
+    pulse = chosen.pulse
+    first = np.ones(pulse.shape[0], bool)
+    first[1:] = pulse[1:] != pulse[:-1]
+    group_start = np.maximum.accumulate(np.where(first, np.arange(pulse.shape[0]), 0))
+    return_number = (np.arange(pulse.shape[0]) - group_start + 1).astype(np.uint8)
+    counts = np.bincount(pulse, minlength=int(pulse.max()) + 1 if pulse.size else 0)
+    number_of_returns = counts[pulse].astype(np.uint8)
+    return chosen, return_number, number_of_returns, dropped
+
+
+def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped) -> np.ndarray:
+    """Cause of each pulse without a return (index into DROPOUT_CAUSES), NO_DROPOUT otherwise.
+
+    Judged on the noise-free signal at the strongest echo's peak: ``blind_zone`` if no light reaches the
+    receiver, ``saturated`` if clipped returns were dropped, ``masked_by_backscatter`` if the echo alone would
+    clear the threshold over dark noise but the column (its shot noise or its clipping) hides it,
+    ``outside_gate`` if only a gated channel could see it and its gate is shut then, else ``below_threshold``.
+    """
+    ins = model.instrument
+    dig = ins.digitizer
+    offsets, delay, energy = model.echo_delays_energies(batch)
+    record_end = dig.record_length_s
+    cause = np.full(batch.n_pulses, NO_DROPOUT, np.int8)
+    missing = ~np.asarray(has_return, bool)
+    in_record = np.zeros(batch.n_pulses, bool)
+    lit = np.zeros(batch.n_pulses, bool)
+    pulse_of = np.repeat(np.arange(batch.n_pulses), np.diff(offsets))
+    np.logical_or.at(in_record, pulse_of, delay < record_end)
+    np.logical_or.at(lit, pulse_of, (energy > 0.0) & (delay < record_end))
+    cause[missing & ~in_record] = DROPOUT_CAUSES.index("no_hit")
+    cause[missing & in_record & ~lit] = DROPOUT_CAUSES.index("blind_zone")
+    sat = np.zeros(batch.n_pulses, bool)
+    sat[np.asarray(saturated_dropped, np.int64)] = True
+    cause[missing & lit & sat] = DROPOUT_CAUSES.index("saturated")
+    todo = np.nonzero(missing & lit & ~sat)[0]
+    if todo.size:
+        strongest = np.full(batch.n_pulses, -1, np.int64)
+        masked_energy = np.where(delay < record_end, energy, -1.0)
+        order = np.lexsort((masked_energy, pulse_of))
+        strongest[pulse_of[order]] = order  # last (largest energy) per pulse wins
+        t_star = delay[strongest[todo]] + ins.pulse.peak_delay_s
+        chans = ChannelArrays.of(model)
+        tb = model.tables
+        cut_tau = 2.0 * batch.column_cut_m / model.water.speed_m_s
+        total = _powers(t_star, todo, model.basis, tb.s0a, tb.s1a, tb.s0b, tb.step_s, cut_tau,
+                        batch.column_cut_weight, offsets, delay, energy, batch.background_w, ins.pulse.duration_s)
+        base = batch.background_w[todo] + model.column_power_w(t_star)
+        echo = np.maximum(total - model.column_power_w(t_star, batch.column_cut_m[todo].min(axis=1))
+                          - batch.background_w[todo], 0.0)
+        k = ins.processing.threshold_sigma
+        masked = np.zeros(todo.size, bool)
+        gated_out = np.zeros(todo.size, bool)
+        for c in range(1, len(ins.channels) + 1):
+            in_gate = (chans.gate_open_s[c] <= t_star) & (t_star < chans.gate_close_s[c])
+            amp = chans.lsb_per_w[c] * echo
+            dark = math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
+            noise = np.sqrt(dark**2 + chans.shot_lsb2_per_w[c] * base)
+            clipped = chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * base >= dig.max_code
+            visible_alone = amp > k * dark
+            masked |= in_gate & visible_alone & ((amp <= k * noise) | clipped)
+            gated_out |= ~in_gate & visible_alone
+        cause[todo] = np.where(masked, DROPOUT_CAUSES.index("masked_by_backscatter"),
+                               np.where(gated_out, DROPOUT_CAUSES.index("outside_gate"),
+                                        DROPOUT_CAUSES.index("below_threshold")))
+    return cause
+
+
+@numba.njit(cache=True)
+def _powers(t, pulses, basis, s0a, s1a, s0b, step, cut_tau, cut_w, offsets, delay, energy, background, extent):
+    out = np.empty(t.shape[0])
+    for i in range(t.shape[0]):
+        out[i] = optical_power(t[i], pulses[i], basis, s0a, s1a, s0b, step, cut_tau, cut_w, offsets, delay,
+                               energy, background, extent)
+    return out
+
+
+def range_batch(model: OpticalModel, batch: PulseBatch, records: Records) -> Ranging:
+    """Peaks, chosen returns and dropout causes of a digitised batch."""
+    peaks, ref_time = find_peaks(model, batch, records)
+    chosen, return_number, number_of_returns, dropped = choose_returns(model, peaks)
+    has_return = np.zeros(batch.n_pulses, bool)
+    has_return[chosen.pulse] = True
+    cause = dropout_causes(model, batch, has_return, dropped)
+    return Ranging(chosen, return_number, number_of_returns, peaks, cause, ref_time)
