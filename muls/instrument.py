@@ -161,7 +161,7 @@ class Digitizer:
         return int(round((self.record_length_s + self.pretrigger_s) * self.sample_rate_hz))
 
 
-PEAK_FITS = ("gaussian", "parabolic")
+PEAK_FITS = ("pulse", "gaussian", "parabolic")
 SATURATION_POLICIES = ("drop", "keep")
 
 
@@ -170,15 +170,17 @@ class Processing:
     """How the instrument turns records into ranges (DESIGN.md section 4, Ranging)."""
 
     threshold_sigma: float = 5.0  # assumption: k of the k-sigma threshold (false alarms < 3e-7 per sample)
-    peak_fit: str = "gaussian"
+    peak_fit: str = "pulse"  # three-point fit to the known pulse shape (unbiased), or gaussian / parabolic
     saturation_policy: str = "drop"
     merge_window_s: float = 4e-9  # peaks of different channels closer than this are one echo
+    tail_tolerance: float = 0.05  # assumption: a later peak must also clear 5 % of the earlier echoes' model
 
     def __post_init__(self):
         check_positive("processing.threshold_sigma", self.threshold_sigma)
         check_choice("processing.peak_fit", self.peak_fit, PEAK_FITS)
         check_choice("processing.saturation_policy", self.saturation_policy, SATURATION_POLICIES)
         check_positive("processing.merge_window_s", self.merge_window_s)
+        check_fraction("processing.tail_tolerance", self.tail_tolerance)
 
 
 @dataclass(frozen=True)

@@ -65,6 +65,9 @@ class Ranging:
     reference_time_s: np.ndarray
 
 
+FIT_CODES = {"pulse": 0, "gaussian": 1, "parabolic": 2}
+
+
 def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records) -> tuple[Peaks, np.ndarray]:
     """All peaks of all signal channels, with Eq. 14 ranges, and the CH0 reference times (n_pulses,) [s]."""
     ins = model.instrument
@@ -81,14 +84,15 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records) -> tupl
     out_snr = np.empty(cap)
     out_sat = np.empty(cap, np.bool_)
     counts = np.zeros(n_windows * n_chan, np.int64)
-    gaussian = proc.peak_fit == "gaussian"
+    fit = FIT_CODES[proc.peak_fit]
+    shape = template_tables(model)
     _peaks(records.codes, records.window_pulse, records.window_start, records.phase_s, -dig.pretrigger_s,
            dig.sample_interval_s, model.basis, tb.s0a, tb.s1a, tb.s0b, tb.step_s, batch.background_w,
            chans.lsb_per_w[1:], chans.gate_open_s[1:], chans.gate_close_s[1:], chans.dark_mean_lsb[1:],
-           chans.dark_std_lsb[1:], chans.shot_lsb2_per_w[1:], proc.threshold_sigma, float(dig.max_code), gaussian,
-           ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)), *clip_tables(model),
-           out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts)
-    ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], gaussian)
+           chans.dark_std_lsb[1:], chans.shot_lsb2_per_w[1:], proc.threshold_sigma, proc.tail_tolerance,
+           float(dig.max_code), fit, ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)), *shape,
+           *clip_tables(model), out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts)
+    ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], fit, *shape)
     slot = (np.arange(cap) % MAX_PEAKS_PER_WINDOW) < np.repeat(counts, MAX_PEAKS_PER_WINDOW)
     w, c, idx = out_w[slot], out_c[slot] + 1, out_idx[slot]
     pulse = records.window_pulse[w]
@@ -109,8 +113,43 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records) -> tupl
     return peaks, ref_time
 
 
+def template_tables(model: OpticalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Three-point fit to the known pulse shape: (feature, offset [samples], sample over peak), by feature.
+
+    For samples y(-1), y(0), y(1) around a maximum, the parabolic feature (y1 - y-1) / (2 (2 y0 - y-1 - y1))
+    is a monotone function of the true peak's offset from sample 0 for the (asymmetric) pulse; inverting it
+    removes the phase-dependent bias of parabolic and Gaussian fits.
+    """
+    pulse = model.instrument.pulse
+    dt = model.instrument.digitizer.sample_interval_s
+    offset = np.linspace(-0.5, 0.5, 1001)
+
+    def shape(u):
+        return pulse(u + pulse.peak_delay_s) / pulse(pulse.peak_delay_s)
+
+    before, centre, after = shape((-1.0 - offset) * dt), shape(-offset * dt), shape((1.0 - offset) * dt)
+    feature = (after - before) / (2.0 * (2.0 * centre - before - after))
+    return feature, offset, centre
+
+
+@numba.njit(cache=True, inline="always")
+def _refine(y0, y1, y2, fit, feature, offset, centre):
+    """(offset of the peak from the middle sample [samples], middle sample over peak) from three samples."""
+    den = y0 - 2.0 * y1 + y2
+    if den >= 0.0:
+        return 0.0, 1.0
+    if fit == 1 and y0 > 0.0 and y1 > 0.0 and y2 > 0.0:
+        l0, l1, l2 = math.log(y0), math.log(y1), math.log(y2)
+        d = 0.5 * (l0 - l2) / (l0 - 2.0 * l1 + l2)
+        return min(0.5, max(-0.5, d)), 1.0
+    d = 0.5 * (y0 - y2) / den
+    if fit != 0:
+        return min(0.5, max(-0.5, d)), 1.0
+    return np.interp(d, feature, offset), np.interp(d, feature, centre)
+
+
 @numba.njit(cache=True, parallel=True)
-def _reference_peaks(reference, dark_mean, gaussian):
+def _reference_peaks(reference, dark_mean, fit, feature, offset, centre):
     """Sub-sample index of the CH0 peak of each pulse."""
     n_pulses, n_ref = reference.shape
     out = np.empty(n_pulses)
@@ -119,30 +158,16 @@ def _reference_peaks(reference, dark_mean, gaussian):
         for k in range(1, n_ref - 1):
             if reference[p, k] > reference[p, best]:
                 best = k
-        out[p] = best + _refine(reference[p, best - 1] - dark_mean, reference[p, best] - dark_mean,
-                                reference[p, best + 1] - dark_mean, gaussian)
+        d, _ = _refine(reference[p, best - 1] - dark_mean, reference[p, best] - dark_mean,
+                       reference[p, best + 1] - dark_mean, fit, feature, offset, centre)
+        out[p] = best + d
     return out
-
-
-@numba.njit(cache=True, inline="always")
-def _refine(y0, y1, y2, gaussian):
-    """Sub-sample offset of a peak from three samples (Gaussian or parabolic three-point fit)."""
-    if gaussian and y0 > 0.0 and y1 > 0.0 and y2 > 0.0:
-        l0, l1, l2 = math.log(y0), math.log(y1), math.log(y2)
-        den = l0 - 2.0 * l1 + l2
-    else:
-        l0, l2 = y0, y2
-        den = y0 - 2.0 * y1 + y2
-    if den >= 0.0:
-        return 0.0
-    d = 0.5 * (l0 - l2) / den
-    return min(0.5, max(-0.5, d))
 
 
 @numba.njit(cache=True, parallel=True)
 def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0b, step, background,
-           lsb_per_w, gate_open, gate_close, dark_mean, dark_std, shot, k_sigma, max_code, gaussian,
-           peak_delay, peak_density, clip_ratio, clip_width, clip_offset,
+           lsb_per_w, gate_open, gate_close, dark_mean, dark_std, shot, k_sigma, tail_tolerance, max_code, fit,
+           peak_delay, peak_density, feature, offset, centre, clip_ratio, clip_width, clip_offset,
            out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts):
     n_windows, n_chan, n_samples = codes.shape
     cap = out_w.shape[0] // max(1, n_windows * n_chan)
@@ -155,79 +180,67 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
             base_w[k] = background[p] + column_value(times[k], np.inf, basis, s0a, s1a, s0b, step)
         resid = np.empty(n_samples)
         sigma = np.empty(n_samples)
+        echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
         open_ = np.empty(n_samples, np.bool_)
-        found_t = np.empty(cap)
-        found_a = np.empty(cap)
         for c in range(n_chan):
             slot = w * n_chan + c
             for k in range(n_samples):
                 open_[k] = gate_open[c] <= times[k] < gate_close[c]
                 base = base_w[k] if open_[k] else 0.0
-                resid[k] = codes[w, c, k] - dark_mean[c] - lsb_per_w[c] * base
+                expected = dark_mean[c] + lsb_per_w[c] * base
                 sigma[k] = math.sqrt(dark_std[c] ** 2 + shot[c] * base + 1.0 / 12.0)
-            n_found = 0
+                # Where the backscatter alone clips the channel, nothing can be seen in it.
+                resid[k] = codes[w, c, k] - expected if expected < max_code else 0.0
+                echoes[k] = 0.0
             k = 0
             while k < n_samples:
-                if n_found > 0:  # take off the tails of the echoes already found (known pulse shape)
-                    resid[k] -= _tails(times[k], found_t, found_a, n_found, basis, peak_delay, peak_density)
-                if resid[k] <= 0.5 * k_sigma * sigma[k]:
+                if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
                     k += 1
                     continue
                 start = k
                 top = k
                 clipped_first = -1
                 clipped_last = -1
-                while True:
-                    if resid[k] > resid[top]:
+                while k < n_samples and resid[k] - echoes[k] > 0.5 * k_sigma * sigma[k]:
+                    if resid[k] - echoes[k] > resid[top] - echoes[top]:
                         top = k
                     if codes[w, c, k] >= max_code:
                         if clipped_first < 0:
                             clipped_first = k
                         clipped_last = k
                     k += 1
-                    if k >= n_samples:
-                        break
-                    if n_found > 0:
-                        resid[k] -= _tails(times[k], found_t, found_a, n_found, basis, peak_delay, peak_density)
-                    if resid[k] <= 0.5 * k_sigma * sigma[k]:
-                        break
-                # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears
-                # the threshold there.
+                # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
+                # threshold there, over what the echoes already found leave if their shape is a little off.
                 if start == 0 or k >= n_samples or top == start or not open_[top - 1]:
                     continue
-                if clipped_first < 0 and resid[top] <= k_sigma * sigma[top]:
+                height = resid[top] - echoes[top]
+                if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
                     continue
-                if n_found >= cap:
+                if counts[slot] >= cap:
                     continue
                 if clipped_first >= 0:
                     # Clipped: the plateau width gives amplitude and peak time through the known pulse shape.
-                    level = resid[clipped_first]
                     width = (clipped_last - clipped_first + 1) * dt
-                    ratio = np.interp(width, clip_width, clip_ratio)
-                    idx = 0.5 * (clipped_first + clipped_last) + np.interp(width, clip_width, clip_offset) / dt
-                    amp = level / ratio
+                    idx = 0.5 * float(2 * window_start[w] + clipped_first + clipped_last) + np.interp(
+                        width, clip_width, clip_offset) / dt
+                    amp = (resid[clipped_first] - echoes[clipped_first]) / np.interp(width, clip_width, clip_ratio)
                 else:
-                    idx = top + _refine(resid[top - 1], resid[top], resid[top + 1], gaussian)
-                    amp = resid[top]
-                found_t[n_found] = t0 + (window_start[w] + idx) * dt + phase[p]
-                found_a[n_found] = amp
-                n_found += 1
+                    d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
+                                       fit, feature, offset, centre)
+                    idx = float(window_start[w] + top) + d
+                    amp = height / ratio
+                    k = top + 1  # look again behind this echo once its modelled shape is taken off
+                t_peak = t0 + idx * dt + phase[p]
+                for j in range(top + 1, n_samples):
+                    echoes[j] += amp * pulse_value(times[j] - t_peak + peak_delay, basis) / peak_density
                 j = slot * cap + counts[slot]
                 out_w[j] = w
                 out_c[j] = c
-                out_idx[j] = window_start[w] + idx
+                out_idx[j] = idx
                 out_amp[j] = amp
                 out_snr[j] = amp / sigma[top]
                 out_sat[j] = clipped_first >= 0
                 counts[slot] += 1
-
-
-@numba.njit(cache=True, inline="always")
-def _tails(t, found_t, found_a, n_found, basis, peak_delay, peak_density):
-    total = 0.0
-    for i in range(n_found):
-        total += found_a[i] * pulse_value(t - found_t[i] + peak_delay, basis) / peak_density
-    return total
 
 
 def clip_tables(model: OpticalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

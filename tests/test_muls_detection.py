@@ -1,0 +1,184 @@
+"""Digitiser (Eqs. 12, 13), noise statistics, ranging (Eq. 14), channel choice, dropout causes, record modes."""
+
+import numpy as np
+import pytest
+
+from muls import mul2023, water_preset
+from muls.noise import standard_normal
+from muls.ranging import DROPOUT_CAUSES, NO_DROPOUT
+from muls.simulate import simulate
+from muls.waveform import OpticalModel, PulseBatch, shot_noise_lsb2_per_w
+
+RANGE_TOL_NOISE_FREE_M = 0.01
+
+
+def _model(water="pool", gate=(150e-9, 400e-9)):
+    ins = mul2023(*gate)
+    return OpticalModel.build(ins, water_preset(water))
+
+
+def _causes(ranging):
+    counts = np.bincount(ranging.dropout_cause[ranging.dropout_cause >= 0], minlength=len(DROPOUT_CAUSES))
+    return {name: int(n) for name, n in zip(DROPOUT_CAUSES, counts) if n}
+
+
+def test_counter_based_normals_are_standard_and_independent():
+    x = standard_normal(7, np.repeat(np.arange(200), 500), 3, np.tile(np.arange(500), 200))
+    assert abs(x.mean()) < 0.01
+    assert x.var() == pytest.approx(1.0, abs=0.02)
+    assert abs(np.corrcoef(x[:-1], x[1:])[0, 1]) < 0.01
+    assert not np.array_equal(x, standard_normal(8, np.repeat(np.arange(200), 500), 3, np.tile(np.arange(500), 200)))
+
+
+def test_quantisation_rounds_and_clipping_saturates():
+    model = _model()
+    batch = PulseBatch.flat_target(model.instrument, [3.0, 25.0])
+    rec, _ = simulate(model, batch, seed=2, mode="full", keep_noise_free=True, noise=False)
+    top = model.instrument.digitizer.max_code
+    expected = np.clip(np.floor(rec.noise_free_lsb.astype(float) + 0.5), 0, top)
+    assert np.array_equal(rec.codes, expected.astype(np.uint16))
+    assert rec.codes[0].max() == top  # the 3 m echo clips
+    assert rec.codes.dtype == np.uint16 and rec.codes.min() >= 0
+
+
+def test_shot_noise_variance_matches_its_formula():
+    """Residuals over the noise-free record have variance dark^2 + 2 e B F M^2 S_k xi_i P (xi_v R_L)^2 + 1/12."""
+    model = _model("pond")
+    ins = model.instrument
+    batch = PulseBatch.flat_target(ins, np.full(400, 30.0), pulse_id=np.arange(400))
+    rec, _ = simulate(model, batch, seed=11, mode="full", keep_noise_free=True)
+    ch = 0  # ch1 sees the column far above its dark noise; its clipped samples are left out
+    channel = ins.channels[ch]
+    clean = rec.noise_free_lsb[:, ch, :].astype(float)
+    codes = rec.codes[:, ch, :].astype(float)
+    power_w = (clean - channel.dark_mean_lsb) / (channel.volts_per_watt * ins.digitizer.lsb_per_volt)
+    shot = shot_noise_lsb2_per_w(channel, ins.digitizer.bandwidth_hz, ins.digitizer.lsb_per_volt) * power_w
+    strong = (shot > 4 * channel.dark_std_lsb**2) & (clean < ins.digitizer.max_code - 8 * np.sqrt(shot + 1))
+    assert strong.sum() > 2000
+    z = (codes - clean)[strong] / np.sqrt(channel.dark_std_lsb**2 + shot[strong] + 1 / 12)
+    assert z.var() == pytest.approx(1.0, abs=0.05)
+    assert abs(z.mean()) < 0.05
+
+
+@pytest.mark.parametrize("range_m", [7.0, 9.0, 12.0, 16.0, 19.0])
+def test_noise_free_ranging_within_1_cm(range_m):
+    """Echoes of 150 LSB and more: only the sampling phase and 10-bit rounding remain."""
+    model = _model()
+    batch = PulseBatch.flat_target(model.instrument, np.full(20, range_m), pulse_id=np.arange(20))
+    _, ranging = simulate(model, batch, seed=5, noise=False)
+    assert ranging.returns.pulse.size == 20
+    assert np.all(np.abs(ranging.returns.range_m - range_m) < RANGE_TOL_NOISE_FREE_M)
+
+
+@pytest.mark.parametrize("range_m", [22.0, 30.0])
+def test_noise_free_ranging_of_weak_echoes_is_quantisation_limited(range_m):
+    """A 24 LSB echo at 30 m ranges to several cm with 10 bits; a 14-bit digitiser brings it within 1 cm."""
+    from dataclasses import replace
+
+    base = mul2023(150e-9, 400e-9)
+    fine = replace(base, digitizer=replace(base.digitizer, bits=14))
+    model = OpticalModel.build(fine, water_preset("pool"))
+    batch = PulseBatch.flat_target(fine, np.full(20, range_m), pulse_id=np.arange(20))
+    _, ranging = simulate(model, batch, seed=5, noise=False)
+    assert np.all(np.abs(ranging.returns.range_m - range_m) < RANGE_TOL_NOISE_FREE_M)
+
+
+def test_channel_choice_high_gain_saturated_falls_to_low_gain():
+    model = _model()
+    batch = PulseBatch.flat_target(model.instrument, np.full(30, 9.0), pulse_id=np.arange(30))
+    _, ranging = simulate(model, batch, seed=3)
+    ch1_peaks = ranging.peaks.select(ranging.peaks.channel == 1)
+    assert ch1_peaks.saturated.all()
+    assert np.all(ranging.returns.channel == 2)
+    assert not ranging.returns.saturated.any()
+
+
+def test_channel_choice_echo_in_gate_uses_ch3():
+    model = _model("pond", (100e-9, 400e-9))
+    batch = PulseBatch.flat_target(model.instrument, np.full(30, 13.0), pulse_id=np.arange(30))
+    _, ranging = simulate(model, batch, seed=3)
+    assert np.all(ranging.returns.channel == 3)
+    assert np.all(np.abs(ranging.returns.range_m - 13.0) < 0.2)
+
+
+def test_record_modes_agree_on_detections_and_ranges():
+    model = _model("coastal_ocean", (100e-9, 400e-9))
+    rng = np.random.default_rng(4)
+    batch = PulseBatch.flat_target(model.instrument, rng.uniform(1.0, 60.0, 300), rng.uniform(0.02, 0.5, 300))
+    _, windowed = simulate(model, batch, seed=9, mode="windowed")
+    _, full = simulate(model, batch, seed=9, mode="full")
+    for field in ("pulse", "channel", "saturated"):
+        assert np.array_equal(getattr(windowed.returns, field), getattr(full.returns, field)), field
+    for field in ("range_m", "amplitude_lsb"):
+        assert np.allclose(getattr(windowed.returns, field), getattr(full.returns, field), rtol=0, atol=1e-9), field
+    assert np.array_equal(windowed.dropout_cause, full.dropout_cause)
+
+
+def test_batching_does_not_change_results():
+    model = _model("coastal_ocean")
+    ranges = np.random.default_rng(5).uniform(2.0, 40.0, 200)
+    whole = simulate(model, PulseBatch.flat_target(model.instrument, ranges), seed=21)[1]
+    parts = [simulate(model, PulseBatch.flat_target(model.instrument, ranges[s], pulse_id=np.arange(200)[s]), seed=21)[1]
+             for s in (slice(0, 77), slice(77, 200))]
+    assert np.array_equal(whole.returns.range_m, np.concatenate([p.returns.range_m for p in parts]))
+    assert np.array_equal(whole.dropout_cause, np.concatenate([p.dropout_cause for p in parts]))
+
+
+def test_seed_changes_noise_but_not_noise_free_result():
+    model = _model()
+    batch = PulseBatch.flat_target(model.instrument, np.full(50, 19.0))
+    a = simulate(model, batch, seed=1)[1].returns.range_m
+    b = simulate(model, batch, seed=2)[1].returns.range_m
+    assert not np.array_equal(a, b)
+    assert abs(a.mean() - b.mean()) < 0.02
+
+
+@pytest.mark.parametrize("water, gate, range_m, rho, cause", [
+    ("pool", (150e-9, 400e-9), np.inf, 0.1, "no_hit"),
+    ("pool", (150e-9, 400e-9), 1.0, 0.1, "blind_zone"),
+    ("turbid_harbor", (100e-9, 400e-9), 20.0, 0.1, "below_threshold"),
+    ("coastal_ocean", (100e-9, 400e-9), 3.0, 0.1, "saturated"),
+    ("turbid_harbor", (100e-9, 400e-9), 2.5, 0.001, "masked_by_backscatter"),
+    ("pond", (200e-9, 400e-9), 13.0, 0.1, "outside_gate"),
+])
+def test_each_dropout_cause_is_reached(water, gate, range_m, rho, cause):
+    model = _model(water, gate)
+    batch = PulseBatch.flat_target(model.instrument, np.full(20, range_m), rho)
+    _, ranging = simulate(model, batch, seed=6)
+    assert ranging.returns.pulse.size == 0
+    assert _causes(ranging) == {cause: 20}
+
+
+def test_saturated_returns_kept_under_keep_policy():
+    from dataclasses import replace
+
+    model = _model("coastal_ocean", (100e-9, 400e-9))
+    ins = replace(model.instrument, processing=replace(model.instrument.processing, saturation_policy="keep"))
+    model = OpticalModel.build(ins, model.water)
+    _, ranging = simulate(model, PulseBatch.flat_target(ins, np.full(20, 3.0)), seed=6)
+    assert ranging.returns.pulse.size == 20
+    assert ranging.returns.saturated.all()
+    assert np.all(ranging.dropout_cause == NO_DROPOUT)
+    # The clipped plateau's width recovers the peak time through the known pulse shape.
+    assert np.all(np.abs(ranging.returns.range_m - 3.0) < 0.1)
+
+
+def test_two_echoes_in_one_footprint_give_two_returns_and_close_ones_merge():
+    model = _model()
+    ins = model.instrument
+
+    def batch_for(ranges):
+        n = 20
+        return PulseBatch(
+            pulse_id=np.arange(n), return_pulse=np.repeat(np.arange(n), 2),
+            return_range_m=np.tile(ranges, n), return_weight_per_sr=np.full(2 * n, 0.5 * 0.05 / np.pi),
+            column_cut_m=np.full((n, 1), max(ranges)), column_cut_weight=np.ones((n, 1)), background_w=np.zeros(n))
+
+    _, apart = simulate(model, batch_for([15.0, 17.0]), seed=1)
+    assert np.all(apart.number_of_returns == 2)
+    assert np.allclose(apart.returns.range_m[apart.return_number == 1], 15.0, atol=0.1)
+    assert np.allclose(apart.returns.range_m[apart.return_number == 2], 17.0, atol=0.15)
+    _, close = simulate(model, batch_for([15.0, 15.3]), seed=1)
+    assert np.all(close.number_of_returns == 1)
+    merged = close.returns.range_m
+    assert np.all((merged > 15.0) & (merged < 15.3))  # one biased range between the two surfaces

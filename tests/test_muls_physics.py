@@ -1,0 +1,229 @@
+"""Closed-form checks of the MULS optics: pulse (Eq. 2), water (Eqs. 5, 6), overlap (Eq. 11), radiometry
+(Eqs. 3, 4, 7-10) and the exactly-cut water column."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from muls import Digitizer, ParameterError, PulseShape, Transmitter, Water, mul2023, water_preset
+from muls.instrument import coaxial
+from muls.radiometry import (background_power_w, column_density_per_m, lambertian_weight, target_factor,
+                             two_way_transmission, window_factor)
+from muls.waveform import OpticalModel
+
+REL_TOL_TABLE = 2e-3  # column tables: trapezoid rule on a 25 ps grid
+
+
+def test_pulse_has_unit_area_fwhm_and_peak_at_0409_width():
+    pulse = PulseShape(10e-9)
+    t = np.linspace(0.0, 400e-9, 400001)
+    w = pulse(t)
+    assert np.trapezoid(w, t) == pytest.approx(1.0, abs=1e-7)
+    above = t[w >= 0.5 * w.max()]
+    assert above[-1] - above[0] == pytest.approx(10e-9, abs=2e-12)
+    assert pulse.peak_delay_s == pytest.approx(0.4088 * 10e-9, rel=1e-3)
+    assert pulse(-1e-9) == 0.0
+
+
+def test_band_limited_pulse_keeps_unit_area_and_is_later_and_lower():
+    raw, filtered = PulseShape(10e-9), PulseShape(10e-9, 200e6)
+    t = np.linspace(0.0, 400e-9, 400001)
+    assert np.trapezoid(filtered(t), t) == pytest.approx(1.0, abs=1e-7)
+    assert filtered.peak_delay_s > raw.peak_delay_s
+    assert filtered(filtered.peak_delay_s) < raw(raw.peak_delay_s)
+    # The first-order low-pass adds its time constant 1 / (2 pi B) to the mean delay.
+    mean_raw = np.trapezoid(t * raw(t), t)
+    mean_filtered = np.trapezoid(t * filtered(t), t)
+    assert mean_filtered - mean_raw == pytest.approx(1.0 / (2 * math.pi * 200e6), rel=1e-4)
+
+
+@pytest.mark.parametrize("name, expected", [("clean_ocean", 0.119), ("coastal_ocean", 0.202), ("turbid_harbor", 0.521)])
+def test_k_lidar_of_petzold_waters(name, expected):
+    assert water_preset(name).k_lidar_per_m == pytest.approx(expected, abs=6e-4)
+
+
+def test_attenuation_options_and_limits():
+    clean = water_preset("clean_ocean")
+    assert clean.with_models(attenuation_model="c").two_way_attenuation_per_m == pytest.approx(0.151)
+    # k_lidar is c for an absorbing-only water (w0 = 0) and below c for any scattering water.
+    absorbing = Water("absorbing", 0.2, 0.0)
+    assert absorbing.k_lidar_per_m == pytest.approx(0.2)
+    assert clean.k_lidar_per_m < clean.attenuation_per_m
+    kd = clean.with_models(attenuation_model="kd").two_way_attenuation_per_m
+    assert clean.absorption_per_m < kd < clean.attenuation_per_m
+
+
+def test_backscatter_options():
+    harbor = water_preset("turbid_harbor")
+    b = harbor.scattering_per_m
+    assert harbor.beta_pi_per_m_sr == pytest.approx(0.0031 * b)
+    assert harbor.with_models(backscatter_model="hg").beta_pi_per_m_sr == pytest.approx(1.634e-3 * b, rel=1e-3)
+    assert harbor.with_models(backscatter_model="eq5").beta_pi_per_m_sr == pytest.approx(0.0962 * b, rel=2e-3)
+    # The pond has no measured beta(pi): "measured" falls back to Henyey-Greenstein.
+    pond = water_preset("pond")
+    assert pond.beta_pi_per_m_sr == pond.with_models(backscatter_model="hg").beta_pi_per_m_sr
+
+
+def test_group_velocity():
+    assert water_preset("clean_ocean").speed_m_s == pytest.approx(299_792_458 / 1.364)
+    assert water_preset("pool").speed_m_s == pytest.approx(299_792_458 / 1.357)
+
+
+def test_overlap_blind_zone_and_full_overlap_from_closed_form():
+    g = mul2023().geometry
+    r10, r20, t1, t2, d = 0.005, g.receiver_diameter_m / 2, math.tan(2e-3), math.tan(50e-3), 0.13
+    assert g.blind_zone_m == pytest.approx((d - r10 - r20) / (t1 + t2))
+    assert g.blind_zone_m == pytest.approx(1.683, abs=1e-3)  # DESIGN.md section 4: 1.68 m (half-angle reading)
+    assert g.full_overlap_m == pytest.approx((d - r20 + r10) / (t2 - t1))
+    z = np.linspace(0.0, 10.0, 20001)
+    o = g.overlap(z)
+    assert np.all(o[z <= g.blind_zone_m] == 0.0)
+    assert np.all(o[z >= g.full_overlap_m] == pytest.approx(1.0))
+    assert np.all(np.diff(o) >= -1e-12)  # monotone
+    assert np.max(np.abs(np.diff(o))) < 5e-3  # continuous: no jump on a 0.5 mm grid
+    inside = (z > g.blind_zone_m) & (z < g.full_overlap_m)
+    assert np.all((o[inside] > 0.0) & (o[inside] < 1.0))
+
+
+def test_overlap_equals_lens_area_by_monte_carlo():
+    g = mul2023().geometry
+    z = 1.85
+    r1, r2 = float(g.beam_radius_m(z)), float(g.footprint_radius_m(z))
+    rng = np.random.default_rng(1)
+    n = 400_000
+    rad, ang = r1 * np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
+    x, y = rad * np.cos(ang), rad * np.sin(ang)
+    inside = (x - g.offset_m) ** 2 + y**2 <= r2**2
+    assert float(g.overlap(z)) == pytest.approx(inside.mean(), abs=4e-3)
+
+
+def test_full_angle_reading_moves_blind_zone_to_337_m():
+    ins = mul2023()
+    full_reading = replace(
+        ins, transmitter=replace(ins.transmitter, beam_divergence_full_rad=2e-3),
+        receiver=replace(ins.receiver, fov_full_rad=50e-3))
+    assert full_reading.geometry.blind_zone_m == pytest.approx(3.37, abs=0.01)
+
+
+def test_flat_plate_factor_is_eq7():
+    ins, water = mul2023(), water_preset("pond")
+    z, rho = 8.5, 0.1
+    weight = lambertian_weight(ins, z, rho)
+    expected = (ins.receiver.area_m2 * 1.0 * rho / math.pi * 0.9 * 0.6 * (1 - 0.0039) ** 2
+                * math.exp(-2 * water.k_lidar_per_m * z) / z**2)
+    assert float(target_factor(ins, water, z, weight)) == pytest.approx(expected, rel=1e-12)
+    # Inside the blind zone no light reaches the receiver.
+    assert float(target_factor(ins, water, 1.0, lambertian_weight(ins, 1.0, rho))) == 0.0
+
+
+def test_flat_plate_echo_energy_in_the_record_equals_eq7():
+    """The noise-free waveform of a plate minus that of a black plate at the same range is the Eq. 7 echo."""
+    from muls.simulate import simulate
+    from muls.waveform import PulseBatch
+
+    ins, water = mul2023(), water_preset("pool")
+    ins = ins.with_channel("ch3", gate_delay_s=None, gate_width_s=None)
+    model = OpticalModel.build(ins, water)
+    z = 12.0
+    records = []
+    for rho in (0.05, 0.0):
+        batch = PulseBatch.flat_target(ins, [z], rho)
+        rec, _ = simulate(model, batch, seed=1, mode="full", keep_noise_free=True)
+        records.append(rec.noise_free_lsb[0, 1].astype(float))  # ch2: stays far from clipping
+    echo_lsb = records[0] - records[1]
+    energy_j = echo_lsb.sum() * ins.digitizer.sample_interval_s / (ins.channels[1].volts_per_watt * ins.digitizer.lsb_per_volt)
+    expected = ins.transmitter.pulse_energy_j * float(target_factor(ins, water, z, lambertian_weight(ins, z, 0.05)))
+    assert energy_j == pytest.approx(expected, rel=2e-3)
+
+
+def test_column_with_a_short_pulse_is_the_eq4_closed_form():
+    ins = mul2023()
+    ins = replace(ins, transmitter=replace(ins.transmitter, pulse_width_s=1e-9),
+                  digitizer=replace(ins.digitizer, bandwidth_hz=1e12))
+    water = water_preset("coastal_ocean")
+    model = OpticalModel.build(ins, water)
+    a = ins.pulse.decay_per_s
+    mean_delay = 2.0 / a  # first moment of a^2 t exp(-a t)
+    z = np.array([3.0, 5.0, 10.0, 20.0, 40.0])
+    t = 2 * z / water.speed_m_s
+    got = model.column_power_w(t + mean_delay)
+    closed = (ins.transmitter.pulse_energy_j * water.speed_m_s / 2 * ins.receiver.area_m2 * water.beta_pi_per_m_sr
+              * two_way_transmission(ins) * np.exp(-2 * water.k_lidar_per_m * z) / z**2)
+    assert got == pytest.approx(closed, rel=1e-2)
+    assert column_density_per_m(ins, water, z) * ins.transmitter.pulse_energy_j * water.speed_m_s / 2 == pytest.approx(closed)
+
+
+def test_cut_column_equals_numerical_convolution_of_truncated_profile():
+    ins, water = mul2023(), water_preset("turbid_harbor")
+    model = OpticalModel.build(ins, water)
+    cut = 4.0
+    t = np.array([10e-9, 30e-9, 2 * cut / water.speed_m_s, 45e-9, 60e-9, 90e-9])
+    dz = 1e-4
+    z = np.arange(dz / 2, cut, dz)
+    density = column_density_per_m(ins, water, z) * ins.transmitter.pulse_energy_j
+    expected = [np.sum(density * ins.pulse(ti - 2 * z / water.speed_m_s)) * dz for ti in t]
+    assert model.column_power_w(t, cut) == pytest.approx(expected, rel=REL_TOL_TABLE)
+    # Before the cut's echo time the cut changes nothing.
+    early = t[:2]
+    assert model.column_power_w(early, cut) == pytest.approx(model.column_power_w(early), rel=1e-12)
+
+
+def test_column_energy_is_conserved():
+    """The time integral of the column power is E_t times the integral of the Eq. 4 density over range."""
+    ins, water = mul2023(), water_preset("coastal_ocean")
+    model = OpticalModel.build(ins, water)
+    cut = 15.0
+    t = np.arange(0.0, 2 * cut / water.speed_m_s + 200e-9, 0.05e-9)
+    z = np.linspace(1e-6, cut, 300001)
+    expected = ins.transmitter.pulse_energy_j * np.trapezoid(column_density_per_m(ins, water, z), z)
+    assert np.trapezoid(model.column_power_w(t, cut), t) == pytest.approx(expected, rel=REL_TOL_TABLE)
+
+
+def test_window_return_vanishes_for_non_coaxial_and_follows_eq3_for_coaxial():
+    assert window_factor(mul2023()) == 0.0
+    ins = coaxial()
+    rx = ins.receiver
+    assert window_factor(ins) == pytest.approx(rx.area_m2 * 0.9 * 0.6 * 0.0039 / rx.window_distance_m**2)
+
+
+def test_coaxial_column_is_stronger_near_field():
+    water = water_preset("turbid_harbor")
+    t = np.arange(0.0, 200e-9, 0.25e-9)
+    coax = OpticalModel.build(coaxial(), water).column_power_w(t)
+    paraxial = OpticalModel.build(mul2023(), water).column_power_w(t)
+    assert coax.max() > paraxial.max()
+    # Far beyond full overlap both columns coincide (same optics, O = 1).
+    far = t > 150e-9
+    assert coax[far] == pytest.approx(paraxial[far], rel=1e-4)
+
+
+def test_background_terms_eqs_8_to_10():
+    ins, water = mul2023(), water_preset("clean_ocean")
+    assert np.all(background_power_w(ins, water, 0.0, [5.0], [0.1]) == 0.0)
+    lb, z, rho = 1e-3, 5.0, 0.1
+    rx = ins.receiver
+    att = math.exp(-2 * water.k_lidar_per_m * z)
+    common = lb * rx.area_m2 * rx.efficiency * 1.0 * att
+    expected = common * rho * rx.fov_full_rad**2 / 4 + common * water.beta_pi_per_m_sr * math.pi * rx.fov_full_rad**2 / 4
+    assert float(background_power_w(ins, water, lb, z, rho)[()]) == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("build, key", [
+    (lambda: Water("bad", -0.1, 0.2), "absorption_per_m"),
+    (lambda: Water.from_attenuation("bad", 0.1, 0.2), "absorption_per_m"),
+    (lambda: Digitizer(bits=0), "digitizer.bits"),
+    (lambda: Transmitter(pulse_energy_j=0.0), "transmitter.pulse_energy_j"),
+    (lambda: water_preset("muddy"), "water"),
+])
+def test_bad_parameters_are_rejected_with_their_name(build, key):
+    with pytest.raises(ParameterError, match=key.replace(".", r"\.")):
+        build()
+
+
+def test_reflectance_over_one_is_rejected():
+    from muls.waveform import PulseBatch
+
+    with pytest.raises(ParameterError, match="reflectance"):
+        PulseBatch.flat_target(mul2023(), [5.0], 1.2)
