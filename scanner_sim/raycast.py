@@ -13,6 +13,7 @@ hit to the receiver aperture) -> :class:`Hits`, struct-of-arrays in scan order w
 from __future__ import annotations
 
 import math
+import threading
 import warnings
 from dataclasses import dataclass
 
@@ -20,7 +21,7 @@ import numpy as np
 
 from muls.errors import ParameterError
 
-from .beams import BeamPattern, subrays
+from .beams import BeamPattern, perpendicular_basis
 
 BACKENDS = ("auto", "embree", "numpy")
 
@@ -49,6 +50,7 @@ class RayCaster:
                 warnings.warn("embreex is not importable: ray casting falls back to trimesh's numpy "
                               "intersector, about 100 times slower", RuntimeWarning, stacklevel=2)
         self.backend = backend
+        self._local = threading.local()
         self.vertices = np.ascontiguousarray(vertices_local, dtype=np.float32)
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)
         if backend == "embree":
@@ -66,6 +68,20 @@ class RayCaster:
 
             self._mesh = trimesh.Trimesh(self.vertices.astype(np.float64), self.faces, process=False)
             self._numpy = RayMeshIntersector(self._mesh)
+
+    def workspace(self, name: str, shape: tuple, dtype) -> np.ndarray:
+        """A reusable scratch array (per thread) for temporaries that never leave the ray stage.
+
+        Fresh multi-megabyte arrays per chunk cost page faults comparable to the ray casting itself here;
+        the stage's float32 ray buffers are reused instead (grown when a chunk is larger).
+        """
+        pool = self._local.__dict__.setdefault("pool", {})
+        size = int(np.prod(shape))
+        buf = pool.get(name)
+        if buf is None or buf.size < size or buf.dtype != np.dtype(dtype):
+            buf = np.empty(max(size, 1), dtype)
+            pool[name] = buf
+        return buf[:size].reshape(shape)
 
     # -- the whole interface -------------------------------------------------------------------------------
     def first_hits(self, origins: np.ndarray, directions: np.ndarray):
@@ -92,18 +108,22 @@ class RayCaster:
         return ray.astype(np.int64), tri.astype(np.int64), dist.astype(np.float32)
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, max_distance_m: np.ndarray) -> np.ndarray:
-        """(n,) bool: does any triangle lie on each ray between 0 and ``max_distance_m`` (n,)?"""
+        """(n,) bool: does any triangle lie on each ray between 0 and ``max_distance_m`` (n,)?
+
+        Rays with ``max_distance_m`` <= 0 are empty: never occluded (Embree skips them).
+        """
         origins = np.ascontiguousarray(origins, dtype=np.float32)
         directions = np.ascontiguousarray(directions, dtype=np.float32)
         max_distance_m = np.ascontiguousarray(max_distance_m, dtype=np.float32)
         if origins.shape[0] == 0:
             return np.zeros(0, bool)
         if self.backend == "embree":
-            return self._scene.run(origins, directions, dists=max_distance_m, query="OCCLUDED") >= 0
+            hit = self._scene.run(origins, directions, dists=max_distance_m, query="OCCLUDED") >= 0
+            return hit & (max_distance_m > 0.0)
         ray, _, dist = self.first_hits(origins, directions)
         out = np.zeros(origins.shape[0], bool)
         out[ray] = dist < max_distance_m[ray]
-        return out
+        return out & (max_distance_m > 0.0)
 
 
 @dataclass(frozen=True)
@@ -112,11 +132,11 @@ class Hits:
 
     pulse_index (n,) int64: row of the pulse in the chunk; subray_index (n,) int32: sub-ray in the pattern;
     range_m (n,) float64: distance along the sub-ray from its origin; point (n, 3) float64: world position;
-    normal (n, 3) float64: unit surface normal facing the incoming ray; incidence_rad (n,) float64: angle
+    normal (n, 3) float32: unit surface normal facing the incoming ray; incidence_rad (n,) float64: angle
     between the ray and the normal, in [0, pi/2]; reflectance (n,) float64 at 532 nm; label (n,) int16: class
     code (scene.LABELS); object_id (n,) int32: index into Scene.objects; receiver_weight (n,) float64: 1 if the
     hit is inside the receiver FOV cone and seen from the aperture, else 0; weight (n,) float64: the sub-ray's
-    share of the pulse energy (weights of one pulse's sub-rays sum to 1); rx_distance_m (n,) float64:
+    share of the pulse energy (weights of one pulse's sub-rays sum to 1); rx_distance_m (n,) float32:
     distance from the hit to the receiver aperture centre (the return leg).
     Sub-rays that miss have no row: a pulse with no row at all is a ``no_hit``.
     """
@@ -192,61 +212,56 @@ def cast_beams(scene, beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: 
     :class:`muls.overlap.TransceiverGeometry` (beam radius, divergence, receiver aperture and FOV);
     shadow_rays: cast a visibility ray from each in-cone hit to the receiver aperture (else only the cone).
     Returns :class:`Hits` in scan order.
+
+    The work around the two Embree calls is two fused numba kernels (sub-rays in; hit attributes, FOV cone
+    and shadow rays out), so the stage keeps most of Embree's raw throughput (``scanner-sim bench-rays``).
     """
     n_pulses, m = beam_origin.shape[0], pattern.count
-    origins, dirs = subrays(beam_origin, beam_dir, shaft_dir, pattern, 0.5 * geometry.beam_diameter_m,
-                            0.5 * geometry.beam_divergence_full_rad)
+    r_t = 0.5 * geometry.beam_diameter_m
+    tan_h = math.tan(0.5 * geometry.beam_divergence_full_rad)
+    beam_local = np.ascontiguousarray(beam_origin - scene.local_origin)
+    beam_dir = np.ascontiguousarray(beam_dir, dtype=np.float64)
+    u, v = perpendicular_basis(beam_dir, np.asarray(shaft_dir, float))
+    xy = np.ascontiguousarray(pattern.xy)
+    kernels = _kernels()
     caster = scene.caster()
-    origins_local = origins - scene.local_origin  # float64, then float32 near the local origin
-    ray, tri, _ = caster.first_hits(origins_local.astype(np.float32), dirs.astype(np.float32))
+    origins32 = caster.workspace("origins32", (n_pulses * m, 3), np.float32)
+    dirs32 = caster.workspace("dirs32", (n_pulses * m, 3), np.float32)
+    kernels.subrays_local32(beam_local, beam_dir, u, v, xy, r_t, tan_h, origins32, dirs32)
+    ray, tri, tfar = caster.first_hits(origins32, dirs32)
 
-    # Range refined in float64 on the hit triangle's plane: exact to float64, not float32 (STYLE.md rule 7).
-    o, d = origins_local[ray], dirs[ray]
-    n = scene.face_normal[tri]
-    denom = np.einsum("ij,ij->i", n, d)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        range_m = (scene.face_plane_m[tri] - np.einsum("ij,ij->i", n, o)) / denom
-    # Grazing rays (denominator ~ 0) keep Embree's own distance.
-    bad = ~np.isfinite(range_m) | (range_m < 0.0)
-    if np.any(bad):
-        range_m[bad] = caster.first_hits(o[bad].astype(np.float32), d[bad].astype(np.float32))[2].astype(float)
-    point_local = o + range_m[:, None] * d
-    facing = np.where(denom > 0.0, -1.0, 1.0)  # orient the normal toward the incoming ray
-    normal = n * facing[:, None]
-    incidence = np.arccos(np.clip(np.abs(denom), 0.0, 1.0))
+    cone = ReceiverCone.from_geometry(geometry)
+    rx_local = np.ascontiguousarray(rx_origin - scene.local_origin)
+    k = ray.shape[0]
+    sh_o = caster.workspace("shadow_origins32", (k, 3), np.float32)
+    sh_d = caster.workspace("shadow_dirs32", (k, 3), np.float32)
+    sh_len = caster.workspace("shadow_length32", (k,), np.float32)
+    (pulse, sub, range_m, point, normal, incidence, reflectance, label, object_id, weight, rx_dist,
+     seen) = kernels.hit_attributes(
+        ray, tri, tfar, m, beam_local, beam_dir, u, v, xy, r_t, tan_h, rx_local,
+        np.ascontiguousarray(rx_dir, dtype=np.float64), scene.face_normal, scene.face_reflectance,
+        scene.face_label, scene.face_object, pattern.weight, scene.local_origin, cone.apex_behind_m,
+        cone.cos_half_fov, scene.shadow_offset_m, sh_o, sh_d, sh_len)
+    np.arccos(incidence, out=incidence)  # the kernel returns cos(incidence)
+    if shadow_rays:  # one ray per hit; those outside the cone have length -1 and are skipped
+        seen[caster.occluded(sh_o, sh_d, sh_len)] = 0.0
 
-    pulse = ray // m
-    sub = (ray % m).astype(np.int32)
-    rx_o = rx_origin[pulse] - scene.local_origin
-    rx_a = rx_dir[pulse]
-    inside = ReceiverCone.from_geometry(geometry).contains(point_local, rx_o, rx_a)
-    to_rx = rx_o - point_local
-    rx_dist = np.sqrt(np.einsum("ij,ij->i", to_rx, to_rx))
-    seen = inside & (np.einsum("ij,ij->i", normal, to_rx) > 0.0)  # the receiver is on the lit side
-    if shadow_rays and np.any(seen):
-        idx = np.flatnonzero(seen)
-        eps = scene.shadow_offset_m
-        u = to_rx[idx] / rx_dist[idx, None]
-        start = point_local[idx] + eps * normal[idx]
-        blocked = caster.occluded(start.astype(np.float32), u.astype(np.float32), rx_dist[idx] - 2.0 * eps)
-        seen[idx[blocked]] = False
+    return Hits(pulse_index=pulse, subray_index=sub, range_m=range_m, point=point, normal=normal,
+                incidence_rad=incidence, reflectance=reflectance, label=label, object_id=object_id,
+                receiver_weight=seen, weight=weight, rx_distance_m=rx_dist, n_pulses=n_pulses, n_subrays=m)
 
-    return Hits(
-        pulse_index=pulse.astype(np.int64),
-        subray_index=sub,
-        range_m=range_m,
-        point=point_local + scene.local_origin,
-        normal=normal,
-        incidence_rad=incidence,
-        reflectance=scene.face_reflectance[tri],
-        label=scene.face_label[tri],
-        object_id=scene.face_object[tri],
-        receiver_weight=seen.astype(np.float64),
-        weight=pattern.weight[sub],
-        rx_distance_m=rx_dist,
-        n_pulses=n_pulses,
-        n_subrays=m,
-    )
+
+_KERNELS = None
+
+
+def _kernels():
+    """Compile (once, cached on disk) the numba kernels of :func:`cast_beams`."""
+    global _KERNELS
+    if _KERNELS is None:
+        from . import _raykernels
+
+        _KERNELS = _raykernels
+    return _KERNELS
 
 
 def raycast_overlap(distances_m, geometry, subrays_count: int = 61, profile: str = "top_hat",

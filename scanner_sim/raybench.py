@@ -1,0 +1,102 @@
+"""Ray-throughput benchmark: the pipeline's ray stage against raw embreex on the same rays, in one run.
+
+The rays are a scan-ordered chunk of a real pass (the middle of the scene's pass, ``pulses`` pulses with
+``subrays`` sub-rays each), plus the shadow rays the receiver check casts for them (one slot per hit; hits outside the FOV cone get
+an empty ray that Embree skips, in both timings). *Pipeline* times
+:func:`scanner_sim.raycast.cast_beams` end to end: world beam rays in, :class:`Hits` out (sub-ray
+generation, local-frame float32 conversion, first hits, hit attributes, FOV cone, shadow rays). *Raw* times
+only embreex's two calls (first-hit query with distances, occlusion query) on a separately built Embree
+scene of the same float32 mesh, with the very same float32 rays prepared beforehand. Best of ``repeat``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+
+def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: int = 19, repeat: int = 3) -> dict:
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    from . import _raykernels
+    from .beams import beam_pattern, perpendicular_basis
+    from .config import load_scene
+    from .raycast import ReceiverCone, cast_beams
+    from .scanner import Scanner
+    from .scene import build_scene
+    from .trajectory import build_trajectory
+
+    cfg = load_scene(scene_name)
+    inst = cfg.instrument_model()
+    scene = build_scene(cfg, backend="embree")
+    traj = build_trajectory(cfg, scene)
+    scanner = Scanner.from_config(cfg.scanner, inst)
+    mid = 0.5 * traj.duration_s
+    span = pulses / (scanner.pulse_rate_hz * scanner.active_fraction)
+    times = scanner.pulse_times(max(0.0, mid - 0.5 * span), mid + 0.5 * span + 1.0)[:pulses]
+    rays = scanner.world_rays(traj.poses(times))
+    pattern = beam_pattern(subrays)
+    geometry = inst.geometry
+
+    # The exact float32 rays the pipeline casts (primary and shadow), prepared outside the raw timing.
+    beam_local = np.ascontiguousarray(rays[0] - scene.local_origin)
+    u, v = perpendicular_basis(rays[1], rays[2])
+    o32 = np.empty((len(times) * pattern.count, 3), np.float32)
+    d32 = np.empty_like(o32)
+    _raykernels.subrays_local32(beam_local, rays[1], u, v, np.ascontiguousarray(pattern.xy),
+                                0.5 * geometry.beam_diameter_m, float(np.tan(0.5 * geometry.beam_divergence_full_rad)),
+                                o32, d32)
+    caster = scene.caster()
+    ray, tri, tfar = caster.first_hits(o32, d32)
+    cone = ReceiverCone.from_geometry(geometry)
+    sh_o = np.empty((len(ray), 3), np.float32)
+    sh_d = np.empty_like(sh_o)
+    sh_len = np.empty(len(ray), np.float32)
+    _raykernels.hit_attributes(ray, tri, tfar, pattern.count, beam_local, rays[1], u, v,
+                                     np.ascontiguousarray(pattern.xy), 0.5 * geometry.beam_diameter_m,
+                                     float(np.tan(0.5 * geometry.beam_divergence_full_rad)),
+                                     np.ascontiguousarray(rays[3] - scene.local_origin), rays[4], scene.face_normal,
+                                     scene.face_reflectance, scene.face_label, scene.face_object, pattern.weight,
+                                     scene.local_origin, cone.apex_behind_m, cone.cos_half_fov,
+                                     scene.shadow_offset_m, sh_o, sh_d, sh_len)
+    n_shadow = int(np.count_nonzero(sh_len > 0))
+    n_rays = o32.shape[0] + n_shadow
+
+    raw_scene = rtcore_scene.EmbreeScene()
+    TriangleMesh(scene=raw_scene, vertices=caster.vertices, indices=caster.faces)
+
+    def raw():
+        raw_scene.run(o32, d32, output=1)
+        raw_scene.run(sh_o, sh_d, dists=sh_len, query="OCCLUDED")
+
+    def pipeline():
+        return cast_beams(scene, *rays, pattern, geometry, shadow_rays=True)
+
+    raw()
+    hits = pipeline()  # warm both (BVH build, numba compile)
+    t_raw, t_pipe = [], []
+    for _ in range(repeat):  # interleave so machine load hits both alike
+        t0 = time.perf_counter()
+        raw()
+        t_raw.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        pipeline()
+        t_pipe.append(time.perf_counter() - t0)
+    best_raw, best_pipe = min(t_raw), min(t_pipe)
+    return {
+        "scene": scene_name,
+        "triangles": scene.n_faces,
+        "pulses": int(len(times)),
+        "subrays": subrays,
+        "primary_rays": int(o32.shape[0]),
+        "shadow_rays": n_shadow,
+        "hits": len(hits),
+        "raw_embreex_rays_per_s": round(n_rays / best_raw),
+        "pipeline_rays_per_s": round(n_rays / best_pipe),
+        "pipeline_pulses_per_s": round(len(times) / best_pipe),
+        "ratio": round(best_raw / best_pipe, 4),
+        "required_ratio": 0.8,
+        "repeat": repeat,
+    }
