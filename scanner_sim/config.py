@@ -639,7 +639,7 @@ class PlatformConfig:
     heading_deg: float = _spec(ANY_NUMBER, 0.0)
     altitude_m: float | None = _spec(number(0.0, lo_open=True, optional=True), None)
     depth_m: float | None = _spec(number(0.0, optional=True), None)
-    follow_length_m: float = _spec(POSITIVE, 3.0)
+    follow_length_m: float = _spec(POSITIVE, 1.5)
     turn_length_m: float = _spec(NON_NEGATIVE, 1.0)
     attitude: AttitudeConfig = _section_field(AttitudeConfig)
     navigation_noise: NavigationNoiseConfig = _section_field(NavigationNoiseConfig)
