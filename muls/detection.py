@@ -170,7 +170,7 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
               chans.gate_close_s[1:], chans.dark_mean_lsb[1:], chans.dark_std_lsb[1:], chans.shot_lsb2_per_w[1:],
               float(dig.max_code), scale)
     _reference(reference, ref_clean, phase, pulse_id, key, -dig.pretrigger_s, dig.sample_interval_s, model.basis,
-               ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
+               pulse.duration_s, ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
                chans.dark_std_lsb[0], float(dig.max_code), scale)
     return Records(reference, codes, window_pulse, window_start, phase, mode,
                    clean if keep_noise_free else None, ref_clean if keep_noise_free else None)
@@ -183,14 +183,15 @@ def _quantise(u, max_code):
 
 
 @numba.njit(cache=True, parallel=True)
-def _reference(reference, clean, phase, pulse_id, key, t0, dt, basis, lsb_per_density, dark_mean, dark_std,
-               max_code, noise_scale):
+def _reference(reference, clean, phase, pulse_id, key, t0, dt, basis, extent, lsb_per_density, dark_mean,
+               dark_std, max_code, noise_scale):
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
     for p in numba.prange(n_pulses):
         base = stream_base(key, pulse_id[p], REFERENCE_STREAM)
         for k in range(n_ref):
-            level = lsb_per_density * pulse_value(t0 + k * dt + phase[p], basis)
+            u = t0 + k * dt + phase[p]
+            level = lsb_per_density * pulse_value(u, basis) if u < extent else 0.0
             if keep:
                 clean[p, k] = level + dark_mean
             reference[p, k] = _quantise(level + dark_mean + noise_scale * dark_std * normal_at(base, k), max_code)

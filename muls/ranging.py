@@ -18,7 +18,7 @@ import numba
 import numpy as np
 
 from .detection import ChannelArrays, Records
-from .waveform import OpticalModel, PulseBatch, column_value, optical_power, pulse_value
+from .waveform import OpticalModel, PulseBatch, column_value, optical_power
 
 DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
 NO_DROPOUT = -1
@@ -93,7 +93,9 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records) -> tupl
            float(dig.max_code), fit, ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)), *shape,
            *clip_tables(model), out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts)
     ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], fit, *shape)
-    slot = (np.arange(cap) % MAX_PEAKS_PER_WINDOW) < np.repeat(counts, MAX_PEAKS_PER_WINDOW)
+    # Gather the filled slots: slot s holds counts[s] peaks from position s * MAX_PEAKS_PER_WINDOW.
+    first = np.repeat(np.arange(counts.size) * MAX_PEAKS_PER_WINDOW - (np.cumsum(counts) - counts), counts)
+    slot = first + np.arange(first.size)
     w, c, idx = out_w[slot], out_c[slot] + 1, out_idx[slot]
     pulse = records.window_pulse[w]
     phase = records.phase_s
@@ -230,9 +232,8 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
                     idx = float(window_start[w] + top) + d
                     amp = height / ratio
                     k = top + 1  # look again behind this echo once its modelled shape is taken off
-                t_peak = t0 + idx * dt + phase[p]
-                for j in range(top + 1, n_samples):
-                    echoes[j] += amp * pulse_value(times[j] - t_peak + peak_delay, basis) / peak_density
+                _add_echo(echoes, top + 1, times[top + 1] - (t0 + idx * dt + phase[p]) + peak_delay, dt,
+                          amp / peak_density, basis)
                 j = slot * cap + counts[slot]
                 out_w[j] = w
                 out_c[j] = c
@@ -241,6 +242,24 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
                 out_snr[j] = amp / sigma[top]
                 out_sat[j] = clipped_first >= 0
                 counts[slot] += 1
+
+
+@numba.njit(cache=True, inline="always")
+def _add_echo(echoes, first, u, dt, scale, basis):
+    """echoes[first:] += scale * w(u + i dt): the pulse basis steps by constant factors, two exps in all."""
+    if u < 0.0:  # the echo starts after this sample: first sample at or after its start
+        skip = int(math.ceil(-u / dt))
+        first += skip
+        u += skip * dt
+    if first >= echoes.shape[0]:
+        return
+    ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
+    ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
+    for j in range(first, echoes.shape[0]):
+        echoes[j] += scale * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
+        u += dt
+        ea *= ra
+        eb *= rb
 
 
 def clip_tables(model: OpticalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

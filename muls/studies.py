@@ -181,7 +181,7 @@ def waveform_study(water: str | Water = "pond", range_m: float = 11.5, seed: int
             "water": w.name, "instrument": instrument.name, "range_m": range_m, "reflectance": float(reflectance),
             "seed": int(seed), "record_mode": "full", "gate_delay_ns": delay * 1e9, "gate_width_ns": width * 1e9,
             "sample_interval_ns": instrument.digitizer.sample_interval_s * 1e9,
-            "max_code": instrument.digitizer.max_code,
+            "max_code": instrument.digitizer.max_code, "speed_m_s": w.speed_m_s,
         },
     }
 

@@ -202,6 +202,8 @@ def column_value(t, cut_tau, basis, s0a, s1a, s0b, step):
     v0a = s0a[i] + f * (s0a[i + 1] - s0a[i])
     v1a = s1a[i] + f * (s1a[i + 1] - s1a[i])
     v0b = s0b[i] + f * (s0b[i + 1] - s0b[i])
+    if t < cut_tau:  # before the cut's echo: the full column, u = 0
+        return basis[2] * v1a + basis[3] * v0a + basis[4] * v0b
     u = t - tau
     ea = math.exp(-basis[0] * u)
     return (basis[2] * (u * v0a + v1a) + basis[3] * v0a) * ea + basis[4] * v0b * math.exp(-basis[1] * u)

@@ -1,0 +1,249 @@
+"""``muls``: the MULS studies from the command line (waveform, maxrange, precision, coaxial, bench).
+
+Each command runs one function of :mod:`muls.studies`, prints its result as JSON with ``--json`` (otherwise
+a short table), and, except ``bench``, writes a picture (``--out``, a default name otherwise; ``--no-plot``
+skips it). Bad arguments give one line on stderr naming the option and what is allowed, and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+from . import studies
+from .water import WATER_PRESETS
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a bad argument on one line (no usage dump) and exits with code 2."""
+
+    def error(self, message):
+        raise _UsageError(f"{self.prog}: error: {message}")
+
+
+class _UsageError(Exception):
+    pass
+
+
+def _water_name(name: str) -> str:
+    if name not in WATER_PRESETS:
+        raise ValueError(f"--water {name!r}: must be one of {', '.join(sorted(WATER_PRESETS))}")
+    return name
+
+
+def _positive(option: str, value: float) -> float:
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{option} {value!r}: must be a number > 0")
+    return value
+
+
+def _count(option: str, value: int) -> int:
+    if value < 1:
+        raise ValueError(f"{option} {value!r}: must be an integer >= 1")
+    return value
+
+
+def _gate_s(args) -> tuple[float | None, float | None]:
+    delay = None if args.gate_delay_ns is None else args.gate_delay_ns * 1e-9
+    width = None if args.gate_width_ns is None else _positive("--gate-width-ns", args.gate_width_ns) * 1e-9
+    if delay is not None and not (math.isfinite(delay) and delay >= 0.0):
+        raise ValueError(f"--gate-delay-ns {args.gate_delay_ns!r}: must be a number >= 0")
+    return delay, width
+
+
+def _fmt(v, digits: int = 3) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.{digits}f}"
+    return str(v)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Commands: each returns (result dict, human-readable text, plot function or None)
+
+
+def _cmd_waveform(args):
+    delay, width = _gate_s(args)
+    result = studies.waveform_study(_water_name(args.water), _positive("--range-m", args.range_m), seed=args.seed,
+                                    reflectance=args.reflectance, gate_delay_s=delay, gate_width_s=width)
+    s = result["settings"]
+    lines = [f"waveform: {s['water']}, panel at {s['range_m']:g} m (reflectance {s['reflectance']:g}), "
+             f"CH3 gate {s['gate_delay_ns']:g}/{s['gate_width_ns']:g} ns, seed {s['seed']}, full record"]
+    lines.append(f"{'channel':8s} {'max LSB':>8s} {'noise-free max':>15s}")
+    for name, codes in result["channels"].items():
+        lines.append(f"{name:8s} {max(codes):8d} {max(result['noise_free'][name]):15.1f}")
+    if result["returns"]:
+        for r in result["returns"]:
+            lines.append(f"return: {r['channel']} at {r['range_m']:.3f} m (error {r['error_m']:+.3f} m, "
+                         f"SNR {r['snr']:.1f}{', clipped' if r['saturated'] else ''})")
+    else:
+        lines.append(f"no return: dropout cause {result['dropout_cause']}")
+    for p in result["peaks"]:
+        lines.append(f"peak: {p['channel']} at {p['range_m']:.3f} m{' (clipped)' if p['saturated'] else ''}")
+    from .plots import plot_waveform
+
+    return result, "\n".join(lines), plot_waveform
+
+
+def _cmd_maxrange(args):
+    waters = [_water_name(w) for w in args.waters]
+    result = studies.maxrange_study(waters, shots=_count("--shots", args.shots), seed=args.seed,
+                                    reflectance=args.reflectance)
+    s = result["settings"]
+    lines = [f"maximum detectable range [m]: reflectance {s['reflectance']:g}, >= {s['detection_fraction']:.0%} "
+             f"of {s['shots']} pulses within {s['tolerance_bins']} range bins, seed {s['seed']} "
+             f"({s['elapsed_s']:.1f} s)",
+             f"{'water':15s} {'single':>7s} {'near':>7s} {'far':>7s} {'total':>7s} {'improvement':>12s}"]
+    for w in s["waters"]:
+        r = result[w]
+        lines.append(f"{w:15s} {_fmt(r['single_channel_m'], 1):>7s} {_fmt(r['near_field_m'], 1):>7s} "
+                     f"{_fmt(r['far_field_m'], 1):>7s} {_fmt(r['total_m'], 1):>7s} {_fmt(r['improvement'], 2):>12s}")
+    from .plots import plot_maxrange
+
+    return result, "\n".join(lines), plot_maxrange
+
+
+def _cmd_precision(args):
+    delay, width = _gate_s(args)
+    ranges = [_positive("--ranges-m", r) for r in args.ranges_m]
+    result = studies.precision_study(_water_name(args.water), ranges, shots=_count("--shots", args.shots),
+                                     seed=args.seed, reflectance=args.reflectance, gate_delay_s=delay,
+                                     gate_width_s=width)
+    s = result["settings"]
+    lines = [f"range precision: {s['water']}, {s['shots']} shots per range, CH3 gate {s['gate_delay_ns']:g}/"
+             f"{s['gate_width_ns']:g} ns, detection within {s['tolerance_m']:.3f} m, seed {s['seed']}",
+             f"{'range m':>8s} {'channel':8s} {'std m':>8s} {'mean dev m':>11s} {'detected':>9s} {'clipped':>8s}"]
+    for key in (k for k in result if k != "settings"):
+        for ch, st in result[key].items():
+            lines.append(f"{key:>8s} {ch:8s} {_fmt(st['precision_m'], 4):>8s} {_fmt(st['mean_deviation_m'], 4):>11s} "
+                         f"{_fmt(st['detected_fraction'], 3):>9s} {_fmt(st['saturated_fraction'], 3):>8s}")
+    from .plots import plot_precision
+
+    return result, "\n".join(lines), plot_precision
+
+
+def _cmd_coaxial(args):
+    result = studies.coaxial_study(_water_name(args.water))
+    s = result["settings"]
+    text = (f"coaxial vs non-coaxial water-column backscatter in {s['water']}:\n"
+            f"  peak coaxial {result['coaxial_peak_w']:.4g} W at {result['coaxial_peak_time_ns']:.1f} ns, "
+            f"peak non-coaxial {result['non_coaxial_peak_w']:.4g} W at {result['non_coaxial_peak_time_ns']:.1f} ns\n"
+            f"  peak_ratio = {result['peak_ratio']:.2f}")
+    from .plots import plot_coaxial
+
+    def plot(res, path):
+        others = {w: studies.coaxial_study(w) for w in studies.MAXRANGE_WATERS if w != s["water"]}
+        return plot_coaxial({s["water"]: res, **others}, path)
+
+    return result, text, plot
+
+
+def _cmd_bench(args):
+    result = studies.bench_study(pulses=_count("--pulses", args.pulses),
+                                 full_pulses=_count("--full-pulses", args.full_pulses),
+                                 repeats=_count("--repeats", args.repeats))
+    m = result["machine"]
+    lines = [f"simulate (waveform + digitise + ranging), {result['settings']['water']}, mul2023, "
+             f"{m['cpu_count']} CPUs, {m['numba_threads']} numba threads, load {m['loadavg_1_5_15']}"]
+    for key, name, target in (("windowed", "windowed", 100_000), ("full_record", "full record", 10_000)):
+        r = result[key]
+        lines.append(f"{name:12s} {r['pulses_per_s']:>10,.0f} pulses/s (target {target:,}; {r['pulses']:,} pulses, "
+                     f"digitise {r['digitise_s']:.3f} s, ranging {r['range_batch_s']:.3f} s)")
+    return result, "\n".join(lines), None
+
+
+DEFAULT_OUT = {"waveform": "waveform.png", "maxrange": "maxrange.png", "precision": "precision.png",
+               "coaxial": "coaxial.png"}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="muls", description="MULS studies: waveforms, maximum range, precision, coaxial "
+                     "vs non-coaxial, speed.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    waters = ", ".join(sorted(WATER_PRESETS))
+
+    def common(p, plot=True):
+        p.add_argument("--json", action="store_true", help="print the result as JSON")
+        if plot:
+            p.add_argument("--out", default=None, help="picture file (PNG); default %(prog)s's own name")
+            p.add_argument("--no-plot", action="store_true", help="do not write the picture")
+
+    p = sub.add_parser("waveform", help="CH0-CH3 of one pulse, noisy over noise-free (paper Figs. 7, 8)")
+    p.add_argument("--water", default="pond", help=f"water preset ({waters})")
+    p.add_argument("--range-m", type=float, default=11.5, help="panel range [m]")
+    p.add_argument("--reflectance", type=float, default=0.1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--gate-delay-ns", type=float, default=None, help="CH3 gate delay [ns] (default: that water's experiment)")
+    p.add_argument("--gate-width-ns", type=float, default=None, help="CH3 gate width [ns]")
+    common(p)
+    p.set_defaults(run=_cmd_waveform)
+
+    p = sub.add_parser("maxrange", help="maximum detectable range, single vs multi-channel (paper Table 3)")
+    p.add_argument("--shots", type=int, default=200, help="seeded pulses per range")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--reflectance", type=float, default=0.1)
+    p.add_argument("--waters", nargs="+", default=list(studies.MAXRANGE_WATERS), help=f"water presets ({waters})")
+    common(p)
+    p.set_defaults(run=_cmd_maxrange)
+
+    p = sub.add_parser("precision", help="range precision and mean deviation per channel (paper Table 2)")
+    p.add_argument("--water", default="pond", help=f"water preset ({waters})")
+    p.add_argument("--ranges-m", type=float, nargs="+", default=[8.5, 10.0, 11.5], help="panel ranges [m]")
+    p.add_argument("--shots", type=int, default=1000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--reflectance", type=float, default=0.1)
+    p.add_argument("--gate-delay-ns", type=float, default=None)
+    p.add_argument("--gate-width-ns", type=float, default=None)
+    common(p)
+    p.set_defaults(run=_cmd_precision)
+
+    p = sub.add_parser("coaxial", help="column backscatter, coaxial vs non-coaxial (paper Fig. 13)")
+    p.add_argument("--water", default="turbid_harbor", help=f"water preset ({waters})")
+    common(p)
+    p.set_defaults(run=_cmd_coaxial)
+
+    p = sub.add_parser("bench", help="pulses per second of simulate on this machine")
+    p.add_argument("--pulses", type=int, default=100_000, help="windowed-mode pulses")
+    p.add_argument("--full-pulses", type=int, default=10_000, help="full-record pulses")
+    p.add_argument("--repeats", type=int, default=3)
+    common(p, plot=False)
+    p.set_defaults(run=_cmd_bench)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``muls`` console script; returns the exit code."""
+    parser = build_parser()
+    args = None
+    try:
+        args = parser.parse_args(argv)
+        result, text, plot = args.run(args)
+    except _UsageError as exc:
+        print(str(exc), file=sys.stderr)
+        return EXIT_USAGE
+    except ValueError as exc:  # muls.ParameterError and the option checks above
+        command = f"muls {args.command}" if args is not None else "muls"
+        print(f"{command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    out = None
+    if plot is not None and not args.no_plot:
+        out = args.out or DEFAULT_OUT[args.command]
+        plot(result, out)
+    if args.json:
+        print(json.dumps(result, allow_nan=False))
+    else:
+        print(text)
+        if out:
+            print(f"picture: {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

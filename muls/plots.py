@@ -1,0 +1,125 @@
+"""Pictures of the studies' results (the only muls module that plots; matplotlib imported inside, Agg).
+
+Each function takes the dict a :mod:`muls.studies` function returned and a PNG path, and returns the path.
+"""
+
+from __future__ import annotations
+
+GROUP_STYLE = {
+    "single": ("single channel", "k", "-"),
+    "near": ("near field (CH1/CH2)", "tab:blue", "-"),
+    "far": ("far field (CH3, gated)", "tab:red", "-"),
+    "total": ("MUL total (chosen returns)", "tab:green", "--"),
+}
+CHANNEL_COLOURS = {"ch0": "0.3", "ch1": "tab:blue", "ch2": "tab:orange", "ch3": "tab:red", "chosen": "k"}
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path):
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    _pyplot().close(fig)
+    return path
+
+
+def plot_waveform(result: dict, path):
+    """One panel per channel (CH0-CH3): noisy codes [LSB] over the noise-free curve vs time [ns]."""
+    plt = _pyplot()
+    names = list(result["channels"])
+    s = result["settings"]
+    fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.1 * len(names)), sharex=True)
+    t = result["time_ns"]
+    for ax, name in zip(axes, names):
+        colour = CHANNEL_COLOURS.get(name, "tab:purple")
+        ax.plot(t, result["channels"][name], color=colour, lw=0.7, label=f"{name} (noisy)")
+        ax.plot(t, result["noise_free"][name], color="k", lw=0.9, ls="--", label="noise-free")
+        ax.axhline(s["max_code"], color="0.6", lw=0.6, ls=":")
+        for r in result["returns"]:  # the chosen return's range, back to time of flight
+            if r["channel"] == name:
+                ax.axvline(2e9 * r["range_m"] / s["speed_m_s"], color="tab:green", lw=0.8, label="chosen return")
+        ax.set_ylabel("LSB")
+        ax.legend(loc="upper right", fontsize=7)
+        if name == "ch3":
+            d, w = s["gate_delay_ns"], s["gate_width_ns"]
+            ax.axvspan(d, d + w, color="tab:red", alpha=0.06, lw=0)
+    axes[-1].set_xlabel("time after emission [ns]")
+    axes[0].set_title(f"{s['water']}: panel at {s['range_m']:g} m, reflectance {s['reflectance']:g}, seed {s['seed']}")
+    return _save(fig, path)
+
+
+def plot_maxrange(result: dict, path):
+    """Detection fraction vs range, one panel per water, one curve per channel group, 90 % line."""
+    plt = _pyplot()
+    waters = result["settings"]["waters"]
+    level = result["settings"]["detection_fraction"]
+    fig, axes = plt.subplots(len(waters), 1, figsize=(8, 2.6 * len(waters)), squeeze=False)
+    keys = {"single": "single_channel_m", "near": "near_field_m", "far": "far_field_m", "total": "total_m"}
+    for ax, w in zip(axes[:, 0], waters):
+        c = result[w]["curves"]
+        for g, (label, colour, ls) in GROUP_STYLE.items():
+            edge = result[w][keys[g]]
+            ax.plot(c["range_m"], c[g], color=colour, ls=ls, lw=1.2,
+                    label=f"{label}: {edge:.1f} m" if edge is not None else f"{label}: -")
+            if edge is not None:
+                ax.axvline(edge, color=colour, lw=0.6, ls=":")
+        ax.axhline(level, color="0.5", lw=0.6)
+        ax.set_ylim(-0.03, 1.03)
+        top = max([result[w][k] or 0.0 for k in keys.values()])
+        ax.set_xlim(0, max(5.0, 1.4 * top))
+        ax.set_ylabel("detected fraction")
+        ax.set_title(f"{w} (improvement {result[w]['improvement']})", fontsize=10)
+        ax.legend(fontsize=7, loc="lower left")
+    axes[-1, 0].set_xlabel("target range [m]")
+    return _save(fig, path)
+
+
+def plot_precision(result: dict, path):
+    """Range precision (std) and mean deviation [m] vs range, per channel."""
+    plt = _pyplot()
+    keys = [k for k in result if k != "settings"]
+    ranges = [float(k) for k in keys]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+    for ch in result[keys[0]]:
+        colour = CHANNEL_COLOURS.get(ch, "tab:purple")
+        for ax, field in ((a1, "precision_m"), (a2, "mean_deviation_m")):
+            pts = [(r, result[k][ch][field]) for r, k in zip(ranges, keys) if result[k][ch][field] is not None]
+            if pts:
+                ax.plot(*zip(*pts), marker="o", color=colour, ls="--" if ch == "chosen" else "-", label=ch)
+    s = result["settings"]
+    a1.set_ylabel("range precision (std) [m]")
+    a2.set_ylabel("mean deviation (measured - true) [m]")
+    a2.axhline(0.0, color="0.5", lw=0.6)
+    for ax in (a1, a2):
+        ax.set_xlabel("target range [m]")
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{s['water']}, {s['shots']} shots per range, CH3 gate {s['gate_delay_ns']:g}/{s['gate_width_ns']:g} ns")
+    return _save(fig, path)
+
+
+def plot_coaxial(results: dict, path):
+    """Column power [W] vs time [ns], coaxial (solid) vs non-coaxial (dashed), one colour per water.
+
+    results: {water name: coaxial_study(...) dict}.
+    """
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    colours = ["tab:brown", "tab:green", "tab:blue", "tab:purple", "tab:orange"]
+    for colour, (w, r) in zip(colours, results.items()):
+        ax.semilogy(r["time_ns"], r["coaxial_w"], color=colour, lw=1.2, label=f"{w} coaxial")
+        ax.semilogy(r["time_ns"], r["non_coaxial_w"], color=colour, lw=1.2, ls="--",
+                    label=f"{w} non-coaxial (peak ratio {r['peak_ratio']:.1f})")
+    peak = max(r["coaxial_peak_w"] for r in results.values())
+    ax.set_ylim(peak * 1e-6, peak * 3)
+    ax.set_xlabel("time after emission [ns]")
+    ax.set_ylabel("water-column power [W]")
+    ax.set_title("Water-column backscatter, both receivers non-gated (paper Fig. 13)")
+    ax.legend(fontsize=7)
+    return _save(fig, path)
