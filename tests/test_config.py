@@ -1,0 +1,127 @@
+"""Scene-file validation: strict keys with suggestions, units, one-line errors naming key and value."""
+
+import math
+
+import pytest
+import yaml
+
+from scanner_sim.config import (SCENES_DIR, ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes)
+
+SHIPPED = ["cable_survey", "mine_field", "seabed_lawnmower", "pool_panel", "pond_panel"]
+
+
+def _base():
+    return yaml.safe_load((SCENES_DIR / "cable_survey.yaml").read_text())
+
+
+def test_all_issue_scenes_are_shipped():
+    assert set(SHIPPED) <= set(shipped_scenes())
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_scene_loads(name):
+    cfg = load_scene(name)
+    assert isinstance(cfg, SceneConfig) and cfg.name == name and cfg.format_version == 1
+    cfg.water_model()
+    cfg.instrument_model()
+
+
+def test_tank_scenes_set_the_paper_gates():
+    pool = load_scene("pool_panel").instrument_model()
+    pond = load_scene("pond_panel").instrument_model()
+    assert pool.channel("ch3").gate_delay_s == pytest.approx(150e-9)
+    assert pond.channel("ch3").gate_delay_s == pytest.approx(100e-9)
+    assert pond.channel("ch3").gate_width_s == pytest.approx(400e-9)
+    assert load_scene("pool_panel").water_model().name == "pool"
+
+
+def _error(mutate) -> str:
+    data = _base()
+    mutate(data)
+    with pytest.raises(ConfigError) as exc:
+        parse_scene(data, base_dir=SCENES_DIR)
+    message = str(exc.value)
+    assert "\n" not in message
+    return message
+
+
+def test_typo_suggests_the_nearest_key():
+    msg = _error(lambda d: d["platform"].update(altitud_m=d["platform"].pop("altitude_m")))
+    assert msg.startswith("platform.altitud_m: unknown key") and "did you mean 'altitude_m'" in msg
+
+
+def test_top_level_typo():
+    msg = _error(lambda d: d.update(scaner=d.pop("scanner")))
+    assert "scaner: unknown key" in msg and "'scanner'" in msg
+
+
+def test_negative_altitude():
+    msg = _error(lambda d: d["platform"].update(altitude_m=-4))
+    assert msg == "platform.altitude_m = -4.0: must be a number > 0"
+
+
+def test_reflectance_above_one():
+    msg = _error(lambda d: d["objects"][0].update(reflectance=1.2))
+    assert msg == "objects[0].reflectance = 1.2: must be a number >= 0 and <= 1"
+
+
+def test_nan_is_rejected():
+    msg = _error(lambda d: d["seabed"].update(resolution_m=float("nan")))
+    assert msg.startswith("seabed.resolution_m = nan: must be a finite number")
+
+
+def test_missing_mesh_file():
+    def mutate(d):
+        d["objects"].append({"type": "mesh", "file": "assets/no_such_wreck.stl"})
+
+    msg = _error(mutate)
+    assert msg.startswith("objects[1].file = 'assets/no_such_wreck.stl': file not found")
+
+
+def test_bad_choice_lists_allowed_values():
+    msg = _error(lambda d: d["scanner"].update(mode="spiral"))
+    assert "scanner.mode = 'spiral': must be one of 'continuous', 'oscillating', 'static'" in msg
+    msg = _error(lambda d: d.update(water="coastal"))
+    assert "water.preset = 'coastal'" in msg and "coastal_ocean" in msg
+
+
+def test_format_version_and_required_keys():
+    assert "format_version = 2: must be one of 1" in _error(lambda d: d.update(format_version=2))
+    assert "platform: missing required key" in _error(lambda d: d.pop("platform"))
+
+
+def test_units_convert_once():
+    d = _base()
+    d["water"] = {"attenuation_per_m": 1.44, "absorption_per_m": 0.22}
+    d["instrument"] = {"preset": "mul2023", "gate_delay_ns": 120, "gate_width_ns": 300}
+    cfg = parse_scene(d)
+    assert cfg.water_model().scattering_per_m == pytest.approx(1.22)
+    assert cfg.instrument_model().channel("ch3").gate_delay_s == pytest.approx(120e-9)
+
+
+def test_water_needs_consistent_properties():
+    assert "exactly one of scattering_per_m" in _error(lambda d: d.update(water={"absorption_per_m": 0.1}))
+
+
+def test_numbers_written_without_a_dot_parse():
+    d = _base()
+    d["instrument"] = {"beam_divergence_full_rad": "4e-3"}  # PyYAML reads 4e-3 as a string
+    assert parse_scene(d).instrument_model().transmitter.beam_divergence_full_rad == pytest.approx(4e-3)
+
+
+def test_duplicate_keys_rejected(tmp_path):
+    p = tmp_path / "dup.yaml"
+    p.write_text((SCENES_DIR / "pool_panel.yaml").read_text() + "\nname: again\n")
+    with pytest.raises(ConfigError, match="name: duplicate key"):
+        load_scene(p)
+
+
+def test_unknown_scene_name_suggests():
+    with pytest.raises(ConfigError, match="did you mean 'cable_survey'"):
+        load_scene("cable_survy")
+
+
+def test_defaults_are_complete():
+    cfg = load_scene("pool_panel")
+    assert cfg.survey.resolved_subrays == 91 and cfg.survey.resolved_shadow_rays
+    assert cfg.scanner.mounting == "along_track" and math.isclose(cfg.survey.start_s, 0.0)
