@@ -1,0 +1,191 @@
+"""The studies of muls.studies: documented keys, JSON-ready output, and physics that would fail if wrong."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from muls import studies
+from muls.instrument import POND_GATE_S, POOL_GATE_S
+from muls.ranging import Peaks
+from muls.water import water_preset
+
+MAXRANGE_KEYS = {"single_channel_m", "near_field_m", "far_field_m", "total_m", "improvement"}
+CHANNEL_KEYS = {"precision_m", "mean_deviation_m", "detected_fraction", "saturated_fraction"}
+
+
+def _json_roundtrip(result):
+    """The result must serialise as strict JSON (no NaN, no numpy scalars)."""
+    return json.loads(json.dumps(result, allow_nan=False))
+
+
+# --- helpers ----------------------------------------------------------------------------------------------
+
+def test_far_gate_opens_20_to_30_ns_before_the_echo():
+    c_w = water_preset("clean_ocean").speed_m_s
+    ranges = np.linspace(4.0, 100.0, 500)
+    lead = 2.0 * ranges / c_w - studies.far_gate_delay_s(ranges, c_w)
+    assert np.all(lead >= 20e-9 - 1e-15) and np.all(lead < 30e-9 + 1e-15)
+    assert studies.far_gate_delay_s(1.0, c_w) == 0.0  # never negative
+
+
+def test_nearest_to_truth_picks_the_closest_peak_per_pulse_and_channel():
+    peaks = Peaks(pulse=np.array([0, 0, 0, 2]), channel=np.array([1, 1, 3, 1]),
+                  time_s=np.zeros(4), range_m=np.array([4.0, 5.1, 5.0, 7.3]), amplitude_lsb=np.ones(4),
+                  snr=np.ones(4), saturated=np.array([False, True, False, False]))
+    truth = np.array([5.0, 6.0, 7.0])
+    err, sat = studies.nearest_to_truth(peaks, truth, (1,))
+    np.testing.assert_allclose(err[[0, 2]], [0.1, 0.3])
+    assert math.isnan(err[1]) and sat.tolist() == [True, False, False]
+    err_all, _ = studies.nearest_to_truth(peaks, truth)
+    assert err_all[0] == 0.0
+
+
+def test_experiment_gates():
+    assert studies.experiment_gate_s("pond") == POND_GATE_S
+    assert studies.experiment_gate_s("pool") == POOL_GATE_S
+    assert studies.experiment_gate_s("coastal_ocean") == POND_GATE_S
+
+
+# --- waveform ---------------------------------------------------------------------------------------------
+
+def test_waveform_study_keys_shapes_and_gate():
+    r = _json_roundtrip(studies.waveform_study("pond", 11.5, seed=3))
+    n = len(r["time_ns"])
+    assert set(r["channels"]) == {"ch0", "ch1", "ch2", "ch3"} == set(r["noise_free"])
+    assert all(len(v) == n for v in list(r["channels"].values()) + list(r["noise_free"].values()))
+    assert r["settings"]["gate_delay_ns"] == pytest.approx(100.0) and r["settings"]["gate_width_ns"] == pytest.approx(400.0)
+    t = np.array(r["time_ns"])
+    ch3 = np.array(r["noise_free"]["ch3"])
+    dark = ch3[0]
+    # CH3 is gated: only its dark level before the gate opens, signal (column + echo) inside it.
+    assert np.all(ch3[t < 99.0] == pytest.approx(dark))
+    assert ch3[(t > 100.0) & (t < 130.0)].max() > dark + 50.0
+    # The noisy record scatters around the noise-free one (dark noise ~1 LSB far from any signal).
+    tail = t > 700.0
+    assert abs(np.mean(np.array(r["channels"]["ch1"])[tail]) - np.mean(np.array(r["noise_free"]["ch1"])[tail])) < 0.3
+    assert studies.waveform_study("pool", 3.0)["settings"]["gate_delay_ns"] == pytest.approx(150.0)
+
+
+def test_waveform_study_echo_arrives_at_the_time_of_flight():
+    """In clear water the CH1 echo of a panel at 9 m peaks 2R/c_w (+ the pulse's own peak delay) in."""
+    r = studies.waveform_study("pool", 9.0, seed=1)
+    t = np.array(r["time_ns"])
+    ch1 = np.array(r["noise_free"]["ch1"])
+    c_w = water_preset("pool").speed_m_s
+    t_echo = 2e9 * 9.0 / c_w
+    window = (t > t_echo - 10) & (t < t_echo + 30)
+    assert t_echo < t[window][np.argmax(ch1[window])] < t_echo + 15.0
+
+
+def test_waveform_study_rejects_bad_range():
+    with pytest.raises(ValueError, match="range_m"):
+        studies.waveform_study("pond", -1.0)
+    with pytest.raises(ValueError, match="must be one of"):
+        studies.waveform_study("mud", 5.0)
+
+
+# --- precision --------------------------------------------------------------------------------------------
+
+def test_precision_study_keys_and_ch1_precision_worsens_with_range():
+    r = _json_roundtrip(studies.precision_study("pond", [8.5, 10.0], shots=150, seed=2))
+    assert set(r) == {"8.5", "10", "settings"}
+    for key in ("8.5", "10"):
+        for ch in ("ch1", "ch2", "ch3"):
+            assert CHANNEL_KEYS <= set(r[key][ch])
+            assert 0.0 <= r[key][ch]["detected_fraction"] <= 1.0
+    p85, p10 = r["8.5"]["ch1"]["precision_m"], r["10"]["ch1"]["precision_m"]
+    assert p85 is not None and p10 is not None
+    assert p10 > p85  # lower SNR farther away (paper section 4.2)
+    # Detections lie within the 3-bin tolerance, so the mean deviation does too.
+    tol = r["settings"]["tolerance_m"]
+    assert abs(r["8.5"]["ch1"]["mean_deviation_m"]) < tol
+
+
+def test_precision_study_null_when_nothing_is_detected():
+    """CH3's pond gate opens at 100 ns, after the echo of a panel at 8.5 m (77 ns): nothing to range."""
+    r = _json_roundtrip(studies.precision_study("pond", [8.5], shots=50))
+    assert r["8.5"]["ch3"]["detected_fraction"] == 0.0
+    assert r["8.5"]["ch3"]["precision_m"] is None and r["8.5"]["ch3"]["saturated_fraction"] is None
+
+
+def test_precision_study_is_repeatable_from_its_seed():
+    a = studies.precision_study("pond", [9.0], shots=60, seed=7)
+    b = studies.precision_study("pond", [9.0], shots=60, seed=7)
+    c = studies.precision_study("pond", [9.0], shots=60, seed=8)
+    assert a == b
+    assert a["9"]["ch1"] != c["9"]["ch1"]
+
+
+# --- coaxial ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("water", ["clean_ocean", "coastal_ocean", "turbid_harbor"])
+def test_coaxial_backscatter_exceeds_non_coaxial(water):
+    r = _json_roundtrip(studies.coaxial_study(water))
+    assert {"peak_ratio", "time_ns", "coaxial_w", "non_coaxial_w", "settings"} <= set(r)
+    assert r["peak_ratio"] > 1.0
+    t = np.array(r["time_ns"]) * 1e-9
+    non = np.array(r["non_coaxial_w"])
+    co = np.array(r["coaxial_w"])
+    # The non-coaxial column is dark until the pulse reaches the blind-zone edge Z1 (overlap 0 before it).
+    z1 = r["settings"]["blind_zone_m"]
+    assert np.all(non[t < 2.0 * z1 / water_preset(water).speed_m_s] == 0.0)
+    # Long after the pulse has passed full overlap (and the heavy tail of Eq. 2 has carried off the coaxial
+    # near-field peak) both designs see the same column.
+    late = studies.coaxial_study(water, t_max_ns=300.0)
+    t = np.array(late["time_ns"])
+    co, non = np.array(late["coaxial_w"]), np.array(late["non_coaxial_w"])
+    np.testing.assert_allclose(non[t >= 200.0], co[t >= 200.0], rtol=1e-5)
+    assert np.all(co[t < 30.0] >= non[t < 30.0])
+
+
+def test_coaxial_ratio_grows_with_turbidity():
+    ratios = [studies.coaxial_study(w)["peak_ratio"] for w in ("clean_ocean", "coastal_ocean", "turbid_harbor")]
+    assert ratios[0] < ratios[1] < ratios[2]
+
+
+# --- maximum range ----------------------------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_maxrange_study_orders_waters_and_channels():
+    r = _json_roundtrip(studies.maxrange_study(shots=60, seed=1))
+    waters = ("clean_ocean", "coastal_ocean", "turbid_harbor")
+    for w in waters:
+        assert MAXRANGE_KEYS <= set(r[w])
+        assert all(r[w][k] is not None for k in MAXRANGE_KEYS)
+        assert r[w]["total_m"] >= r[w]["single_channel_m"]
+        assert r[w]["improvement"] == pytest.approx(r[w]["total_m"] / r[w]["single_channel_m"], abs=1e-3)
+        # total (chosen returns) reaches as far as the better of the near and far fields, to the fine step.
+        assert abs(r[w]["total_m"] - max(r[w]["near_field_m"], r[w]["far_field_m"])) <= studies.FINE_STEP_M + 1e-9
+    for key in ("single_channel_m", "total_m", "far_field_m", "near_field_m"):
+        assert r["clean_ocean"][key] > r["coastal_ocean"][key] > r["turbid_harbor"][key]
+    assert r["clean_ocean"]["near_field_m"] < r["clean_ocean"]["far_field_m"]
+    assert r["settings"]["shots"] == 60
+
+
+def test_maxrange_study_one_water_small():
+    r = studies.maxrange_study(["turbid_harbor"], shots=20, seed=0)
+    t = r["turbid_harbor"]
+    assert MAXRANGE_KEYS <= set(t) and set(r) == {"turbid_harbor", "settings"}
+    # The edge is resolved to the fine step: the next fine range fails the 90 % criterion.
+    curves = t["curves"]
+    ranges = np.array(curves["range_m"])
+    assert np.all(np.diff(ranges) > 0)
+    beyond = ranges > t["far_field_m"] + 1e-9
+    assert np.all(np.array(curves["far"])[beyond] < 0.9)
+    assert np.min(ranges[beyond]) - t["far_field_m"] <= studies.FINE_STEP_M + 1e-9
+
+
+def test_maxrange_rejects_bad_shots():
+    with pytest.raises(ValueError, match="shots"):
+        studies.maxrange_study(shots=0)
+
+
+# --- bench ------------------------------------------------------------------------------------------------
+
+def test_bench_study_keys_small():
+    r = _json_roundtrip(studies.bench_study(pulses=2000, full_pulses=200, repeats=1))
+    assert r["windowed_pulses_per_s"] > 0 and r["full_record_pulses_per_s"] > 0
+    assert {"cpu_count", "numba_threads", "loadavg_1_5_15"} <= set(r["machine"])
+    assert r["windowed"]["pulses"] == 2000 and r["full_record"]["pulses"] == 200
