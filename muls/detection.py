@@ -17,7 +17,7 @@ import numpy as np
 from .errors import check_choice
 from .noise import (FIRST_SIGNAL_STREAM, PHASE_STREAM, REFERENCE_STREAM, normal_at, normal_pair_at, seed_key,
                     stream_base, uniform_at)
-from .waveform import OpticalModel, PulseBatch, optical_power, pulse_value, shot_noise_lsb2_per_w
+from .waveform import OpticalModel, PulseBatch, column_value, pulse_value, shot_noise_lsb2_per_w
 
 RECORD_MODES = ("windowed", "full")
 
@@ -142,15 +142,16 @@ def _plan(offsets, first, usable, width, need):
 
 
 def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
-             keep_noise_free: bool = False, noise: bool = True) -> Records:
+             keep_noise_free: bool = False, noise: bool = True, echoes=None) -> Records:
     """Digitised records of every channel for a batch of pulses (MULS Eqs. 1, 12, 13).
 
     ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
+    ``echoes``: ``model.echoes(batch)`` if already computed.
     """
     ins = model.instrument
     dig = ins.digitizer
     key = seed_key(seed)
-    offsets, delay, energy = model.echo_delays_energies(batch)
+    offsets, delay, energy = echoes if echoes is not None else model.echoes(batch)
     window_pulse, window_start, n_samples = plan_windows(model, batch, offsets, delay, energy, mode)
     phase = sampling_phase_s(key, batch.pulse_id, dig.sample_interval_s)
     chans = ChannelArrays.of(model)
@@ -166,7 +167,7 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     _digitise(codes, clean, window_pulse, window_start, phase, pulse_id, key,
               -dig.pretrigger_s, dig.sample_interval_s, model.basis, tb.s0a, tb.s1a, tb.s0b, tb.step_s,
               2.0 * batch.column_cut_m / model.water.speed_m_s, batch.column_cut_weight, offsets, delay, energy,
-              batch.background_w, pulse.duration_s, chans.lsb_per_w[1:], chans.gate_open_s[1:],
+              batch.background_w, chans.lsb_per_w[1:], chans.gate_open_s[1:],
               chans.gate_close_s[1:], chans.dark_mean_lsb[1:], chans.dark_std_lsb[1:], chans.shot_lsb2_per_w[1:],
               float(dig.max_code), scale)
     _reference(reference, ref_clean, phase, pulse_id, key, -dig.pretrigger_s, dig.sample_interval_s, model.basis,
@@ -199,22 +200,41 @@ def _reference(reference, clean, phase, pulse_id, key, t0, dt, basis, extent, ls
 
 @numba.njit(cache=True, parallel=True)
 def _digitise(codes, clean, window_pulse, window_start, phase, pulse_id, key, t0, dt, basis, s0a, s1a, s0b,
-              step, cut_tau, cut_w, offsets, delay, energy, background, extent, lsb_per_w, gate_open,
+              step, cut_tau, cut_w, offsets, delay, energy, background, lsb_per_w, gate_open,
               gate_close, dark_mean, dark_std, shot_lsb2_per_w, max_code, noise_scale):
     n_windows, n_chan, n_samples = codes.shape
     n_pairs = (n_chan + 1) // 2
     keep = clean.shape[0] > 0
+    ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
     for w in numba.prange(n_windows):
         p = window_pulse[w]
         bases = np.empty(n_pairs, np.uint64)
         for j in range(n_pairs):
             bases[j] = stream_base(key, pulse_id[p], FIRST_SIGNAL_STREAM + j)
         normals = np.empty(2 * n_pairs)
+        # Echoes of pulse p (by delay) as three running sums over those started by time t:
+        # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
+        # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
+        sa, s1, sb = 0.0, 0.0, 0.0
+        nxt = offsets[p]
         for k in range(n_samples):
             index = window_start[w] + k
             t = t0 + index * dt + phase[p]
-            power = optical_power(t, p, basis, s0a, s1a, s0b, step, cut_tau, cut_w, offsets, delay, energy,
-                                  background, extent)
+            if k > 0:
+                s1 = (s1 + dt * sa) * ra
+                sa *= ra
+                sb *= rb
+            while nxt < offsets[p + 1] and delay[nxt] <= t:
+                u = t - delay[nxt]
+                ea = energy[nxt] * math.exp(-basis[0] * u)
+                sa += ea
+                s1 += u * ea
+                sb += energy[nxt] * math.exp(-basis[1] * u)
+                nxt += 1
+            power = background[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
+            for c in range(cut_tau.shape[1]):
+                if cut_w[p, c] != 0.0:
+                    power += cut_w[p, c] * column_value(t, cut_tau[p, c], basis, s0a, s1a, s0b, step)
             for j in range(n_pairs):
                 normals[2 * j], normals[2 * j + 1] = normal_pair_at(bases[j], index)
             for c in range(n_chan):

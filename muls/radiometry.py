@@ -56,10 +56,14 @@ def column_density_per_m(instrument: Instrument, water: Water, z_m):
 
 
 def window_factor(instrument: Instrument) -> float:
-    """Window return energy over emitted energy [-] (MULS Eq. 3); 0 for non-coaxial optics (O = 0)."""
+    """Window return energy over emitted energy [-] (MULS Eq. 3); 0 for non-coaxial optics (O = 0).
+
+    A_r / D^2 is the share of the window's reflection the receiver collects; it is capped at 1 (a window
+    closer than sqrt(A_r) cannot return more than it reflects).
+    """
     rx, tx = instrument.receiver, instrument.transmitter
-    return (rx.area_m2 * rx.window_coupling * tx.efficiency * rx.efficiency * rx.window_reflectance
-            / rx.window_distance_m**2)  # MULS Eq. 3
+    collected = min(1.0, rx.area_m2 / rx.window_distance_m**2)
+    return collected * rx.window_coupling * tx.efficiency * rx.efficiency * rx.window_reflectance  # MULS Eq. 3
 
 
 def background_power_w(instrument: Instrument, water: Water, spectral_radiance_w_m2_sr_nm: float,

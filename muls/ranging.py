@@ -213,7 +213,11 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
                     k += 1
                 # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
                 # threshold there, over what the echoes already found leave if their shape is a little off.
-                if start == 0 or k >= n_samples or top == start or not open_[top - 1]:
+                if start == 0 or k >= n_samples:
+                    continue
+                if clipped_first < 0 and (top == start or not open_[top - 1]):
+                    continue  # no rising edge inside the gate: a gate opening on a tail, not an echo
+                if clipped_first >= 0 and not open_[start - 1]:
                     continue
                 height = resid[top] - echoes[top]
                 if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
@@ -311,7 +315,7 @@ def choose_returns(model: OpticalModel, peaks: Peaks):
     return chosen, return_number, number_of_returns, dropped
 
 
-def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped) -> np.ndarray:
+def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped, echoes=None) -> np.ndarray:
     """Cause of each pulse without a return (index into DROPOUT_CAUSES), NO_DROPOUT otherwise.
 
     Judged on the noise-free signal at the strongest echo's peak: ``blind_zone`` if no light reaches the
@@ -321,7 +325,7 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     """
     ins = model.instrument
     dig = ins.digitizer
-    offsets, delay, energy = model.echo_delays_energies(batch)
+    offsets, delay, energy = echoes if echoes is not None else model.echoes(batch)
     record_end = dig.record_length_s
     cause = np.full(batch.n_pulses, NO_DROPOUT, np.int8)
     missing = ~np.asarray(has_return, bool)
@@ -377,11 +381,11 @@ def _powers(t, pulses, basis, s0a, s1a, s0b, step, cut_tau, cut_w, offsets, dela
     return out
 
 
-def range_batch(model: OpticalModel, batch: PulseBatch, records: Records) -> Ranging:
-    """Peaks, chosen returns and dropout causes of a digitised batch."""
+def range_batch(model: OpticalModel, batch: PulseBatch, records: Records, echoes=None) -> Ranging:
+    """Peaks, chosen returns and dropout causes of a digitised batch (``echoes``: ``model.echoes(batch)``)."""
     peaks, ref_time = find_peaks(model, batch, records)
     chosen, return_number, number_of_returns, dropped = choose_returns(model, peaks)
     has_return = np.zeros(batch.n_pulses, bool)
     has_return[chosen.pulse] = True
-    cause = dropout_causes(model, batch, has_return, dropped)
+    cause = dropout_causes(model, batch, has_return, dropped, echoes)
     return Ranging(chosen, return_number, number_of_returns, peaks, cause, ref_time)

@@ -10,5 +10,6 @@ from .waveform import OpticalModel, PulseBatch
 def simulate(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
              keep_noise_free: bool = False, noise: bool = True) -> tuple[Records, Ranging]:
     """Digitise every channel of ``batch`` (Eqs. 1-13) and range it (Eq. 14); ``seed`` keys all noise."""
-    records = digitise(model, batch, seed, mode=mode, keep_noise_free=keep_noise_free, noise=noise)
-    return records, range_batch(model, batch, records)
+    echoes = model.echoes(batch)
+    records = digitise(model, batch, seed, mode=mode, keep_noise_free=keep_noise_free, noise=noise, echoes=echoes)
+    return records, range_batch(model, batch, records, echoes)

@@ -411,7 +411,7 @@ def coaxial_study(water: str | Water = "turbid_harbor", t_max_ns: float = 200.0,
     non_model = OpticalModel.build(mul2023(), w)
     co = co_model.column_power_w(t)
     non = non_model.column_power_w(t)
-    _, delay, energy = co_model.echo_delays_energies(PulseBatch.flat_target(co_model.instrument, [np.inf]))
+    _, delay, energy = co_model.echoes(PulseBatch.flat_target(co_model.instrument, [np.inf]))
     window_peak = float(energy.max() * co_model.instrument.pulse(co_model.instrument.pulse.peak_delay_s)) \
         if energy.size else 0.0
     geometry = non_model.instrument.geometry

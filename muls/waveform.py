@@ -148,8 +148,11 @@ class OpticalModel:
     def basis(self) -> np.ndarray:
         return np.array(self.instrument.pulse.basis())
 
-    def echo_delays_energies(self, batch: PulseBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """CSR echoes per pulse: (offsets (n+1,), delay_s (m',), energy_j (m',)), window return first."""
+    def echoes(self, batch: PulseBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """CSR echoes per pulse, by delay within a pulse: (offsets (n+1,), delay_s (m',), energy_j (m',)).
+
+        The window return (Eq. 3), when coupled, is one more echo per pulse.
+        """
         e_t = self.instrument.transmitter.pulse_energy_j
         c_w = self.water.speed_m_s
         delay = 2.0 * batch.return_range_m / c_w
@@ -162,8 +165,8 @@ class OpticalModel:
             pulse = np.concatenate([np.arange(n), pulse])
             delay = np.concatenate([np.full(n, 2.0 * d / c_w), delay])
             energy = np.concatenate([np.full(n, e_t * window), energy])
-            order = np.argsort(pulse, kind="stable")
-            pulse, delay, energy = pulse[order], delay[order], energy[order]
+        order = np.lexsort((delay, pulse))  # by pulse, then by delay: the digitiser adds echoes as they start
+        pulse, delay, energy = pulse[order], delay[order], energy[order]
         offsets = np.searchsorted(pulse, np.arange(batch.n_pulses + 1)).astype(np.int64)
         return offsets, delay, energy
 

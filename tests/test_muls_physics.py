@@ -185,7 +185,9 @@ def test_window_return_vanishes_for_non_coaxial_and_follows_eq3_for_coaxial():
     assert window_factor(mul2023()) == 0.0
     ins = coaxial()
     rx = ins.receiver
-    assert window_factor(ins) == pytest.approx(rx.area_m2 * 0.9 * 0.6 * 0.0039 / rx.window_distance_m**2)
+    assert window_factor(ins) == pytest.approx(min(1.0, rx.area_m2 / rx.window_distance_m**2) * 0.9 * 0.6 * 0.0039)
+    far = replace(ins, receiver=replace(rx, window_distance_m=0.5))
+    assert window_factor(far) == pytest.approx(rx.area_m2 / 0.25 * 0.9 * 0.6 * 0.0039)
 
 
 def test_coaxial_column_is_stronger_near_field():
