@@ -16,24 +16,24 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar, Iterable, Mapping
 
+import numba
 import numpy as np
+
+from muls.ranging import DROPOUT_CAUSES as MULS_DROPOUT_CAUSES
 
 __all__ = [
     "DROPOUT_CAUSES",
     "DropoutRecords",
     "PointRecords",
     "dropout_cause_code",
+    "intensity_from_power",
+    "match_returns_to_hits",
 ]
 
-#: Dropout cause names; a cause's index in this tuple is its code in ``DropoutRecords.cause``.
-DROPOUT_CAUSES: tuple[str, ...] = (
-    "no_hit",  # 0: nothing within range along the beam
-    "blind_zone",  # 1: a hit, but beam/receiver overlap is zero (too close)
-    "below_threshold",  # 2: echo present, below k sigma in every channel
-    "saturated",  # 3: every channel clipped and the policy is to drop
-    "masked_by_backscatter",  # 4: echo hidden by the water-column return
-    "outside_gate",  # 5: only a gated channel could see it, and the echo is outside its gate
-)
+#: Dropout cause names; a cause's index in this tuple is its code in ``DropoutRecords.cause``. The physics
+#: decides them (muls.ranging): no_hit, blind_zone, below_threshold, saturated, masked_by_backscatter,
+#: outside_gate.
+DROPOUT_CAUSES: tuple[str, ...] = MULS_DROPOUT_CAUSES
 
 
 def dropout_cause_code(name: str) -> int:
@@ -286,3 +286,34 @@ class DropoutRecords(_Records):
         counts = np.bincount(self.cause, minlength=len(DROPOUT_CAUSES))
         return {name: int(counts[i]) for i, name in enumerate(DROPOUT_CAUSES)}
 
+
+
+#: Intensity scale: log10 of the echo's peak optical power [W] from 1 nW (0) to 1 W (65535).
+INTENSITY_LOG10_RANGE_W = (-9.0, 0.0)
+
+
+def intensity_from_power(peak_power_w: np.ndarray) -> np.ndarray:
+    """LAS intensity (uint16) of echoes of peak optical power ``peak_power_w`` (n,) [W], log-scaled so that
+    one number spans the channels' 10^4 dynamic range (see docs/outputs.md)."""
+    lo, hi = INTENSITY_LOG10_RANGE_W
+    level = (np.log10(np.maximum(peak_power_w, 1e-30)) - lo) / (hi - lo)
+    return np.round(np.clip(level, 0.0, 1.0) * 65535.0).astype(np.uint16)
+
+
+@numba.njit(cache=True)
+def match_returns_to_hits(return_pulse, return_range_m, hit_offsets, hit_range_m, hit_energy, window_m):
+    """Index of the hit that made each return: the most energetic hit of its pulse within ``window_m`` of the
+    measured range (a merged echo is attributed to its strongest part), else the nearest in range; -1 if the
+    pulse has no hit. Returns (n_returns,) int64; hits of pulse p are ``hit_offsets[p]:hit_offsets[p + 1]``."""
+    out = np.full(return_pulse.shape[0], -1, np.int64)
+    for i in range(return_pulse.shape[0]):
+        p = return_pulse[i]
+        best, best_energy, nearest, nearest_gap = -1, -1.0, -1, np.inf
+        for j in range(hit_offsets[p], hit_offsets[p + 1]):
+            gap = abs(hit_range_m[j] - return_range_m[i])
+            if gap < nearest_gap:
+                nearest, nearest_gap = j, gap
+            if gap <= window_m and hit_energy[j] > best_energy:
+                best, best_energy = j, hit_energy[j]
+        out[i] = best if best >= 0 else nearest
+    return out
