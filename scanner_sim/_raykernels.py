@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 
 @njit(cache=True, fastmath=False)
@@ -33,36 +33,30 @@ def subrays_local32(beam_local, beam_dir, u, v, xy, r_t, tan_h, origins, dirs):
             dirs[k, 2] = dz * inv
 
 
-@njit(cache=True, fastmath=False, parallel=True)
-def hit_attributes(ray, tri, tfar, m, beam_local, beam_dir, u, v, xy, r_t, tan_h, rx_local, rx_dir, face_normal,
-                   face_reflectance, face_label, face_object, weights, local_origin, apex_behind, cos_half_fov,
-                   eps, sh_o, sh_d, sh_len):
-    """Per-hit geometry and material, the receiver FOV cone, and the shadow rays to cast (compacted).
+@njit(cache=True, fastmath=False)
+def hit_block(prim, tfar, ray0, m, beam_local, beam_dir, u, v, xy, r_t, tan_h, rx_local, rx_dir, face_normal,
+              face_reflectance, face_label, face_object, weights, local_origin, apex_behind, cos_half_fov, eps,
+              base, pulse, sub, rng, point, normal, cos_inc, refl, label, obj, weight, rx_dist, seen,
+              sh_o, sh_d, sh_len):
+    """Turn one block of Embree first-hit results into hit rows, and set up their shadow rays.
 
-    Returns pulse (k,) int64, subray (k,) int32, range_m (k,) float64, point (k, 3) float64 world, normal
-    (k, 3) float32 facing the ray, cos_incidence (k,) float64, reflectance (k,), label (k,) int16, object
-    (k,) int32, weight (k,), rx_dist (k,) float32 [m], seen (k,) float64 (1 in the cone with the receiver on
-    the lit side). Fills one shadow ray per hit into the caller's (k, 3) / (k,) float32 buffers: origins
-    (local, stepped ``eps`` off the surface), unit directions toward the aperture, and lengths (stopping
-    ``eps`` short of the aperture; -1 where no shadow ray is needed, which Embree skips as an empty ray).
+    prim (b,) int32 / tfar (b,) float32: Embree's answer for rays ray0 .. ray0 + b - 1 (-1: miss). Hits are
+    written in ray (scan) order at rows base, base + 1, ... of the output arrays: pulse int64, sub int32,
+    range_m float64, point (., 3) float64 world, normal (., 3) float32 facing the ray, cos_inc float64
+    (cosine of the incidence angle), refl float64, label int16, obj int32, weight float64, rx_dist float32
+    [m], seen float64 (1 when inside the FOV cone with the aperture on the lit side). Shadow ray c of the
+    block (for hit row base + c) goes into sh_o / sh_d / sh_len (float32, local frame): from the hit
+    stepped ``eps`` off the surface toward the aperture, stopping ``eps`` short of it; length -1 (an empty
+    ray Embree skips) when the hit is not in the cone. Returns the block's hit count.
     """
-    k = ray.shape[0]
-    pulse = np.empty(k, np.int64)
-    sub = np.empty(k, np.int32)
-    rng = np.empty(k, np.float64)
-    point = np.empty((k, 3), np.float64)
-    normal = np.empty((k, 3), np.float32)
-    incidence = np.empty(k, np.float64)
-    refl = np.empty(k, np.float64)
-    label = np.empty(k, np.int16)
-    obj = np.empty(k, np.int32)
-    weight = np.empty(k, np.float64)
-    rx_dist = np.empty(k, np.float32)
-    seen = np.zeros(k, np.float64)
+    c = 0
     ox, oy, oz = local_origin[0], local_origin[1], local_origin[2]
-    for i in prange(k):
-        r = ray[i]
-        f = tri[i]
+    for b in range(prim.shape[0]):
+        f = prim[b]
+        if f < 0:
+            continue
+        r = ray0 + b
+        i = base + c
         p = r // m
         j = r - p * m
         pulse[i] = p
@@ -82,7 +76,7 @@ def hit_attributes(ray, tri, tfar, m, beam_local, beam_dir, u, v, xy, r_t, tan_h
         dx *= inv
         dy *= inv
         dz *= inv
-        t = np.float64(tfar[i])
+        t = np.float64(tfar[b])
         rng[i] = t
         qx = beam_local[p, 0] + r_t * ax + t * dx
         qy = beam_local[p, 1] + r_t * ay + t * dy
@@ -97,7 +91,7 @@ def hit_attributes(ray, tri, tfar, m, beam_local, beam_dir, u, v, xy, r_t, tan_h
         normal[i, 0] = nx
         normal[i, 1] = ny
         normal[i, 2] = nz
-        incidence[i] = -dn if -dn < 1.0 else 1.0  # cos(incidence); arccos in numpy (SIMD) afterwards
+        cos_inc[i] = -dn if -dn < 1.0 else 1.0  # arccos in numpy (SIMD) afterwards
         # Receiver FOV cone: virtual apex behind the aperture (raycast.ReceiverCone).
         rx, ry, rz = rx_local[p, 0], rx_local[p, 1], rx_local[p, 2]
         kx, ky, kz = rx_dir[p, 0], rx_dir[p, 1], rx_dir[p, 2]
@@ -110,11 +104,20 @@ def hit_attributes(ray, tri, tfar, m, beam_local, beam_dir, u, v, xy, r_t, tan_h
         rx_dist[i] = dist
         ok = along >= cos_half_fov * math.sqrt(wx * wx + wy * wy + wz * wz) and nx * tx + ny * ty + nz * tz > 0.0
         seen[i] = 1.0 if ok else 0.0
-        sh_o[i, 0] = qx + eps * nx
-        sh_o[i, 1] = qy + eps * ny
-        sh_o[i, 2] = qz + eps * nz
-        sh_d[i, 0] = tx / dist
-        sh_d[i, 1] = ty / dist
-        sh_d[i, 2] = tz / dist
-        sh_len[i] = dist - 2.0 * eps if ok else -1.0
-    return pulse, sub, rng, point, normal, incidence, refl, label, obj, weight, rx_dist, seen
+        sh_o[c, 0] = qx + eps * nx
+        sh_o[c, 1] = qy + eps * ny
+        sh_o[c, 2] = qz + eps * nz
+        sh_d[c, 0] = tx / dist
+        sh_d[c, 1] = ty / dist
+        sh_d[c, 2] = tz / dist
+        sh_len[c] = dist - 2.0 * eps if ok else -1.0
+        c += 1
+    return c
+
+
+@njit(cache=True)
+def clear_blocked(occluded, sh_len, seen, base):
+    """seen[base + c] = 0 where shadow ray c hit something (empty rays, length <= 0, never count)."""
+    for c in range(occluded.shape[0]):
+        if occluded[c] >= 0 and sh_len[c] > 0.0:
+            seen[base + c] = 0.0

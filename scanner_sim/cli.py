@@ -161,6 +161,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    from .raycast import tune_memory
+
+    tune_memory()  # reuse chunk-sized arrays instead of page-faulting them anew (measured, see raycast)
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

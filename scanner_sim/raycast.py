@@ -26,6 +26,34 @@ from .beams import BeamPattern, perpendicular_basis
 BACKENDS = ("auto", "embree", "numpy")
 
 
+_MEMORY_TUNED = False
+
+
+def tune_memory(mmap_threshold_bytes: int = 64 << 20, trim_threshold_bytes: int = 512 << 20) -> bool:
+    """Keep glibc from returning chunk-sized arrays to the OS after every chunk (process-wide, idempotent).
+
+    Measured with a profiler on this 2-core VM (scanner-sim bench-rays, 20,000 pulses x 19 sub-rays): the
+    geometry stage's fresh multi-megabyte arrays (Hits, Embree's outputs) were each mmapped and page-faulted
+    anew per chunk, which cost as much as 25 ms of 175 ms; with these thresholds the memory is reused and
+    the hit kernel halves. Call once at program start (``scanner-sim`` does); returns False where mallopt is
+    unavailable (not glibc), which only costs speed.
+    """
+    global _MEMORY_TUNED
+    if _MEMORY_TUNED:
+        return True
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        m_trim_threshold, m_mmap_threshold = -1, -3  # from glibc's malloc.h
+        ok = bool(libc.mallopt(m_mmap_threshold, int(mmap_threshold_bytes))) and bool(
+            libc.mallopt(m_trim_threshold, int(trim_threshold_bytes)))
+    except (OSError, AttributeError):
+        return False
+    _MEMORY_TUNED = ok
+    return ok
+
+
 def embree_available() -> bool:
     try:
         import embreex.rtcore_scene  # noqa: F401
@@ -106,6 +134,23 @@ class RayCaster:
         ray, tri, loc = ray[order], tri[order], loc[order]
         dist = np.einsum("ij,ij->i", loc - origins[ray], directions[ray])
         return ray.astype(np.int64), tri.astype(np.int64), dist.astype(np.float32)
+
+    def first_hits_raw(self, origins: np.ndarray, directions: np.ndarray):
+        """Per-ray answer, no compaction: ``(tri_index (n,) int32, -1 for a miss; distance_m (n,) float32)``."""
+        if self.backend == "embree":
+            result = self._scene.run(origins, directions, output=1)
+            return result["primID"], result["tfar"]
+        ray, tri, dist = self.first_hits(origins, directions)
+        prim = np.full(origins.shape[0], -1, np.int32)
+        tfar = np.full(origins.shape[0], np.inf, np.float32)
+        prim[ray], tfar[ray] = tri, dist
+        return prim, tfar
+
+    def occluded_raw(self, origins, directions, max_distance_m) -> np.ndarray:
+        """Per-ray occlusion answer as Embree gives it: (n,) int, >= 0 when something lies on the ray."""
+        if self.backend == "embree":
+            return self._scene.run(origins, directions, dists=max_distance_m, query="OCCLUDED")
+        return np.where(self.occluded(origins, directions, max_distance_m), 0, -1)
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, max_distance_m: np.ndarray) -> np.ndarray:
         """(n,) bool: does any triangle lie on each ray between 0 and ``max_distance_m`` (n,)?
@@ -221,35 +266,63 @@ def cast_beams(scene, beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: 
     tan_h = math.tan(0.5 * geometry.beam_divergence_full_rad)
     beam_local = np.ascontiguousarray(beam_origin - scene.local_origin)
     beam_dir = np.ascontiguousarray(beam_dir, dtype=np.float64)
+    rx_local = np.ascontiguousarray(rx_origin - scene.local_origin)
+    rx_dir = np.ascontiguousarray(rx_dir, dtype=np.float64)
     u, v = perpendicular_basis(beam_dir, np.asarray(shaft_dir, float))
     xy = np.ascontiguousarray(pattern.xy)
-    kernels = _kernels()
-    caster = scene.caster()
-    origins32 = caster.workspace("origins32", (n_pulses * m, 3), np.float32)
-    dirs32 = caster.workspace("dirs32", (n_pulses * m, 3), np.float32)
-    kernels.subrays_local32(beam_local, beam_dir, u, v, xy, r_t, tan_h, origins32, dirs32)
-    ray, tri, tfar = caster.first_hits(origins32, dirs32)
-
     cone = ReceiverCone.from_geometry(geometry)
-    rx_local = np.ascontiguousarray(rx_origin - scene.local_origin)
-    k = ray.shape[0]
-    sh_o = caster.workspace("shadow_origins32", (k, 3), np.float32)
-    sh_d = caster.workspace("shadow_dirs32", (k, 3), np.float32)
-    sh_len = caster.workspace("shadow_length32", (k,), np.float32)
-    (pulse, sub, range_m, point, normal, incidence, reflectance, label, object_id, weight, rx_dist,
-     seen) = kernels.hit_attributes(
-        ray, tri, tfar, m, beam_local, beam_dir, u, v, xy, r_t, tan_h, rx_local,
-        np.ascontiguousarray(rx_dir, dtype=np.float64), scene.face_normal, scene.face_reflectance,
-        scene.face_label, scene.face_object, pattern.weight, scene.local_origin, cone.apex_behind_m,
-        cone.cos_half_fov, scene.shadow_offset_m, sh_o, sh_d, sh_len)
-    np.arccos(incidence, out=incidence)  # the kernel returns cos(incidence)
-    if shadow_rays:  # one ray per hit; those outside the cone have length -1 and are skipped
-        seen[caster.occluded(sh_o, sh_d, sh_len)] = 0.0
+    caster = scene.caster()
+    kernels = _kernels()
 
-    return Hits(pulse_index=pulse, subray_index=sub, range_m=range_m, point=point, normal=normal,
-                incidence_rad=incidence, reflectance=reflectance, label=label, object_id=object_id,
-                receiver_weight=seen, weight=weight, rx_distance_m=rx_dist, n_pulses=n_pulses, n_subrays=m)
+    # Outputs sized for every sub-ray hitting; only the rows written are touched (and returned).
+    n_max = n_pulses * m
+    pulse = np.empty(n_max, np.int64)
+    sub = np.empty(n_max, np.int32)
+    range_m = np.empty(n_max)
+    point = np.empty((n_max, 3))
+    normal = np.empty((n_max, 3), np.float32)
+    incidence = np.empty(n_max)
+    reflectance = np.empty(n_max)
+    label = np.empty(n_max, np.int16)
+    object_id = np.empty(n_max, np.int32)
+    weight = np.empty(n_max)
+    rx_dist = np.empty(n_max, np.float32)
+    seen = np.empty(n_max)
 
+    # Blocks of pulses small enough that each block's rays, Embree answers and shadow rays stay in cache.
+    block = max(1, BLOCK_RAYS // m)
+    base = 0
+    for p0 in range(0, n_pulses, block):  # a handful of blocks per chunk, not a loop per pulse
+        p1 = min(n_pulses, p0 + block)
+        b = (p1 - p0) * m
+        o32 = caster.workspace("origins32", (b, 3), np.float32)
+        d32 = caster.workspace("dirs32", (b, 3), np.float32)
+        kernels.subrays_local32(beam_local[p0:p1], beam_dir[p0:p1], u[p0:p1], v[p0:p1], xy, r_t, tan_h, o32, d32)
+        prim, tfar = caster.first_hits_raw(o32, d32)
+        sh_o = caster.workspace("shadow_origins32", (b, 3), np.float32)
+        sh_d = caster.workspace("shadow_dirs32", (b, 3), np.float32)
+        sh_len = caster.workspace("shadow_length32", (b,), np.float32)
+        c = kernels.hit_block(prim, tfar, p0 * m, m, beam_local, beam_dir, u, v, xy, r_t, tan_h, rx_local, rx_dir,
+                              scene.face_normal, scene.face_reflectance, scene.face_label, scene.face_object,
+                              pattern.weight, scene.local_origin, cone.apex_behind_m, cone.cos_half_fov,
+                              scene.shadow_offset_m, base, pulse, sub, range_m, point, normal, incidence,
+                              reflectance, label, object_id, weight, rx_dist, seen, sh_o, sh_d, sh_len)
+        if shadow_rays and c:  # hits outside the cone have empty (length -1) shadow rays, skipped by Embree
+            occluded = caster.occluded_raw(sh_o[:c], sh_d[:c], sh_len[:c])
+            kernels.clear_blocked(occluded, sh_len[:c], seen, base)
+        base += c
+
+    k = base
+    incidence = incidence[:k]
+    np.arccos(incidence, out=incidence)  # the kernel wrote cos(incidence)
+    return Hits(pulse_index=pulse[:k], subray_index=sub[:k], range_m=range_m[:k], point=point[:k],
+                normal=normal[:k], incidence_rad=incidence, reflectance=reflectance[:k], label=label[:k],
+                object_id=object_id[:k], receiver_weight=seen[:k], weight=weight[:k], rx_distance_m=rx_dist[:k],
+                n_pulses=n_pulses, n_subrays=m)
+
+
+#: Rays per block inside :func:`cast_beams` (measured: 16k-64k keep a block's working set in cache).
+BLOCK_RAYS = 32768
 
 _KERNELS = None
 

@@ -125,3 +125,13 @@ def test_defaults_are_complete():
     cfg = load_scene("pool_panel")
     assert cfg.survey.resolved_subrays == 91 and cfg.survey.resolved_shadow_rays
     assert cfg.scanner.mounting == "along_track" and math.isclose(cfg.survey.start_s, 0.0)
+
+
+def test_docs_example_validates():
+    """The complete commented example in docs/scene-format.md is a valid scene."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parent.parent / "docs" / "scene-format.md").read_text()
+    block = text.split("```yaml\n", 1)[1].split("```", 1)[0]
+    cfg = parse_scene(yaml.safe_load(block), base_dir=SCENES_DIR)
+    assert cfg.name == "cable_survey" and cfg.platform.navigation_noise.seed == 11
