@@ -171,7 +171,7 @@ class Processing:
 
     threshold_sigma: float = 5.0  # assumption: k of the k-sigma threshold (false alarms < 3e-7 per sample)
     peak_fit: str = "pulse"  # three-point fit to the known pulse shape (unbiased), or gaussian / parabolic
-    saturation_policy: str = "drop"
+    saturation_policy: str = "keep"  # clipped returns are kept, flagged; "drop" makes them dropouts
     merge_window_s: float = 4e-9  # peaks of different channels closer than this are one echo
     tail_tolerance: float = 0.05  # assumption: a later peak must also clear 5 % of the earlier echoes' model
 

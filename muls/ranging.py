@@ -169,7 +169,7 @@ def _reference_peaks(reference, dark_mean, fit, feature, offset, centre):
 @numba.njit(cache=True, parallel=True)
 def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0b, step, background,
            lsb_per_w, gate_open, gate_close, dark_mean, dark_std, shot, k_sigma, tail_tolerance, max_code, fit,
-           peak_delay, peak_density, feature, offset, centre, clip_ratio, clip_width, clip_offset,
+           peak_delay, peak_density, feature, offset, centre, clip_ratio, clip_rise, clip_fall,
            out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts):
     n_windows, n_chan, n_samples = codes.shape
     cap = out_w.shape[0] // max(1, n_windows * n_chan)
@@ -184,6 +184,7 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
         sigma = np.empty(n_samples)
         echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
         open_ = np.empty(n_samples, np.bool_)
+        blind = np.empty(n_samples, np.bool_)
         for c in range(n_chan):
             slot = w * n_chan + c
             for k in range(n_samples):
@@ -192,7 +193,8 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
                 expected = dark_mean[c] + lsb_per_w[c] * base
                 sigma[k] = math.sqrt(dark_std[c] ** 2 + shot[c] * base + 1.0 / 12.0)
                 # Where the backscatter alone clips the channel, nothing can be seen in it.
-                resid[k] = codes[w, c, k] - expected if expected < max_code else 0.0
+                blind[k] = expected >= max_code
+                resid[k] = 0.0 if blind[k] else codes[w, c, k] - expected
                 echoes[k] = 0.0
             k = 0
             while k < n_samples:
@@ -217,7 +219,14 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
                     continue
                 if clipped_first < 0 and (top == start or not open_[top - 1]):
                     continue  # no rising edge inside the gate: a gate opening on a tail, not an echo
-                if clipped_first >= 0 and not open_[start - 1]:
+                if clipped_first >= 0:
+                    # The plateau may have begun before the run did (clipped samples with a small residual on a
+                    # high baseline): it must rise from a sample the channel sees, or its width is unknown.
+                    while clipped_first > 0 and codes[w, c, clipped_first - 1] >= max_code:
+                        clipped_first -= 1
+                    if clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
+                        continue
+                if blind[top - 1]:
                     continue
                 height = resid[top] - echoes[top]
                 if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
@@ -225,11 +234,12 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
                 if counts[slot] >= cap:
                     continue
                 if clipped_first >= 0:
-                    # Clipped: the plateau width gives amplitude and peak time through the known pulse shape.
-                    width = (clipped_last - clipped_first + 1) * dt
-                    idx = 0.5 * float(2 * window_start[w] + clipped_first + clipped_last) + np.interp(
-                        width, clip_width, clip_offset) / dt
-                    amp = (resid[clipped_first] - echoes[clipped_first]) / np.interp(width, clip_width, clip_ratio)
+                    # Clipped: the plateau and the clip levels at its ends (over a baseline that may slope) give
+                    # amplitude and peak time through the known pulse shape.
+                    idx, amp = _clipped_peak(clipped_first, clipped_last, resid[clipped_first] - echoes[clipped_first],
+                                             resid[clipped_last] - echoes[clipped_last], clip_ratio, clip_rise,
+                                             clip_fall)
+                    idx += window_start[w]
                 else:
                     d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
                                        fit, feature, offset, centre)
@@ -267,16 +277,37 @@ def _add_echo(echoes, first, u, dt, scale, basis):
 
 
 def clip_tables(model: OpticalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For a pulse clipped at ``ratio`` of its peak: (ratio, plateau width [s], peak minus plateau centre [s]),
-    sorted by width, so a clipped run's width gives the echo's amplitude and peak time."""
+    """For a pulse cut at ``ratio`` of its peak (ascending): how long before its peak it rises through that
+    level, and how long after it falls through it, both in samples."""
     pulse = model.instrument.pulse
-    u = np.linspace(0.0, 2.0 * pulse.duration_s, 40001)
+    dt = model.instrument.digitizer.sample_interval_s
+    u = np.linspace(0.0, 2.0 * pulse.duration_s, 80001)
     f = pulse(u) / pulse(pulse.peak_delay_s)
     i_peak = int(np.argmax(f))
-    ratio = np.geomspace(1e-7, 0.999, 400)[::-1]
+    ratio = np.geomspace(1e-9, 1.0, 600)
     rising = np.interp(ratio, f[: i_peak + 1], u[: i_peak + 1])
     falling = np.interp(ratio, f[i_peak:][::-1], u[i_peak:][::-1])
-    return ratio, falling - rising, pulse.peak_delay_s - 0.5 * (rising + falling)
+    return ratio, (u[i_peak] - rising) / dt, (falling - u[i_peak]) / dt
+
+
+@numba.njit(cache=True)
+def _clipped_peak(first, last, level_first, level_last, ratio, rise, fall):
+    """(peak index [samples], amplitude) of an echo clipped from sample ``first`` to ``last``, where the clip
+    level above the baseline was ``level_first`` and ``level_last``: the amplitude A whose pulse exceeds those
+    levels for exactly the plateau's width (rising and falling crossings half a sample outside it)."""
+    width = last - first + 1.0
+    lo = math.log(max(level_first, level_last, 1e-9))
+    hi = lo + math.log(1.0 / ratio[0])
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        a = math.exp(mid)
+        span = np.interp(level_first / a, ratio, rise) + np.interp(level_last / a, ratio, fall)
+        if span < width:
+            lo = mid
+        else:
+            hi = mid
+    a = math.exp(0.5 * (lo + hi))
+    return first - 0.5 + np.interp(level_first / a, ratio, rise), a
 
 
 def choose_returns(model: OpticalModel, peaks: Peaks):

@@ -142,7 +142,11 @@ def test_seed_changes_noise_but_not_noise_free_result():
     ("pond", (200e-9, 400e-9), 13.0, 0.1, "outside_gate"),
 ])
 def test_each_dropout_cause_is_reached(water, gate, range_m, rho, cause):
+    from dataclasses import replace
+
     model = _model(water, gate)
+    ins = model.instrument
+    model = OpticalModel.build(replace(ins, processing=replace(ins.processing, saturation_policy="drop")), model.water)
     batch = PulseBatch.flat_target(model.instrument, np.full(20, range_m), rho)
     _, ranging = simulate(model, batch, seed=6)
     assert ranging.returns.pulse.size == 0
@@ -150,17 +154,26 @@ def test_each_dropout_cause_is_reached(water, gate, range_m, rho, cause):
 
 
 def test_saturated_returns_kept_under_keep_policy():
-    from dataclasses import replace
-
     model = _model("coastal_ocean", (100e-9, 400e-9))
-    ins = replace(model.instrument, processing=replace(model.instrument.processing, saturation_policy="keep"))
-    model = OpticalModel.build(ins, model.water)
+    ins = model.instrument
+    assert ins.processing.saturation_policy == "keep"  # the default
     _, ranging = simulate(model, PulseBatch.flat_target(ins, np.full(20, 3.0)), seed=6)
     assert ranging.returns.pulse.size == 20
     assert ranging.returns.saturated.all()
     assert np.all(ranging.dropout_cause == NO_DROPOUT)
     # The clipped plateau's width recovers the peak time through the known pulse shape.
     assert np.all(np.abs(ranging.returns.range_m - 3.0) < 0.1)
+
+
+def test_regression_clipped_run_after_backscatter_blindness_is_not_an_echo():
+    """Root cause: a far channel gated open at 40 ns in turbid water is clipped by the column itself; the echo
+    lies inside that blind stretch, and the clipped samples that follow it were taken as an echo plateau,
+    ranged ~0.8 m long. A run must rise from samples where the channel can see."""
+    model = _model("turbid_harbor", (40e-9, 400e-9))
+    _, ranging = simulate(model, PulseBatch.flat_target(model.instrument, np.full(30, 7.5), 0.14), seed=1)
+    far = ranging.peaks.select(ranging.peaks.channel == 3)
+    assert far.pulse.size == 0
+    assert set(np.unique(ranging.dropout_cause[ranging.dropout_cause >= 0])) <= {DROPOUT_CAUSES.index("masked_by_backscatter")}
 
 
 def test_two_echoes_in_one_footprint_give_two_returns_and_close_ones_merge():
