@@ -150,6 +150,68 @@ def _cmd_bench_rays(args) -> int:
     return 0
 
 
+# -- run ------------------------------------------------------------------------------------------------
+@subcommand("run")
+def _add_run(sub):
+    p = sub.add_parser("run", help="simulate a survey pass: points.las, dropouts, summary, trajectory, render")
+    p.add_argument("scene", nargs="?", default="cable_survey", help="shipped scene name or YAML path")
+    p.add_argument("--out", help="output directory (default: the scene's output.dir)")
+    p.add_argument("--water", help="water preset instead of the scene's (clean_ocean, coastal_ocean, ...)")
+    p.add_argument("--seed", type=int, help="seed of the pass (default: the scene's survey.seed)")
+    p.add_argument("--fidelity", choices=["fast", "balanced", "reference"])
+    p.add_argument("--max-pulses", type=int, help="stop after this many pulses")
+    p.add_argument("--chunk-pulses", type=int, help="pulse slots per chunk (memory vs overhead)")
+    p.add_argument("--waveforms", type=int, default=0, help="also write the full records of N sampled pulses")
+    p.add_argument("--no-render", action="store_true", help="skip render.png")
+    p.add_argument("--quiet", action="store_true", help="no progress bar; print only the summary path")
+    p.set_defaults(func=_cmd_run)
+
+
+def _cmd_run(args) -> int:
+    from pathlib import Path
+
+    from .config import load_scene
+    from .survey import PassOptions, run_pass
+
+    config = load_scene(args.scene)
+    options = PassOptions(water=args.water, seed=args.seed, fidelity=args.fidelity, max_pulses=args.max_pulses,
+                          chunk_pulses=args.chunk_pulses, waveforms=args.waveforms, progress=not args.quiet,
+                          render=not args.no_render)
+    out = Path(args.out or config.output_dir)
+    summary = run_pass(config, out, options)
+    if not args.quiet:
+        dropped = ", ".join(f"{k} {v}" for k, v in summary["dropouts"].items() if v) or "none"
+        print(f"{summary['pulses']:,} pulses -> {summary['points']:,} points in {summary['wall_s']:.1f} s "
+              f"({summary['pulses_per_s']:,.0f} pulses/s); dropouts: {dropped}")
+        print(f"range error |median| {summary['range_error_m']['median']} m, p95 {summary['range_error_m']['p95']} m")
+    print(out / "summary.json")
+    return 0
+
+
+# -- bench ----------------------------------------------------------------------------------------------
+@subcommand("bench")
+def _add_bench(sub):
+    p = sub.add_parser("bench", help="end-to-end pulses/s per fidelity beside raw embreex on the same rays")
+    p.add_argument("scene", nargs="?", default="cable_survey")
+    p.add_argument("--pulses", type=int, default=60000)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_bench)
+
+
+def _cmd_bench(args) -> int:
+    from .bench import bench_pass
+
+    result = bench_pass(args.scene, args.pulses)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for fidelity in ("fast", "balanced", "reference"):
+            r = result[fidelity]
+            print(f"{fidelity:10s} {r['pulses_per_s']:>10,.0f} pulses/s  raw embreex {r['raw_embreex_pulses_per_s']:>10,.0f}"
+                  f" pulses/s  ratio {r['ratio_to_raw_rays']:.2f}")
+    return 0
+
+
 # -- main -----------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="scanner-sim", description="Underwater lidar survey simulator (MULS)")

@@ -132,6 +132,14 @@ def _figure_to_png(fig, path_png) -> None:
             fig.savefig(fh, format="png", dpi=fig.dpi)
 
 
+def _prefer_headless_vtk() -> None:
+    """Without a display, render through EGL straight away instead of failing over from X11 with a warning."""
+    import os
+
+    if not os.environ.get("DISPLAY"):
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+
 def render_point_cloud(
     path_png,
     xyz,
@@ -200,6 +208,7 @@ def render_point_cloud(
     if max_points < 1:
         raise ValueError(f"max_points: {max_points!r} is not allowed; expected >= 1")
 
+    _prefer_headless_vtk()
     import pyvista as pv
 
     pv.OFF_SCREEN = True
