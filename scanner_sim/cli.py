@@ -111,10 +111,12 @@ def _cmd_overlap(args) -> int:
         "full_overlap_m": round(geometry.full_overlap_m, 4),
     }
     if args.out:
-        from .viz_overlap import plot_overlap
+        from .viz import plot_overlap
 
         dense = np.linspace(0.0, float(dist.max()) * 1.05, 400)
-        plot_overlap(dist, ray, ana, args.out, args.subrays, dense, geometry.overlap(dense))
+        plot_overlap(args.out, dist, ray, ana, title=f"Beam / receiver-FOV overlap, {args.instrument} geometry",
+                     raycast_label=f"ray-cast, {args.subrays} sub-rays", dense_distance_m=dense,
+                     dense_analytic=geometry.overlap(dense))
         result["plot"] = str(args.out)
     if args.json:
         print(json.dumps(result))
