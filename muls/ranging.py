@@ -187,6 +187,13 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
         blind = np.empty(n_samples, np.bool_)
         for c in range(n_chan):
             slot = w * n_chan + c
+            # No sample over half the threshold above the dark level: no run can start (the baseline and
+            # its noise only raise the bar).
+            highest = 0
+            for k in range(n_samples):
+                highest = max(highest, codes[w, c, k])
+            if highest - dark_mean[c] <= 0.5 * k_sigma * math.sqrt(dark_std[c] ** 2 + 1.0 / 12.0):
+                continue
             for k in range(n_samples):
                 open_[k] = gate_open[c] <= times[k] < gate_close[c]
                 base = base_w[k] if open_[k] else 0.0
@@ -290,6 +297,20 @@ def clip_tables(model: OpticalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return ratio, (u[i_peak] - rising) / dt, (falling - u[i_peak]) / dt
 
 
+@numba.njit(cache=True, inline="always")
+def _on_geometric_grid(x, ratio, table):
+    """Linear interpolation of ``table`` at ``x`` on the geometric grid ``ratio`` (O(1): index from log x)."""
+    n = ratio.shape[0]
+    pos = (math.log(x) - math.log(ratio[0])) / (math.log(ratio[n - 1]) - math.log(ratio[0])) * (n - 1)
+    if pos <= 0.0:
+        return table[0]
+    if pos >= n - 1:
+        return table[n - 1]
+    i = int(pos)
+    f = pos - i
+    return table[i] + f * (table[i + 1] - table[i])
+
+
 @numba.njit(cache=True)
 def _clipped_peak(first, last, level_first, level_last, ratio, rise, fall):
     """(peak index [samples], amplitude) of an echo clipped from sample ``first`` to ``last``, where the clip
@@ -298,16 +319,16 @@ def _clipped_peak(first, last, level_first, level_last, ratio, rise, fall):
     width = last - first + 1.0
     lo = math.log(max(level_first, level_last, 1e-9))
     hi = lo + math.log(1.0 / ratio[0])
-    for _ in range(50):
+    for _ in range(32):  # bisection on log A: 2^-32 of the bracket
         mid = 0.5 * (lo + hi)
         a = math.exp(mid)
-        span = np.interp(level_first / a, ratio, rise) + np.interp(level_last / a, ratio, fall)
+        span = _on_geometric_grid(level_first / a, ratio, rise) + _on_geometric_grid(level_last / a, ratio, fall)
         if span < width:
             lo = mid
         else:
             hi = mid
     a = math.exp(0.5 * (lo + hi))
-    return first - 0.5 + np.interp(level_first / a, ratio, rise), a
+    return first - 0.5 + _on_geometric_grid(level_first / a, ratio, rise), a
 
 
 def choose_returns(model: OpticalModel, peaks: Peaks):

@@ -165,9 +165,12 @@ class OpticalModel:
             pulse = np.concatenate([np.arange(n), pulse])
             delay = np.concatenate([np.full(n, 2.0 * d / c_w), delay])
             energy = np.concatenate([np.full(n, e_t * window), energy])
-        order = np.lexsort((delay, pulse))  # by pulse, then by delay: the digitiser adds echoes as they start
-        pulse, delay, energy = pulse[order], delay[order], energy[order]
+        if window > 0.0:
+            order = np.argsort(pulse, kind="stable")
+            pulse, delay, energy = pulse[order], delay[order], energy[order]
         offsets = np.searchsorted(pulse, np.arange(batch.n_pulses + 1)).astype(np.int64)
+        delay, energy = delay.copy(), energy.copy()
+        _sort_by_delay_within(offsets, delay, energy)  # the digitiser adds echoes as they start
         return offsets, delay, energy
 
     def column_power_w(self, t_s, cut_m=np.inf):
@@ -181,6 +184,19 @@ class OpticalModel:
     def pulse_power_w(self, t_s, delay_s, energy_j):
         """E w(t - delay) [W] of one echo (numpy broadcasting)."""
         return energy_j * self.instrument.pulse(np.asarray(t_s) - delay_s)
+
+
+@numba.njit(cache=True)
+def _sort_by_delay_within(offsets, delay, energy):
+    """Sort each pulse's echoes by delay in place (insertion sort: a pulse has a few tens at most)."""
+    for p in range(offsets.shape[0] - 1):
+        for i in range(offsets[p] + 1, offsets[p + 1]):
+            d, e = delay[i], energy[i]
+            j = i - 1
+            while j >= offsets[p] and delay[j] > d:
+                delay[j + 1], energy[j + 1] = delay[j], energy[j]
+                j -= 1
+            delay[j + 1], energy[j + 1] = d, e
 
 
 @numba.njit(cache=True, inline="always")
