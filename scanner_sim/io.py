@@ -192,7 +192,22 @@ def _as_triplet(name: str, value, *, positive: bool = False) -> np.ndarray:
     return arr
 
 
-class LasWriter:
+class _StreamingWriter:
+    """Context-manager protocol of the streaming writers: ``open`` on entry; ``close`` (the file appears
+    complete) on a clean exit, ``abort`` (nothing appears) on an exception."""
+
+    def __enter__(self):
+        self.open()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class LasWriter(_StreamingWriter):
     """Streaming, atomic LAS 1.4 writer (point data record format 6 plus extra dimensions).
 
     Use as a context manager and call :meth:`write` once per chunk of points; memory does not grow
@@ -309,16 +324,6 @@ class LasWriter:
         self._extra_range: dict[str, tuple[float, float]] = {}
 
     # -- context management -----------------------------------------------------------------
-    def __enter__(self) -> "LasWriter":
-        self.open()
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
-
     def open(self) -> None:
         """Create the temporary file and write the header. Called by ``__enter__``."""
         if self._atomic is not None or self._closed:
@@ -571,7 +576,7 @@ def read_dropouts_npz(path: PathLike) -> DropoutRecords:
         )
 
 
-class DropoutWriter:
+class DropoutWriter(_StreamingWriter):
     """Streaming, atomic dropouts writer with memory flat in the length of the pass.
 
     Each :meth:`write` appends the chunk's fields to raw spool files beside the destination
@@ -592,17 +597,8 @@ class DropoutWriter:
         self._counts = np.zeros(len(DROPOUT_CAUSES), dtype=np.int64)
         self._closed = False
 
-    def __enter__(self) -> "DropoutWriter":
-        self._open()
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
-
-    def _open(self) -> None:
+    def open(self) -> None:
+        """Start the spool. Called by ``__enter__``."""
         if self._spool is not None or self._closed:
             raise ValueError(f"DropoutWriter({str(self.path)!r}) is already open or closed")
         self._spool = {}
@@ -617,7 +613,7 @@ class DropoutWriter:
     def write(self, records: DropoutRecords) -> None:
         """Append one chunk of dropouts."""
         if self._spool is None:
-            self._open()
+            self.open()
         if not isinstance(records, DropoutRecords):
             raise ValueError(f"DropoutWriter.write: expected DropoutRecords, got {type(records).__name__}")
         try:
@@ -638,7 +634,7 @@ class DropoutWriter:
         if self._closed:
             return
         if self._spool is None:
-            self._open()
+            self.open()
         try:
             arrays = {}
             for name, (tmp, fh) in self._spool.items():
