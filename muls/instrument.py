@@ -279,5 +279,3 @@ def instrument_preset(name: str, water=None) -> Instrument:
         return single_channel(water)
     raise ParameterError(f"instrument = {name!r}: must be one of 'coaxial', 'mul2023', 'single_channel'")
 
-
-INSTRUMENT_PRESETS = ("mul2023", "single_channel", "coaxial")

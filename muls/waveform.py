@@ -181,10 +181,6 @@ class OpticalModel:
         return _column_many(t, np.broadcast_to(cut_tau, t.shape).astype(float), self.basis,
                             tb.s0a, tb.s1a, tb.s0b, tb.step_s)
 
-    def pulse_power_w(self, t_s, delay_s, energy_j):
-        """E w(t - delay) [W] of one echo (numpy broadcasting)."""
-        return energy_j * self.instrument.pulse(np.asarray(t_s) - delay_s)
-
 
 @numba.njit(cache=True)
 def _sort_by_delay_within(offsets, delay, energy):

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from muls.detection import ChannelArrays
 from muls.ranging import DROPOUT_CAUSES
 from muls.radiometry import target_factor
 from muls.simulate import simulate
@@ -194,9 +195,7 @@ def georeference(setup: PassSetup, ranging, hits: Hits, batch: PulseBatch, slots
     unseen = np.isnan(true_range)
     true_range[unseen] = hits.range_m[j[unseen]] if n_hits else np.nan
 
-    chans = model.instrument.channels
-    lsb_per_w = np.array([0.0] + [ch.volts_per_watt * model.instrument.digitizer.lsb_per_volt for ch in chans])
-    peak_power_w = r.amplitude_lsb / lsb_per_w[r.channel]
+    peak_power_w = r.amplitude_lsb / ChannelArrays.of(model).lsb_per_w[r.channel]
     scan_angle = np.degrees(setup.scanner.scan_angle_rad(times[pulse]))
     return PointRecords(
         gps_time_s=times[pulse], xyz=xyz, intensity=intensity_from_power(peak_power_w),
@@ -313,8 +312,7 @@ def write_waveforms(setup: PassSetup, path: Path, count: int) -> None:
     slots = np.concatenate(list(setup.slot_chunks()))
     pick = slots[np.unique(np.linspace(0, slots.size - 1, min(count, slots.size)).astype(np.int64))]
     _, _, records = setup.simulate_chunk(pick, record_mode="full")
-    dig = setup.model.instrument.digitizer
-    time_ns = (-dig.pretrigger_s + np.arange(dig.n_samples) * dig.sample_interval_s + records.phase_s[:, None]) * 1e9
+    time_ns = records.reference_times_s(setup.model) * 1e9  # full mode: the reference spans the record
     channels = {"ch0": records.reference}
     channels.update({ch.name: records.codes[:, i, :] for i, ch in enumerate(setup.model.instrument.channels)})
     io.write_waveforms_npz(path, pick, time_ns, channels)
@@ -338,8 +336,3 @@ def render_pass(setup: PassSetup, out: Path, max_points: int = 1_500_000) -> Non
     viz.render_point_cloud(out / "render.png", xyz, cls, truth_vertices=scene.vertices, truth_faces=scene.faces,
                            title=f"{setup.config.name}: {xyz.shape[0]:,} points ({setup.water_name}, "
                                  f"{setup.fidelity})")
-
-
-def with_overrides(config: SceneConfig, **survey_changes) -> SceneConfig:
-    """Copy of ``config`` with survey fields changed (used by studies)."""
-    return replace(config, survey=replace(config.survey, **survey_changes))
