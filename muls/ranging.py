@@ -229,9 +229,12 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
                 if clipped_first >= 0:
                     # The plateau may have begun before the run did (clipped samples with a small residual on a
                     # high baseline): it must rise from a sample the channel sees, or its width is unknown.
+                    # A plateau that runs through samples the backscatter alone clips began in the column.
+                    through_blind = False
                     while clipped_first > 0 and codes[w, c, clipped_first - 1] >= max_code:
                         clipped_first -= 1
-                    if clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
+                        through_blind = through_blind or blind[clipped_first]
+                    if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
                         continue
                 if blind[top - 1]:
                     continue

@@ -176,6 +176,17 @@ def test_regression_clipped_run_after_backscatter_blindness_is_not_an_echo():
     assert set(np.unique(ranging.dropout_cause[ranging.dropout_cause >= 0])) <= {DROPOUT_CAUSES.index("masked_by_backscatter")}
 
 
+def test_regression_plateau_through_backscatter_blindness_is_not_an_echo():
+    """Root cause: in turbid water at 3.2 m the column alone clips CH1 from 23 to 31 ns and the echo keeps it
+    clipped after that; the plateau was measured from its first clipped sample (in the column), so CH1 ranged
+    the seabed ~0.7 m short and a second, true return came from CH2. A plateau that passes through samples
+    the backscatter alone clips has an unknown start: the channel cannot range it."""
+    model = _model("turbid_harbor", (35e-9, 400e-9))
+    _, ranging = simulate(model, PulseBatch.flat_target(model.instrument, np.full(40, 3.2), 0.14), seed=3)
+    assert np.all(ranging.number_of_returns[ranging.return_number == 1] == 1)
+    assert np.all(np.abs(ranging.returns.range_m - 3.2) < 0.15)
+
+
 def test_two_echoes_in_one_footprint_give_two_returns_and_close_ones_merge():
     model = _model()
     ins = model.instrument
