@@ -214,6 +214,62 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+# -- view -----------------------------------------------------------------------------------------------
+#: ``--color`` name (also the ``viz`` colouring) -> the PointRecords field it shows.
+_VIEW_FIELDS = {"class": "classification", "intensity": "intensity", "channel": "channel",
+                "range_error": "range_error_m", "snr": "snr"}
+
+
+@subcommand("view")
+def _add_view(sub):
+    p = sub.add_parser("view", help="look at a points.las over its scene.ply: a window, or a PNG without a display")
+    p.add_argument("las", metavar="POINTS.las", help="a LAS file, e.g. out/cable_survey/points.las")
+    p.add_argument("--color", default="class", choices=list(_VIEW_FIELDS), help="point colouring (default: class)")
+    p.add_argument("--screenshot", metavar="PNG", help="render off-screen to this PNG instead of opening a window "
+                   "(without a display the default is POINTS.<color>.png beside the LAS)")
+    p.add_argument("--no-mesh", action="store_true", help="do not draw the scene.ply beside the LAS")
+    p.add_argument("--point-size", type=float, default=3.0, help="pixels (default 3)")
+    p.add_argument("--max-points", type=int, default=2_000_000, help="thin larger clouds by a fixed stride")
+    p.add_argument("--window-size", type=int, nargs=2, default=[1600, 1000], metavar=("WIDTH", "HEIGHT"))
+    p.set_defaults(func=_cmd_view)
+
+
+def _cmd_view(args) -> int:
+    import os
+    from pathlib import Path
+
+    import laspy
+
+    from . import viz
+    from .io import read_las, read_scene_ply
+
+    las = Path(args.las)
+    if not las.is_file():
+        raise ValueError(f"POINTS.las = {str(las)!r}: no such file; expected a LAS file such as points.las")
+    try:
+        points = read_las(las)
+    except (laspy.LaspyException, EOFError, OSError, ValueError) as exc:
+        raise ValueError(f"POINTS.las = {str(las)!r}: not a readable LAS file ({exc})") from None
+    mesh = {}
+    ply = las.parent / "scene.ply"
+    if not args.no_mesh and ply.is_file():
+        scene = read_scene_ply(ply)
+        mesh = {"truth_vertices": scene["vertices"], "truth_faces": scene["faces"]}
+    values = getattr(points, _VIEW_FIELDS[args.color])
+    colouring = ({"classification": values} if args.color == "class" else
+                 {"color_by": args.color, "scalars": values})
+    options = dict(title=f"{las}: {len(values):,} points coloured by {args.color}", point_size=args.point_size,
+                   max_points=args.max_points, window_size=tuple(args.window_size), **colouring, **mesh)
+    png = args.screenshot
+    if png is None and os.environ.get("DISPLAY"):
+        viz.show_point_cloud(points.xyz, **options)
+        return 0
+    png = Path(png) if png is not None else las.with_suffix(f".{args.color}.png")
+    viz.render_point_cloud(png, points.xyz, **options)
+    print(png)
+    return 0
+
+
 # -- main -----------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="scanner-sim", description="Underwater lidar survey simulator (MULS)")

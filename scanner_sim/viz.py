@@ -1,4 +1,4 @@
-"""Pictures of a pass: rendered point clouds (pyvista, off-screen), waveform and overlap plots.
+"""Pictures of a pass: rendered point clouds (pyvista, off-screen or in a window), waveform and overlap plots.
 
 This is the only module of ``scanner_sim`` that imports plotting or rendering libraries, and it
 imports them inside the functions, so ``import scanner_sim`` stays light and works without a
@@ -42,6 +42,7 @@ __all__ = [
     "plot_overlap",
     "plot_waveforms",
     "render_point_cloud",
+    "show_point_cloud",
 ]
 
 #: Label name -> RGB colour (0..255).
@@ -185,6 +186,65 @@ def render_point_cloud(
     fitted to the points, not to the (usually larger) truth mesh. Coordinates are shifted to the
     points' centre before they reach VTK, so large world coordinates render without float32 jitter.
     """
+    plotter = _point_cloud_plotter(
+        xyz, classification, off_screen=True, truth_vertices=truth_vertices, truth_faces=truth_faces,
+        title=title, color_by=color_by, scalars=scalars, class_names=class_names, window_size=window_size,
+        point_size=point_size, max_points=max_points,
+    )
+    try:
+        img = plotter.screenshot(return_img=True)
+    finally:
+        plotter.close()
+    _write_png(path_png, np.ascontiguousarray(img[..., :3]))
+
+
+def show_point_cloud(
+    xyz,
+    classification=None,
+    *,
+    truth_vertices=None,
+    truth_faces=None,
+    title: str | None = None,
+    color_by: str = "class",
+    scalars=None,
+    class_names: Mapping[int, str] | None = None,
+    window_size: Sequence[int] = (1600, 1000),
+    point_size: float = 3.0,
+    max_points: int = 2_000_000,
+) -> None:
+    """The picture of :func:`render_point_cloud` in an interactive pyvista window; returns when it is closed.
+
+    Same parameters as :func:`render_point_cloud`, without ``path_png``. Needs a display.
+    """
+    plotter = _point_cloud_plotter(
+        xyz, classification, off_screen=False, truth_vertices=truth_vertices, truth_faces=truth_faces,
+        title=title, color_by=color_by, scalars=scalars, class_names=class_names, window_size=window_size,
+        point_size=point_size, max_points=max_points,
+    )
+    try:
+        plotter.show(title=title or "scanner-sim")
+    finally:
+        plotter.close()
+
+
+def _point_cloud_plotter(
+    xyz,
+    classification,
+    *,
+    off_screen: bool,
+    truth_vertices,
+    truth_faces,
+    title: str | None,
+    color_by: str,
+    scalars,
+    class_names: Mapping[int, str] | None,
+    window_size: Sequence[int],
+    point_size: float,
+    max_points: int,
+):
+    """A ``pv.Plotter`` holding the points, their colouring and legend or scalar bar, the truth mesh,
+    the title and the camera (parameters as :func:`render_point_cloud`). The caller closes it.
+    """
     pts = np.asarray(xyz, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"xyz: shape {pts.shape} is not allowed; expected (n, 3)")
@@ -207,11 +267,13 @@ def render_point_cloud(
         raise ValueError(f"window_size: {window_size!r} is not allowed; expected (width, height) >= 16 pixels")
     if max_points < 1:
         raise ValueError(f"max_points: {max_points!r} is not allowed; expected >= 1")
+    if not point_size > 0:
+        raise ValueError(f"point_size: {point_size!r} is not allowed; expected > 0 pixels")
 
-    _prefer_headless_vtk()
+    if off_screen:
+        _prefer_headless_vtk()
     import pyvista as pv
 
-    pv.OFF_SCREEN = True
     if n > max_points:
         stride = int(np.ceil(n / max_points))
         pts, values = pts[::stride], values[::stride]
@@ -227,7 +289,7 @@ def render_point_cloud(
     centre = (lo + hi) / 2.0
     half = np.maximum((hi - lo) / 2.0, 0.5)
 
-    plotter = pv.Plotter(off_screen=True, window_size=[int(window_size[0]), int(window_size[1])])
+    plotter = pv.Plotter(off_screen=off_screen, window_size=[int(window_size[0]), int(window_size[1])])
     try:
         plotter.set_background(_BACKGROUND)
         if truth_vertices is not None:
@@ -286,10 +348,10 @@ def render_point_cloud(
         plotter.camera.up = (0.0, 0.0, 1.0)
         plotter.reset_camera(bounds=(-half[0], half[0], -half[1], half[1], -half[2], half[2]))
         plotter.camera.zoom(1.15)
-        img = plotter.screenshot(return_img=True)
-    finally:
+    except BaseException:
         plotter.close()
-    _write_png(path_png, np.ascontiguousarray(img[..., :3]))
+        raise
+    return plotter
 
 
 def plot_waveforms(
