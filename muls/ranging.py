@@ -245,10 +245,14 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
                     continue
                 if clipped_first >= 0:
                     # Clipped: the plateau and the clip levels at its ends (over a baseline that may slope) give
-                    # amplitude and peak time through the known pulse shape.
-                    idx, amp = _clipped_peak(clipped_first, clipped_last, resid[clipped_first] - echoes[clipped_first],
-                                             resid[clipped_last] - echoes[clipped_last], clip_ratio, clip_rise,
-                                             clip_fall)
+                    # amplitude and peak time through the known pulse shape. A clip level that the echoes found
+                    # before already explain leaves the plateau's edge, so its width, unknown.
+                    level_first = resid[clipped_first] - echoes[clipped_first]
+                    level_last = resid[clipped_last] - echoes[clipped_last]
+                    if not (level_first > 0.0 and level_last > 0.0):
+                        continue
+                    idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_ratio,
+                                             clip_rise, clip_fall)
                     idx += window_start[w]
                 else:
                     d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
@@ -304,6 +308,8 @@ def clip_tables(model: OpticalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray
 def _on_geometric_grid(x, ratio, table):
     """Linear interpolation of ``table`` at ``x`` on the geometric grid ``ratio`` (O(1): index from log x)."""
     n = ratio.shape[0]
+    if not x > ratio[0]:  # also x <= 0 and NaN: below the grid
+        return table[0]
     pos = (math.log(x) - math.log(ratio[0])) / (math.log(ratio[n - 1]) - math.log(ratio[0])) * (n - 1)
     if pos <= 0.0:
         return table[0]

@@ -187,6 +187,31 @@ def test_regression_plateau_through_backscatter_blindness_is_not_an_echo():
     assert np.all(np.abs(ranging.returns.range_m - 3.2) < 0.15)
 
 
+def test_regression_second_plateau_explained_by_the_first_echo_does_not_hang():
+    """Root cause: two clipped plateaus one sample apart (a moored mine's top, then the seabed, at 1.9 m in
+    single_channel coastal water). Once the first echo's model was taken off, the second plateau's clip level
+    was negative, log() gave NaN, the peak index -inf, and adding that echo's model looped ~2^63 times.
+    A plateau whose clip level the echoes before it already explain is not ranged; the grid lookup is total."""
+    from muls.ranging import _on_geometric_grid, clip_tables
+
+    ratio, rise, _ = clip_tables(_model())
+    for x in (0.0, -1.0, float("nan")):
+        assert _on_geometric_grid(x, ratio, rise) == rise[0]
+    code = (
+        "import numpy as np\n"
+        "from scanner_sim.config import load_scene\n"
+        "from scanner_sim.coverage_study import combination_config\n"
+        "from scanner_sim.survey import PassOptions, PassSetup\n"
+        "cfg = combination_config(load_scene('mine_field'), 'coastal_ocean', 3.0, 'single_channel')\n"
+        "chunk = PassSetup.build(cfg, PassOptions(water='coastal_ocean')).simulate_chunk(np.array([44049]))\n"
+        "assert np.all(np.isfinite(chunk.points.xyz)) and len(chunk.points) >= 1\n"
+    )
+    import subprocess
+    import sys
+
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
 def test_two_echoes_in_one_footprint_give_two_returns_and_close_ones_merge():
     model = _model()
     ins = model.instrument
