@@ -270,6 +270,58 @@ def _cmd_view(args) -> int:
     return 0
 
 
+# -- coverage -------------------------------------------------------------------------------------------
+@subcommand("coverage")
+def _add_coverage(sub):
+    from .coverage import CoverageSettings
+    from .coverage_study import DEFAULT_INSTRUMENTS, DEFAULT_WATERS, GATE_MODES, INSTRUMENTS
+
+    p = sub.add_parser("coverage", help="mapping coverage per water type x altitude x instrument, with its report")
+    p.add_argument("scene", nargs="?", default="cable_survey", help="shipped scene name or YAML path")
+    p.add_argument("--waters", nargs="+", default=list(DEFAULT_WATERS), metavar="WATER",
+                   help="water presets (default: %(default)s)")
+    p.add_argument("--altitudes-m", nargs="+", type=float, metavar="M", help="altitudes [m] (default: the scene's)")
+    p.add_argument("--instruments", nargs="+", default=list(DEFAULT_INSTRUMENTS), choices=INSTRUMENTS,
+                   metavar="INSTRUMENT", help=f"instrument presets, of {', '.join(INSTRUMENTS)} (default: %(default)s)")
+    p.add_argument("--gate", default="follow", choices=GATE_MODES,
+                   help="far gate at other altitudes: follow the nadir echo (default) or keep the scene's delay")
+    p.add_argument("--cell-m", type=float, default=CoverageSettings.cell_m,
+                   help="plan cell and cable stretch [m] (default: %(default)s)")
+    p.add_argument("--min-points", type=int, default=CoverageSettings.min_points,
+                   help="valid points a cell needs (default: %(default)s)")
+    p.add_argument("--tolerance-m", type=float, default=CoverageSettings.tolerance_m,
+                   help="largest |range error| of a valid point [m] (default: %(default)s, IHO S-44 Exclusive Order)")
+    p.add_argument("--out", help="output directory (default: the scene's output.dir + /coverage)")
+    p.add_argument("--fidelity", choices=["fast", "balanced", "reference"])
+    p.add_argument("--seed", type=int, help="seed of every pass (default: the scene's survey.seed)")
+    p.add_argument("--max-pulses", type=int, help="stop each pass after this many pulses")
+    p.add_argument("--no-render", action="store_true", help="tables and coverage.json only: no pictures, no report")
+    p.add_argument("--quiet", action="store_true", help="no progress; print only the path of coverage.json")
+    p.set_defaults(func=_cmd_coverage)
+
+
+def _cmd_coverage(args) -> int:
+    from pathlib import Path
+
+    from .config import load_scene
+    from .coverage import CoverageSettings
+    from .coverage_study import StudyPlan, run_study
+    from .report import main_table, markdown_table
+
+    config = load_scene(args.scene)
+    plan = StudyPlan(tuple(args.waters), tuple(args.altitudes_m) if args.altitudes_m else (None,),
+                     tuple(args.instruments), args.gate)
+    settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m)
+    out = Path(args.out or Path(config.output_dir) / "coverage")
+    study = run_study(config, plan, out, settings=settings, fidelity=args.fidelity, seed=args.seed,
+                      max_pulses=args.max_pulses, render=not args.no_render, progress=not args.quiet)
+    if not args.quiet:
+        print(markdown_table(*main_table(study)))
+        print(f"{len(study['records'])} passes in {study['wall_s']:.0f} s")
+    print(out / "coverage.json")
+    return 0
+
+
 # -- main -----------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="scanner-sim", description="Underwater lidar survey simulator (MULS)")

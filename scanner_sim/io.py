@@ -11,7 +11,8 @@ leave a ``.*.tmp`` file behind, never a half-written file under a final name.
 - :class:`DropoutWriter`, :func:`write_dropouts_npz`, :func:`read_dropouts_npz`: dropped pulses.
 - :func:`write_summary_json`, :func:`write_trajectory_csv` (+ :func:`read_trajectory_csv`),
   :func:`write_scene_ply` (+ :func:`read_scene_ply`), :func:`write_waveforms_npz`
-  (+ :func:`read_waveforms_npz`).
+  (+ :func:`read_waveforms_npz`), :func:`write_coverage_grid_npz` (+ :func:`read_coverage_grid_npz`),
+  :func:`write_text`.
 - :func:`atomic_path`: the context manager all of them use.
 """
 
@@ -42,6 +43,7 @@ __all__ = [
     "DropoutWriter",
     "LasWriter",
     "atomic_path",
+    "read_coverage_grid_npz",
     "read_dropouts_npz",
     "read_las",
     "read_las_metadata",
@@ -49,10 +51,12 @@ __all__ = [
     "read_trajectory_csv",
     "read_waveforms_npz",
     "scan_angle_to_las",
+    "write_coverage_grid_npz",
     "write_dropouts_npz",
     "write_las",
     "write_scene_ply",
     "write_summary_json",
+    "write_text",
     "write_trajectory_csv",
     "write_waveforms_npz",
 ]
@@ -949,3 +953,42 @@ def read_waveforms_npz(path: PathLike) -> tuple[np.ndarray, np.ndarray, dict[str
     with np.load(path, allow_pickle=False) as z:
         names = [str(s) for s in z["channel_names"]]
         return z["pulse_index"], z["time_ns"], {name: z[name] for name in names}
+
+
+# --------------------------------------------------------------------------------------------
+# coverage_grid.npz, text files
+# --------------------------------------------------------------------------------------------
+
+
+def write_coverage_grid_npz(path: PathLike, grid, state, reaching, valid) -> None:
+    """Write a pass's plan-cell coverage to a compressed ``.npz``, atomically.
+
+    ``grid`` is a :class:`scanner_sim.coverage.PlanGrid`; ``state`` (ny, nx) int16 (-2 not reached,
+    -1 covered, else an index into ``gap_cause_names``); ``reaching`` and ``valid`` (ny * nx,) or
+    (ny, nx) counts of reaching pulses and valid points per cell. Row = y, column = x; cell (0, 0) has its
+    lower-left corner at ``origin_m``.
+    """
+    from .coverage import GAP_CAUSES
+
+    shape = tuple(grid.shape)
+    arrays = {"state": np.asarray(state, np.int16), "reaching": np.asarray(reaching, np.int64),
+              "valid": np.asarray(valid, np.int64)}
+    for name, a in arrays.items():
+        if a.size != shape[0] * shape[1]:
+            raise ValueError(f"{name}: {a.size} cells is not allowed; the grid has {shape[0]} x {shape[1]}")
+        arrays[name] = a.reshape(shape)
+    with _atomic_open(path) as fh:
+        np.savez_compressed(fh, origin_m=np.asarray(grid.origin_m, float), cell_m=np.float64(grid.cell_m),
+                            gap_cause_names=np.array(GAP_CAUSES), **arrays)
+
+
+def read_coverage_grid_npz(path: PathLike) -> dict[str, np.ndarray]:
+    """The arrays of :func:`write_coverage_grid_npz` output, by name."""
+    with np.load(path, allow_pickle=False) as z:
+        return {name: z[name] for name in z.files}
+
+
+def write_text(path: PathLike, text: str) -> None:
+    """Write UTF-8 text (Markdown, HTML) atomically."""
+    with _atomic_open(path, "w", encoding="utf-8", newline="\n") as fh:
+        fh.write(text)

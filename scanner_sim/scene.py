@@ -69,6 +69,7 @@ class SceneObject:
     reflectance: float
     face_start: int
     face_stop: int
+    centreline: np.ndarray | None = None  # (n, 3) world [m] for cables and pipelines, else None
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,7 @@ class Part:
     faces: np.ndarray
     label: int
     reflectance: float
+    centreline: np.ndarray | None = None
 
 
 class Scene:
@@ -107,7 +109,7 @@ class Scene:
             obj.append(np.full(len(f), i, np.int32))
             label.append(np.full(len(f), p.label, np.int16))
             refl.append(np.full(len(f), p.reflectance, float))
-            objects.append(SceneObject(i, p.name, p.kind, p.label, p.reflectance, n_f, n_f + len(f)))
+            objects.append(SceneObject(i, p.name, p.kind, p.label, p.reflectance, n_f, n_f + len(f), p.centreline))
             n_v += len(v)
             n_f += len(f)
         self.vertices = np.concatenate(verts)
@@ -332,10 +334,12 @@ def build_scene(config, backend: str = "auto") -> Scene:
 
     for obj in config.objects:
         refl, label = C.reflectance_of(obj), LABELS[obj.label]
+        centreline = None
         if isinstance(obj, C.CableObject):
             line = cable_centreline(obj.points_m, obj.diameter_m, obj.burial_fraction, hf, obj.step_m,
                                     obj.stiffness_length_m)
             v, f = tube(line, 0.5 * obj.diameter_m, obj.sides)
+            centreline = line
         elif isinstance(obj, C.MooredMineObject):
             ground = _ground_z(obj.position_m, hf)
             x, y = obj.position_m[:2]
@@ -372,7 +376,7 @@ def build_scene(config, backend: str = "auto") -> Scene:
                 v = v + np.asarray(obj.translate_m)
         else:  # pragma: no cover - config only produces the types above
             raise ParameterError(f"object type {type(obj).__name__} is not supported")
-        parts.append(Part(obj.name, obj.type, v, f, label, refl))
+        parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline))
     return Scene(parts, hf, backend=backend)
 
 

@@ -12,6 +12,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -24,6 +25,7 @@ from muls.waveform import OpticalModel, PulseBatch
 
 from .beams import FIDELITY, beam_pattern
 from .config import SceneConfig
+from .coverage import CoverageAccumulator, CoverageSettings, Footprint, nominal_footprint
 from .points import DropoutRecords, PointRecords, intensity_from_power, match_returns_to_hits
 from .raycast import Hits, cast_beams
 from .scanner import Scanner
@@ -53,6 +55,18 @@ class PassOptions:
     waveforms: int = 0
     progress: bool = True
     render: bool = True
+    render_size: tuple[int, int] = (1600, 1000)
+    write_scene: bool = True
+    coverage: CoverageSettings = CoverageSettings()
+
+
+class Chunk(NamedTuple):
+    """One chunk through the flow: points, dropouts, the muls records, and the nominal beam footprint."""
+
+    points: PointRecords
+    dropouts: DropoutRecords
+    records: object
+    footprint: Footprint
 
 
 @dataclass
@@ -76,7 +90,8 @@ class PassSetup:
     chunk_slots: int
 
     @classmethod
-    def build(cls, config: SceneConfig, options: PassOptions = PassOptions()) -> "PassSetup":
+    def build(cls, config: SceneConfig, options: PassOptions = PassOptions(), scene=None) -> "PassSetup":
+        """``scene``: the already built :class:`scanner_sim.scene.Scene` of ``config`` to reuse, if any."""
         survey = config.survey
         fidelity = options.fidelity or survey.fidelity
         if fidelity not in FIDELITY:
@@ -84,7 +99,7 @@ class PassSetup:
         water = water_preset(options.water) if options.water else config.water_model()
         instrument = config.instrument.to_instrument(water)
         model = OpticalModel.build(instrument, water)
-        scene = build_scene(config)
+        scene = scene or build_scene(config)
         scene.caster()  # build the Embree BVH now: set-up, not part of the pass
         trajectory = build_trajectory(config, scene)
         scanner = Scanner.from_config(config.scanner, instrument)
@@ -124,8 +139,8 @@ class PassSetup:
             if self.max_pulses is not None and fired >= self.max_pulses:
                 return
 
-    def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None):
-        """One chunk through the whole flow: returns (PointRecords, DropoutRecords, muls Records)."""
+    def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None) -> Chunk:
+        """One chunk of pulse slots (n,) through the whole flow."""
         times = slots / self.scanner.pulse_rate_hz
         true_poses = self.trajectory.poses(times)
         beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(true_poses)
@@ -138,7 +153,7 @@ class PassSetup:
         lost = ranging.dropout_cause >= 0
         dropouts = DropoutRecords(pulse_index=slots[lost], time_s=times[lost], origin=est_o[lost],
                                   direction=est_d[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
-        return points, dropouts, records
+        return Chunk(points, dropouts, records, nominal_footprint(self.scene, beam_o, beam_d))
 
 
 def hit_echo_range_m(hits: Hits) -> np.ndarray:
@@ -224,18 +239,22 @@ class ErrorHistogram:
         return (k + 0.5) * ERROR_BIN_M
 
 
-def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: PassOptions = PassOptions()) -> dict:
+def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: PassOptions = PassOptions(),
+             scene=None) -> dict:
     """Simulate the scene's pass and write its outputs in ``out_dir`` (default: the scene's output dir).
 
     Returns the summary (also written as summary.json); ``wall_s`` and ``pulses_per_s`` time the pass
-    itself (chunks and point/dropout writing), ``setup_s`` the scene, BVH and tables built before it.
+    itself (chunks, coverage tally and point/dropout writing), ``setup_s`` the scene, BVH and tables built
+    before it. A scene with a seabed also gets its coverage (DESIGN.md section 7): the summary's ``coverage``,
+    coverage_grid.npz and, when rendering, coverage_map.png. ``scene`` reuses an already built scene.
     """
     from tqdm import tqdm
 
     from . import io
 
     t_setup = time.perf_counter()
-    setup = PassSetup.build(config, options)
+    setup = PassSetup.build(config, options, scene)
+    coverage = CoverageAccumulator(setup.scene, options.coverage) if setup.scene.heightfield is not None else None
     setup_s = time.perf_counter() - t_setup
     out = Path(out_dir or config.output_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -246,9 +265,12 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     with io.LasWriter(out / "points.las", offset_m=setup.scene.local_origin) as las, \
             io.DropoutWriter(out / "dropouts.npz") as dropout_writer:
         for slots in setup.slot_chunks():
-            points, dropouts, _ = setup.simulate_chunk(slots)
+            chunk = setup.simulate_chunk(slots)
+            points = chunk.points
             las.write(points)
-            dropout_writer.write(dropouts)
+            dropout_writer.write(chunk.dropouts)
+            if coverage is not None:
+                coverage.add(slots, chunk.footprint, points, chunk.dropouts)
             pulses += slots.size
             channels += np.bincount(points.channel, minlength=channels.size)
             errors.add(points.range_error_m)
@@ -258,7 +280,7 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     bar.close()
     wall_s = time.perf_counter() - started
 
-    write_truth_and_trajectory(setup, out)
+    write_truth_and_trajectory(setup, out, options.write_scene)
     if options.waveforms:
         write_waveforms(setup, out / "waveforms.npz", options.waveforms)
     summary = {
@@ -284,18 +306,26 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
             "scene_file": str(config.source_path) if config.source_path else None,
         },
     }
+    if coverage is not None:
+        summary["coverage"] = coverage.figures()
+        io.write_coverage_grid_npz(out / "coverage_grid.npz", coverage.grid, coverage.cell_states(),
+                                   coverage.cells.reaching, coverage.cells.valid)
     io.write_summary_json(out / "summary.json", summary)
     if options.render:
-        render_pass(setup, out)
+        render_pass(setup, out, options.render_size)
+        if coverage is not None:
+            render_coverage_map(setup, coverage, out / "coverage_map.png", summary)
     return summary
 
 
-def write_truth_and_trajectory(setup: PassSetup, out: Path) -> None:
-    """scene.ply (labelled truth meshes) and trajectory.csv (true and estimated poses at 10 Hz)."""
+def write_truth_and_trajectory(setup: PassSetup, out: Path, write_scene: bool = True) -> None:
+    """scene.ply (labelled truth meshes; unless ``write_scene`` is False) and trajectory.csv (true and
+    estimated poses at 10 Hz)."""
     from . import io
 
     scene = setup.scene
-    io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
+    if write_scene:
+        io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
     t0 = setup.first_slot / setup.scanner.pulse_rate_hz
     t1 = setup.end_slot / setup.scanner.pulse_rate_hz
     t = np.arange(t0, t1, 1.0 / TRAJECTORY_RATE_HZ)
@@ -311,14 +341,14 @@ def write_waveforms(setup: PassSetup, path: Path, count: int) -> None:
 
     slots = np.concatenate(list(setup.slot_chunks()))
     pick = slots[np.unique(np.linspace(0, slots.size - 1, min(count, slots.size)).astype(np.int64))]
-    _, _, records = setup.simulate_chunk(pick, record_mode="full")
+    records = setup.simulate_chunk(pick, record_mode="full").records
     time_ns = records.reference_times_s(setup.model) * 1e9  # full mode: the reference spans the record
     channels = {"ch0": records.reference}
     channels.update({ch.name: records.codes[:, i, :] for i, ch in enumerate(setup.model.instrument.channels)})
     io.write_waveforms_npz(path, pick, time_ns, channels)
 
 
-def render_pass(setup: PassSetup, out: Path, max_points: int = 1_500_000) -> None:
+def render_pass(setup: PassSetup, out: Path, window_size=(1600, 1000), max_points: int = 1_500_000) -> None:
     """render.png: the point cloud coloured by class over the faded truth mesh (decimated read-back)."""
     import laspy
 
@@ -334,5 +364,32 @@ def render_pass(setup: PassSetup, out: Path, max_points: int = 1_500_000) -> Non
     cls = np.concatenate(cls) if cls else np.zeros(0, np.uint8)
     scene = setup.scene
     viz.render_point_cloud(out / "render.png", xyz, cls, truth_vertices=scene.vertices, truth_faces=scene.faces,
-                           title=f"{setup.config.name}: {xyz.shape[0]:,} points ({setup.water_name}, "
-                                 f"{setup.fidelity})")
+                           title=f"{pass_label(setup)}: {xyz.shape[0]:,} points ({setup.fidelity})",
+                           window_size=window_size)
+
+
+def pass_label(setup: PassSetup) -> str:
+    """'scene, water, instrument[, altitude]' for picture titles."""
+    altitude = setup.config.platform.altitude_m
+    return (f"{setup.config.name}, {setup.water_name}, {setup.model.instrument.name}"
+            + (f", {altitude:g} m altitude" if altitude is not None else ""))
+
+
+def render_coverage_map(setup: PassSetup, coverage: CoverageAccumulator, path: Path, summary: dict) -> None:
+    """coverage_map.png: plan cells covered or missed by cause, cables drawn along, objects marked."""
+    from . import viz
+    from .coverage import BACKGROUND_KINDS, GAP_CAUSES
+
+    scene = setup.scene
+    lines = [(o.name, o.centreline[:, :2]) for o in scene.objects if o.centreline is not None]
+    markers = []
+    for o in scene.objects:
+        if o.kind not in BACKGROUND_KINDS and o.centreline is None:
+            corners = np.unique(scene.faces[o.face_start:o.face_stop].ravel())
+            markers.append((o.name, scene.vertices[corners, :2].mean(axis=0)))
+    figures = summary["coverage"]
+    fraction = figures["covered_fraction"]
+    title = (f"{pass_label(setup)}\ncovered {fraction:.1%} of {figures['reached_area_m2']:.0f} m² reached"
+             if fraction is not None else f"{pass_label(setup)}\nthe scan reaches no seabed cell")
+    viz.plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
+                          markers=markers, title=title)

@@ -37,8 +37,12 @@ from .io import atomic_path
 
 __all__ = [
     "CLASS_COLOURS",
+    "COVERAGE_COLOURS",
     "SCALAR_COLOUR_MAPS",
+    "WATER_COLOURS",
     "class_table",
+    "plot_coverage_map",
+    "plot_coverage_vs_altitude",
     "plot_overlap",
     "plot_waveforms",
     "render_point_cloud",
@@ -470,4 +474,107 @@ def plot_overlap(
     ax.legend(loc="lower right")
     if title:
         ax.set_title(title)
+    _figure_to_png(fig, path_png)
+
+
+#: Colours of the coverage map: not reached, covered, then one per gap cause (scanner_sim.coverage.GAP_CAUSES).
+COVERAGE_COLOURS: dict[str, str] = {
+    "not_reached": "#f0f0f0",
+    "covered": "#2a9d8f",
+    "no_hit": "#9e9e9e",
+    "blind_zone": "#7b2cbf",
+    "below_threshold": "#d62828",
+    "saturated": "#f4d35e",
+    "masked_by_backscatter": "#f77f00",
+    "outside_gate": "#277da1",
+    "out_of_tolerance": "#e56b9f",
+    "other_surface": "#495057",
+}
+
+#: Curve colour per water preset in coverage charts (others take the matplotlib cycle).
+WATER_COLOURS: dict[str, str] = {"clean_ocean": "#1f77b4", "coastal_ocean": "#2ca02c", "turbid_harbor": "#8c564b",
+                                 "pool": "#17becf", "pond": "#bcbd22"}
+_INSTRUMENT_STYLES = {"mul2023": ("-", "o"), "single_channel": ("--", "s"), "coaxial": (":", "^")}
+
+
+def plot_coverage_map(path_png, state, extent_m, gap_causes: Sequence[str], *, lines=(), markers=(),
+                      title: str | None = None) -> None:
+    """Plan map of coverage cells to a PNG.
+
+    state : (ny, nx) int, row = y: -2 not reached, -1 covered, k >= 0 missed for ``gap_causes[k]``.
+    extent_m : (x_min, x_max, y_min, y_max) [m] of the grid.
+    lines : [(name, (n, 2) xy [m])] drawn over the cells (cable centrelines).
+    markers : [(name, (2,) xy [m])] marked and named (mines, objects).
+    The legend lists covered and every cause present, with its area share of the reached cells.
+    """
+    from matplotlib.colors import ListedColormap
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
+
+    state = np.asarray(state)
+    if state.ndim != 2:
+        raise ValueError(f"state: shape {state.shape} is not allowed; expected (ny, nx)")
+    names = ["not_reached", "covered", *gap_causes]
+    unknown = [n for n in names if n not in COVERAGE_COLOURS]
+    if unknown:
+        raise ValueError(f"gap_causes: {unknown} have no colour; known: {sorted(COVERAGE_COLOURS)}")
+    codes = state.astype(np.int64) + 2
+    x0, x1, y0, y1 = (float(v) for v in extent_m)
+    aspect = (y1 - y0) / max(x1 - x0, 1e-9)
+    fig = Figure(figsize=(10.0, float(np.clip(10.0 * aspect + 1.6, 3.5, 12.0))), dpi=110)
+    ax = fig.add_subplot()
+    ax.imshow(codes, origin="lower", extent=(x0, x1, y0, y1), cmap=ListedColormap([COVERAGE_COLOURS[n] for n in names]),
+              vmin=-0.5, vmax=len(names) - 0.5, interpolation="nearest")
+    for name, xy in lines:
+        xy = np.asarray(xy, float)
+        ax.plot(xy[:, 0], xy[:, 1], color="black", lw=0.8, alpha=0.8)
+        ax.annotate(name, xy[0], fontsize=8, xytext=(3, 3), textcoords="offset points")
+    for name, xy in markers:
+        ax.plot(*xy, marker="x", color="black", ms=7, mew=1.5)
+        ax.annotate(name, xy, fontsize=8, xytext=(5, 5), textcoords="offset points")
+    reached = max(int((codes >= 1).sum()), 1)
+    counts = np.bincount(codes.ravel(), minlength=len(names))
+    handles = [Patch(facecolor=COVERAGE_COLOURS[n], edgecolor="grey", label=f"{n.replace('_', ' ')} "
+                     f"{counts[k] / reached:.1%}") for k, n in enumerate(names) if k == 1 or (k >= 2 and counts[k])]
+    handles.append(Patch(facecolor=COVERAGE_COLOURS["not_reached"], edgecolor="grey", label="not reached by the scan"))
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    ax.set_xlabel("x east [m]")
+    ax.set_ylabel("y north [m]")
+    ax.set_aspect("equal")
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    _figure_to_png(fig, path_png)
+
+
+def plot_coverage_vs_altitude(path_png, records: Sequence[Mapping], *, title: str | None = None) -> None:
+    """Covered fraction [%] against altitude [m], one curve per water type and instrument.
+
+    records: mappings with ``water``, ``instrument``, ``altitude_m`` and ``covered_fraction`` (0..1 or None).
+    Colour tells the water, line style and marker the instrument.
+    """
+    from matplotlib.figure import Figure
+
+    curves: dict[tuple[str, str], list[tuple[float, float]]] = {}
+    for r in records:
+        if r["covered_fraction"] is not None:
+            curves.setdefault((r["water"], r["instrument"]), []).append((r["altitude_m"], 100.0 * r["covered_fraction"]))
+    fig = Figure(figsize=(8.0, 5.0), dpi=110)
+    ax = fig.add_subplot()
+    cycle = iter(f"C{i}" for i in range(3, 100))
+    colours: dict[str, str] = {}
+    for (water, instrument), pts in curves.items():
+        colour = colours.setdefault(water, WATER_COLOURS.get(water) or next(cycle))
+        line, marker = _INSTRUMENT_STYLES.get(instrument, ("-.", "D"))
+        alt, frac = np.array(sorted(pts)).T
+        ax.plot(alt, frac, line, marker=marker, color=colour, label=f"{water}, {instrument}")
+    ax.set_xlabel("altitude [m]")
+    ax.set_ylabel("covered fraction of the reached area [%]")
+    ax.set_ylim(-2, 102)
+    ax.grid(alpha=0.3)
+    if curves:
+        ax.legend(fontsize=8, loc="lower left")
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
     _figure_to_png(fig, path_png)

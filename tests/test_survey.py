@@ -34,7 +34,7 @@ def _pass(config, out, **kw):
 def test_pool_points_lie_on_the_truth_meshes(cable_survey):
     setup = PassSetup.build(cable_survey, PassOptions(water="pool", max_pulses=8000))
     slots = next(setup.slot_chunks())
-    points, _, _ = setup.simulate_chunk(slots)
+    points = setup.simulate_chunk(slots).points
     assert len(points) > 7000
     assert np.percentile(np.abs(points.range_error_m), 95) <= POOL_P95_MAX_M
 
@@ -68,7 +68,7 @@ def test_turbid_water_loses_points_that_clean_water_keeps(cable_survey, tmp_path
 
 def test_points_on_the_cable_are_labelled_cable(cable_survey):
     setup = PassSetup.build(cable_survey, PassOptions(max_pulses=20000))
-    points, _, _ = setup.simulate_chunk(next(setup.slot_chunks()))
+    points = setup.simulate_chunk(next(setup.slot_chunks())).points
     cable_id = next(o.object_id for o in setup.scene.objects if o.label == LABELS["cable"])
     on_cable = points.object_id == cable_id
     assert on_cable.sum() > 50

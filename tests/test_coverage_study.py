@@ -1,0 +1,176 @@
+"""The coverage study end to end: combinations, gate rule, outputs, the self-contained report, the CLI."""
+
+import base64
+import io as stdio
+import json
+import re
+from html.parser import HTMLParser
+
+import numpy as np
+import pytest
+from matplotlib import image as mpimg
+
+from muls.errors import ParameterError
+from scanner_sim.cli import main
+from scanner_sim.config import load_scene
+from scanner_sim.coverage_study import StudyPlan, combination_config, combination_name
+
+
+@pytest.fixture(scope="module")
+def cable_survey():
+    return load_scene("cable_survey")
+
+
+def test_gate_follows_the_nadir_echo(cable_survey):
+    base = cable_survey.instrument.gate_delay_ns
+    speed = 0.2197892  # m/ns, coastal ocean group velocity (muls.water)
+    same = combination_config(cable_survey, "coastal_ocean", 6.0, "mul2023")
+    assert same.instrument.gate_delay_ns == pytest.approx(base)
+    higher = combination_config(cable_survey, "coastal_ocean", 10.0, "mul2023")
+    assert higher.platform.altitude_m == 10.0
+    assert higher.instrument.gate_delay_ns == pytest.approx(base + 2 * 4.0 / speed, rel=1e-5)
+    assert combination_config(cable_survey, "coastal_ocean", 1.0, "mul2023").instrument.gate_delay_ns == 0.0
+    fixed = combination_config(cable_survey, "coastal_ocean", 10.0, "mul2023", gate="fixed")
+    assert fixed.instrument.gate_delay_ns == base
+    single = combination_config(cable_survey, "turbid_harbor", 10.0, "single_channel")
+    assert single.instrument.preset == "single_channel" and single.instrument.gate_delay_ns is None
+
+
+@pytest.mark.parametrize("kw, key", [
+    ({"waters": ("clean_ocean", "milk")}, "water"), ({"altitudes_m": (3.0, -1.0)}, "altitudes_m"),
+    ({"instruments": ("mul2023", "lidar9")}, "instruments"), ({"gate": "auto"}, "gate"),
+    ({"waters": ()}, "waters"), ({"altitudes_m": (3.0, 3.0)}, "altitudes_m")])
+def test_bad_plans_name_the_key(kw, key):
+    with pytest.raises(ParameterError, match=key):
+        StudyPlan(**kw)
+
+
+def test_altitude_of_a_static_scene_cannot_change():
+    with pytest.raises(ParameterError, match="altitude"):
+        combination_config(load_scene("pool_panel"), "pool", 3.0, "mul2023")
+
+
+class _Page(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.images, self.links, self.tables, self.stack = [], [], 0, []
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "img":
+            self.images.append(a["src"])
+        if tag in ("link", "script") or (tag == "a" and "href" in a):
+            self.links.append(a)
+        self.tables += tag == "table"
+
+
+def test_study_outputs_and_self_contained_report(tmp_path, capsys):
+    out = tmp_path / "study"
+    code = main(["coverage", "cable_survey", "--waters", "clean_ocean", "turbid_harbor", "--instruments", "mul2023",
+                 "--altitudes-m", "6", "--max-pulses", "3000", "--out", str(out), "--quiet"])
+    assert code == 0
+    assert capsys.readouterr().out.strip() == str(out / "coverage.json")
+    study = json.loads((out / "coverage.json").read_text())
+    assert [(r["water"], r["instrument"], r["altitude_m"]) for r in study["records"]] == [
+        ("clean_ocean", "mul2023", 6.0), ("turbid_harbor", "mul2023", 6.0)]
+    for r in study["records"]:
+        assert r["pulses"] == 3000
+        assert 0.0 < r["covered_fraction"] <= 1.0
+        assert r["settings"]["tolerance_m"] == 0.15 and r["settings"]["gate_delay_ns"] == 35.0
+        assert sum(r["gaps_m2"].values()) == pytest.approx(r["reached_area_m2"] - r["covered_area_m2"])
+        for file in ("points.las", "summary.json", "coverage_grid.npz", "coverage_map.png", "render.png"):
+            assert (out / r["dir"] / file).is_file()
+        assert not (out / r["dir"] / "scene.ply").exists()  # one truth mesh for the whole study
+    assert (out / "scene.ply").is_file()
+    markdown = (out / "coverage.md").read_text()
+    coverage_table = markdown.split("\n## Coverage\n")[1].split("\n## ")[0]
+    assert coverage_table.count("\n| clean_ocean | mul2023 | 6 |") == 1
+    assert coverage_table.count("\n| turbid_harbor | mul2023 | 6 |") == 1
+    assert "| export_cable (cable, 30.5 m) |" in markdown
+
+    page = _Page()
+    page.feed((out / "report.html").read_text())
+    page.close()
+    assert page.links == []  # nothing outside the file
+    assert page.tables >= 2
+    assert len(page.images) == 1 + 2 * len(study["records"])  # chart, then a map and a render per combination
+    for src in page.images:
+        head, data = src.split(",", 1)
+        assert head == "data:image/png;base64"
+        picture = mpimg.imread(stdio.BytesIO(base64.b64decode(data, validate=True)), format="png")
+        assert picture.shape[0] > 100 and picture.shape[1] > 100
+        assert np.ptp(picture[..., :3]) > 0.1  # not a blank picture
+
+
+def test_coverage_map_colours_cells_by_cause(tmp_path):
+    from scanner_sim.coverage import GAP_CAUSES
+    from scanner_sim.viz import COVERAGE_COLOURS, plot_coverage_map
+
+    state = np.full((40, 80), -2)
+    state[10:30, 10:70] = -1
+    state[15:20, 30:40] = GAP_CAUSES.index("below_threshold")
+    plot_coverage_map(tmp_path / "m.png", state, (0, 20, 0, 10), GAP_CAUSES, title="t")
+    rgb = (mpimg.imread(tmp_path / "m.png")[..., :3] * 255).round().astype(int)
+    colours = {tuple(int(COVERAGE_COLOURS[n][i:i + 2], 16) for i in (1, 3, 5)): n
+               for n in ("covered", "below_threshold", "masked_by_backscatter")}
+    found = {colours[c] for c in map(tuple, rgb.reshape(-1, 3)) if c in colours}
+    assert found == {"covered", "below_threshold"}
+
+
+def test_combination_names_are_unique_and_readable():
+    plan = StudyPlan(altitudes_m=(3, 5.5), instruments=("mul2023", "single_channel"))
+    names = [combination_name(*c) for c in plan.combinations(load_scene("cable_survey"))]
+    assert len(set(names)) == len(names) == 12
+    assert "turbid_harbor-single_channel-5.5m" in names
+    assert all(re.fullmatch(r"[a-z_]+-[a-z0-9_]+-[0-9.]+m", n) for n in names)
+
+
+#: Largest covered-fraction inversion accepted as a tie (0.1 % of the reached area). Where two combinations
+#: both map all but a few cells, those cells (single pulses on steep, saturating facets, out_of_tolerance)
+#: decide: the seed-to-seed spread of the same combination is 0.06 % (docs/studies.md, lawnmower at 3 m).
+TIE = 0.001
+SURVEY_SCENES = ("cable_survey", "mine_field", "seabed_lawnmower")
+ALTITUDES_M = (3.0, 5.0, 8.0, 12.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene", SURVEY_SCENES)
+def test_coverage_falls_with_turbidity_and_altitude_and_multichannel_wins(scene, tmp_path):
+    from muls.ranging import DROPOUT_CAUSES
+
+    study = run_study_quietly(scene, tmp_path)
+    cov = {(r["water"], r["instrument"], r["altitude_m"]): r for r in study["records"]}
+    waters = ("clean_ocean", "coastal_ocean", "turbid_harbor")
+    frac = lambda w, i, a: cov[(w, i, a)]["covered_fraction"]  # noqa: E731
+    density = lambda w, i: sum(cov[(w, i, a)]["valid_points_in_reach"] for a in ALTITUDES_M)  # noqa: E731
+    # The water ordering is the scenes' own instrument's. A single channel, its gain set for the water, clips
+    # on every near echo in clear water at 3 m and loses cells to clipped ranging on steep facets: it maps
+    # less in clean than in coastal water there (about 0.1 %), the dynamic-range limit MULS is built against.
+    for inst in ("mul2023",):
+        for clearer, murkier in zip(waters, waters[1:]):
+            for a in ALTITUDES_M:
+                assert frac(clearer, inst, a) >= frac(murkier, inst, a) - TIE, (clearer, murkier, inst, a)
+            assert density(clearer, inst) > density(murkier, inst), (clearer, murkier, inst)
+        mean = [np.mean([frac(w, inst, a) for a in ALTITUDES_M]) for w in waters]
+        assert mean[0] >= mean[1] - TIE and mean[1] > mean[2] + 0.05
+    for inst in ("mul2023", "single_channel"):
+        turbid = [frac("turbid_harbor", inst, a) for a in ALTITUDES_M]
+        assert all(lo <= hi + TIE for hi, lo in zip(turbid, turbid[1:])), turbid
+        assert turbid[-1] < turbid[0] - 0.3, turbid
+    for (w, i, a), r in cov.items():
+        if i == "mul2023":
+            assert r["covered_fraction"] >= frac(w, "single_channel", a) - TIE, (w, a)
+        # every gap has a cause, and a plan cell is never missed for another surface
+        assert sum(r["gaps_m2"].values()) == pytest.approx(r["reached_area_m2"] - r["covered_area_m2"])
+        assert r["gaps_m2"]["other_surface"] == 0.0
+        assert set(r["gaps_m2"]) == set(DROPOUT_CAUSES) | {"out_of_tolerance", "other_surface"}
+    turbid_gain = sum(frac("turbid_harbor", "mul2023", a) - frac("turbid_harbor", "single_channel", a)
+                      for a in ALTITUDES_M)
+    assert turbid_gain > 0.2  # the gated far channel maps what one channel cannot in turbid water
+
+
+def run_study_quietly(scene, out):
+    from scanner_sim.coverage_study import run_study
+
+    plan = StudyPlan(altitudes_m=ALTITUDES_M, instruments=("mul2023", "single_channel"))
+    return run_study(load_scene(scene), plan, out, max_pulses=20000, render=False, progress=False)
