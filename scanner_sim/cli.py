@@ -186,6 +186,11 @@ def _cmd_run(args) -> int:
         print(f"{summary['pulses']:,} pulses -> {summary['points']:,} points in {summary['wall_s']:.1f} s "
               f"({summary['pulses_per_s']:,.0f} pulses/s); dropouts: {dropped}")
         print(f"range error |median| {summary['range_error_m']['median']} m, p95 {summary['range_error_m']['p95']} m")
+        cov = summary.get("coverage")
+        if cov and cov["covered_fraction"] is not None:
+            gaps = ", ".join(f"{k} {v:.2f} m²" for k, v in cov["gaps_m2"].items() if v) or "none"
+            print(f"coverage {100 * cov['covered_fraction']:.1f} % of {cov['reached_area_m2']:.0f} m² reached "
+                  f"(cells of {cov['cell_m']:g} m); gaps: {gaps}")
     print(out / "summary.json")
     return 0
 

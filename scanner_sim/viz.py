@@ -521,7 +521,7 @@ def plot_coverage_map(path_png, state, extent_m, gap_causes: Sequence[str], *, l
     codes = state.astype(np.int64) + 2
     x0, x1, y0, y1 = (float(v) for v in extent_m)
     aspect = (y1 - y0) / max(x1 - x0, 1e-9)
-    fig = Figure(figsize=(10.0, float(np.clip(10.0 * aspect + 1.6, 3.5, 12.0))), dpi=110)
+    fig = Figure(figsize=(10.0, float(np.clip(7.0 * aspect + 1.4, 3.0, 12.0))), dpi=110)  # the legend takes ~3 in
     ax = fig.add_subplot()
     ax.imshow(codes, origin="lower", extent=(x0, x1, y0, y1), cmap=ListedColormap([COVERAGE_COLOURS[n] for n in names]),
               vmin=-0.5, vmax=len(names) - 0.5, interpolation="nearest")

@@ -1,7 +1,11 @@
 """The coverage study end to end: combinations, gate rule, outputs, the self-contained report, the CLI."""
 
 import base64
+import contextlib
 import io as stdio
+import os
+import shutil
+import subprocess
 import json
 import re
 from html.parser import HTMLParser
@@ -50,6 +54,19 @@ def test_altitude_of_a_static_scene_cannot_change():
         combination_config(load_scene("pool_panel"), "pool", 3.0, "mul2023")
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["coverage", "--waters", "milk"], ["water", "milk", "clean_ocean"]),
+    (["coverage", "pool_panel"], ["pool_panel", "seabed"]),
+    (["coverage", "pool_panel", "--altitudes-m", "3"], ["pool_panel", "seabed"]),
+    (["coverage", "--cell-m", "-1"], ["cell_m", "-1"]),
+    (["coverage", "--altitudes-m", "0"], ["altitudes_m", "0"])])
+def test_coverage_command_errors_are_one_line(argv, words, tmp_path, capsys):
+    assert main(argv + ["--out", str(tmp_path / "x"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and all(w in err for w in words), err
+    assert not (tmp_path / "x" / "coverage.json").exists()
+
+
 class _Page(HTMLParser):
     def __init__(self):
         super().__init__()
@@ -64,12 +81,21 @@ class _Page(HTMLParser):
         self.tables += tag == "table"
 
 
-def test_study_outputs_and_self_contained_report(tmp_path, capsys):
-    out = tmp_path / "study"
-    code = main(["coverage", "cable_survey", "--waters", "clean_ocean", "turbid_harbor", "--instruments", "mul2023",
-                 "--altitudes-m", "6", "--max-pulses", "3000", "--out", str(out), "--quiet"])
+@pytest.fixture(scope="module")
+def small_study(tmp_path_factory):
+    """Two waters at 6 m, 3000 pulses each, through the command line; returns (out dir, its stdout)."""
+    out = tmp_path_factory.mktemp("study") / "study"
+    printed = stdio.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = main(["coverage", "cable_survey", "--waters", "clean_ocean", "turbid_harbor", "--instruments",
+                     "mul2023", "--altitudes-m", "6", "--max-pulses", "3000", "--out", str(out), "--quiet"])
     assert code == 0
-    assert capsys.readouterr().out.strip() == str(out / "coverage.json")
+    return out, printed.getvalue()
+
+
+def test_study_outputs_and_self_contained_report(small_study):
+    out, printed = small_study
+    assert printed.strip() == str(out / "coverage.json")
     study = json.loads((out / "coverage.json").read_text())
     assert [(r["water"], r["instrument"], r["altitude_m"]) for r in study["records"]] == [
         ("clean_ocean", "mul2023", 6.0), ("turbid_harbor", "mul2023", 6.0)]
@@ -102,6 +128,33 @@ def test_study_outputs_and_self_contained_report(tmp_path, capsys):
         assert np.ptp(picture[..., :3]) > 0.1  # not a blank picture
 
 
+def _hex_rgb(colour):
+    return tuple(int(colour[i:i + 2], 16) for i in (1, 3, 5))
+
+
+def test_report_opens_in_headless_chromium_with_every_picture(small_study, tmp_path):
+    """Chromium renders the page; the screenshot shows the map's covered teal and the renders' navy.
+    .ci/run installs Chromium and sets MULS_REQUIRE_CHROMIUM=1, so CI never skips this."""
+    from scanner_sim.viz import COVERAGE_COLOURS
+
+    browser = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+    if browser is None:
+        if os.environ.get("MULS_REQUIRE_CHROMIUM") == "1":
+            pytest.fail("MULS_REQUIRE_CHROMIUM=1 but no chromium on PATH")
+        pytest.skip("no chromium on PATH (CI installs it)")
+    out, _ = small_study
+    shot = tmp_path / "report.png"
+    run = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                          "--window-size=1400,6000", f"--screenshot={shot}", (out / "report.html").as_uri()],
+                         capture_output=True, text=True, timeout=180)
+    assert run.returncode == 0, run.stderr[-2000:]
+    rgb = (mpimg.imread(shot)[..., :3] * 255).round().astype(np.uint8).reshape(-1, 3)
+    colours = {tuple(c) for c in np.unique(rgb, axis=0)}
+    assert _hex_rgb(COVERAGE_COLOURS["covered"]) in colours  # a coverage map is drawn
+    assert _hex_rgb("#0b1a2a") in colours  # a point-cloud render is drawn (its background)
+    assert len(colours) > 500  # pictures, not just text on white
+
+
 def test_coverage_map_colours_cells_by_cause(tmp_path):
     from scanner_sim.coverage import GAP_CAUSES
     from scanner_sim.viz import COVERAGE_COLOURS, plot_coverage_map
@@ -111,8 +164,7 @@ def test_coverage_map_colours_cells_by_cause(tmp_path):
     state[15:20, 30:40] = GAP_CAUSES.index("below_threshold")
     plot_coverage_map(tmp_path / "m.png", state, (0, 20, 0, 10), GAP_CAUSES, title="t")
     rgb = (mpimg.imread(tmp_path / "m.png")[..., :3] * 255).round().astype(int)
-    colours = {tuple(int(COVERAGE_COLOURS[n][i:i + 2], 16) for i in (1, 3, 5)): n
-               for n in ("covered", "below_threshold", "masked_by_backscatter")}
+    colours = {_hex_rgb(COVERAGE_COLOURS[n]): n for n in ("covered", "below_threshold", "masked_by_backscatter")}
     found = {colours[c] for c in map(tuple, rgb.reshape(-1, 3)) if c in colours}
     assert found == {"covered", "below_threshold"}
 
@@ -127,7 +179,7 @@ def test_combination_names_are_unique_and_readable():
 
 #: Largest covered-fraction inversion accepted as a tie (0.1 % of the reached area). Where two combinations
 #: both map all but a few cells, those cells (single pulses on steep, saturating facets, out_of_tolerance)
-#: decide: the seed-to-seed spread of the same combination is 0.06 % (docs/studies.md, lawnmower at 3 m).
+#: decide: the seed-to-seed spread of the same combination is 0.06 % (docs/coverage.md, lawnmower at 3 m).
 TIE = 0.001
 SURVEY_SCENES = ("cable_survey", "mine_field", "seabed_lawnmower")
 ALTITUDES_M = (3.0, 5.0, 8.0, 12.0)
