@@ -232,7 +232,7 @@ def _add_view(sub):
     p.add_argument("--color", default="class", choices=list(_VIEW_FIELDS), help="point colouring (default: class)")
     p.add_argument("--screenshot", metavar="PNG", help="render off-screen to this PNG instead of opening a window "
                    "(without a display the default is POINTS.<color>.png beside the LAS)")
-    p.add_argument("--no-mesh", action="store_true", help="do not draw the scene.ply beside the LAS")
+    p.add_argument("--no-mesh", action="store_true", help="do not draw the scene.ply beside the LAS (or one directory up)")
     p.add_argument("--point-size", type=float, default=3.0, help="pixels (default 3)")
     p.add_argument("--max-points", type=int, default=2_000_000, help="thin larger clouds by a fixed stride")
     p.add_argument("--window-size", type=int, nargs=2, default=[1600, 1000], metavar=("WIDTH", "HEIGHT"))
@@ -256,8 +256,9 @@ def _cmd_view(args) -> int:
     except (laspy.LaspyException, EOFError, OSError, ValueError) as exc:
         raise ValueError(f"POINTS.las = {str(las)!r}: not a readable LAS file ({exc})") from None
     mesh = {}
-    ply = las.parent / "scene.ply"
-    if not args.no_mesh and ply.is_file():
+    # A pass writes scene.ply beside its LAS; a coverage study writes it once, one directory up.
+    ply = next((d / "scene.ply" for d in (las.parent, las.parent.parent) if (d / "scene.ply").is_file()), None)
+    if not args.no_mesh and ply is not None:
         scene = read_scene_ply(ply)
         mesh = {"truth_vertices": scene["vertices"], "truth_faces": scene["faces"]}
     values = getattr(points, _VIEW_FIELDS[args.color])

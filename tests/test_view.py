@@ -160,3 +160,16 @@ def test_bad_colour_is_an_argparse_error(survey_dir, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "--color" in err and "'depth'" in err and "range_error" in err
+
+
+def test_a_study_pass_finds_the_scene_one_directory_up(survey_dir, tmp_path, monkeypatch):
+    """A coverage study writes scene.ply once at its top and each pass's LAS in a sub-directory."""
+    monkeypatch.delenv("DISPLAY", raising=False)
+    sub = survey_dir / "clean_ocean-mul2023-6m"
+    sub.mkdir(exist_ok=True)
+    (sub / "points.las").write_bytes((survey_dir / "points.las").read_bytes())
+    found, dropped = tmp_path / "found.png", tmp_path / "dropped.png"
+    assert _view(sub / "points.las", "--screenshot", found, "--max-points", "1000") == 0
+    assert _view(sub / "points.las", "--screenshot", dropped, "--max-points", "1000", "--no-mesh") == 0
+    navy = tuple(int(viz._BACKGROUND[i:i + 2], 16) for i in (1, 3, 5))
+    assert _pixels_near(_image(dropped), navy, 2) > _pixels_near(_image(found), navy, 2) + 1000
