@@ -159,10 +159,9 @@ class CableBins:
 
 @dataclass(frozen=True)
 class Footprint:
-    """Where each pulse's nominal beam axis first meets the truth meshes: ``hit`` (n,) bool,
-    ``xyz`` (n, 3) world [m] (NaN without a hit), ``object_id`` (n,) int (-1 without a hit)."""
+    """Where each pulse's nominal beam axis first meets the truth meshes: ``xyz`` (n, 3) world [m] (NaN
+    without a hit), ``object_id`` (n,) int (-1 without a hit)."""
 
-    hit: np.ndarray
     xyz: np.ndarray
     object_id: np.ndarray
 
@@ -176,7 +175,7 @@ def nominal_footprint(scene, beam_origin: np.ndarray, beam_direction: np.ndarray
     xyz[ray] = beam_origin[ray] + dist[:, None].astype(float) * beam_direction[ray]
     object_id = np.full(n, -1, np.int64)
     object_id[ray] = scene.face_object[tri]
-    return Footprint(object_id >= 0, xyz, object_id)
+    return Footprint(xyz, object_id)
 
 
 def pulse_outcomes(slots: np.ndarray, points, dropouts, tolerance_m: float) -> tuple[np.ndarray, np.ndarray]:

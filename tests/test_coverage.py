@@ -50,8 +50,7 @@ def _dropouts(pulse, causes):
 def _footprint(xyz_or_none, object_id=0):
     hit = np.array([p is not None for p in xyz_or_none])
     xyz = np.array([p if p is not None else [np.nan] * 3 for p in xyz_or_none], float)
-    obj = np.where(hit, np.broadcast_to(object_id, hit.shape), -1)
-    return Footprint(hit, xyz, obj)
+    return Footprint(xyz, np.where(hit, np.broadcast_to(object_id, hit.shape), -1))
 
 
 def test_plan_grid_cells_edges_and_outside():
@@ -168,7 +167,7 @@ def test_cable_stretches_and_objects():
     slots = np.arange(4)
     points = _points(slots, np.zeros(4), object_id=np.array([cable_id, 0, mine_id, mine_id]))
     points = PointRecords(**{**points.as_dict(), "xyz": np.array(aim)})
-    acc.add(slots, Footprint(np.ones(4, bool), np.array(aim), objects), points, _dropouts(np.zeros(0, int), []))
+    acc.add(slots, Footprint(np.array(aim), objects), points, _dropouts(np.zeros(0, int), []))
     f = acc.figures()
     (c,) = f["cables"]
     assert c["reached_m"] == pytest.approx(2 * CELL) and c["covered_m"] == pytest.approx(CELL)
