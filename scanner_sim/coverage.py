@@ -123,7 +123,7 @@ class PlanGrid:
 
     def index(self, xy) -> np.ndarray:
         """(n,) int64 flat cell index (row y, column x) of plan points (n, >=2) [m]; -1 outside or NaN."""
-        xy = np.asarray(xy, float).reshape(-1, np.shape(xy)[-1] if np.ndim(xy) > 1 else 2)
+        xy = np.atleast_2d(np.asarray(xy, float))
         ny, nx = self.shape
         with np.errstate(invalid="ignore"):
             fx = np.floor((xy[:, 0] - self.origin_m[0]) / self.cell_m)

@@ -71,13 +71,12 @@ def combination_config(config: SceneConfig, water: str, altitude_m: float | None
                        gate: str = "follow") -> SceneConfig:
     """The scene's config flown at ``altitude_m`` with the ``instrument`` preset (gate per ``gate``)."""
     base_altitude = config.platform.altitude_m
-    if altitude_m is not None and altitude_m != base_altitude:
-        if base_altitude is None:
-            raise ParameterError(f"altitudes_m: scene '{config.name}' flies at constant depth or stands still "
-                                 "(platform.altitude_m is not set), so its altitude cannot be varied")
+    if altitude_m is not None and base_altitude is None:
+        raise ParameterError(f"altitudes_m: scene '{config.name}' flies at constant depth or stands still "
+                             "(platform.altitude_m is not set), so its altitude cannot be varied")
     inst_cfg = replace(config.instrument, preset=instrument)
     gated = [ch for ch in instrument_preset(instrument, water_preset(water)).channels if ch.gated]
-    if gated and gate == "follow" and altitude_m is not None and base_altitude is not None:
+    if gated and gate == "follow" and altitude_m is not None:
         delay_ns = inst_cfg.gate_delay_ns if inst_cfg.gate_delay_ns is not None else gated[0].gate_delay_s * 1e9
         width_ns = inst_cfg.gate_width_ns if inst_cfg.gate_width_ns is not None else gated[0].gate_width_s * 1e9
         shift_ns = 2.0 * (altitude_m - base_altitude) / water_preset(water).speed_m_s * 1e9
@@ -109,16 +108,16 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
         raise ParameterError(f"scene '{config.name}': coverage is measured over the seabed's plan area; the "
                              "scene has no seabed section")
     combos = list(plan.combinations(config))
-    for water, altitude, instrument in combos:  # every combination is checked before any pass runs
-        combination_config(config, water, altitude, instrument, plan.gate)
+    # every combination is built (and so checked) before any pass runs
+    configs = [combination_config(config, water, altitude, instrument, plan.gate)
+               for water, altitude, instrument in combos]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     scene = build_scene(config)
     io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
     records = []
-    for k, (water, altitude, instrument) in enumerate(combos):
-        cfg = combination_config(config, water, altitude, instrument, plan.gate)
+    for k, ((water, altitude, instrument), cfg) in enumerate(zip(combos, configs)):
         name = combination_name(water, altitude, instrument)
         if progress:
             print(f"[{k + 1}/{len(combos)}] {name}", flush=True)

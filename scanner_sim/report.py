@@ -19,6 +19,10 @@ def _percent(x) -> str:
     return "–" if x is None else f"{100.0 * x:.1f}"
 
 
+def _altitude(altitude_m) -> str:
+    return "–" if altitude_m is None else f"{altitude_m:g}"
+
+
 def _gaps(gaps: dict, unit: str) -> str:
     parts = [f"{cause.replace('_', ' ')} {amount:.2f}" for cause, amount in
              sorted(gaps.items(), key=lambda kv: -kv[1]) if amount > 0]
@@ -35,7 +39,7 @@ def main_table(study: dict) -> tuple[list[str], list[list[str]]]:
         objects = r["objects"]
         detected = f"{sum(o['detected'] for o in objects)}/{len(objects)}" if objects else "–"
         rows.append([
-            r["water"], r["instrument"], f"{r['altitude_m']:g}" if r["altitude_m"] is not None else "–",
+            r["water"], r["instrument"], _altitude(r["altitude_m"]),
             _percent(r["covered_fraction"]), f"{r['reached_area_m2']:.1f}",
             "–" if r["density_pts_per_m2"] is None else f"{r['density_pts_per_m2']:.0f}",
             f"{r['holes']['count']} ({r['holes']['largest_m2']:.2f})", _gaps(r["gaps_m2"], "m²"), cables, detected,
@@ -49,7 +53,7 @@ def object_table(study: dict) -> tuple[list[str], list[list[str]]]:
     header = ["water", "instrument", "altitude [m]", "object", "reaching pulses", "valid points", "result"]
     rows = []
     for r in study["records"]:
-        key = [r["water"], r["instrument"], f"{r['altitude_m']:g}" if r["altitude_m"] is not None else "–"]
+        key = [r["water"], r["instrument"], _altitude(r["altitude_m"])]
         for o in r["objects"]:
             result = "detected" if o["detected"] else (f"missed: {o['gap_cause'].replace('_', ' ')}"
                                                        if o["gap_cause"] else "not reached")
@@ -72,7 +76,7 @@ def multichannel_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
     rows = []
     for w, a in pairs:
         m, s = by_key[(w, a, "mul2023")], by_key[(w, a, "single_channel")]
-        rows.append([w, f"{a:g}" if a is not None else "–", _percent(m["covered_fraction"]),
+        rows.append([w, _altitude(a), _percent(m["covered_fraction"]),
                      _percent(s["covered_fraction"]), f"{m['valid_points_in_reach'] - s['valid_points_in_reach']:+,}"])
     return header, rows
 

@@ -66,7 +66,7 @@ class Chunk(NamedTuple):
     points: PointRecords
     dropouts: DropoutRecords
     records: object
-    footprint: Footprint
+    footprint: Footprint | None
 
 
 @dataclass
@@ -99,7 +99,7 @@ class PassSetup:
         water = water_preset(options.water) if options.water else config.water_model()
         instrument = config.instrument.to_instrument(water)
         model = OpticalModel.build(instrument, water)
-        scene = scene or build_scene(config)
+        scene = build_scene(config) if scene is None else scene
         scene.caster()  # build the Embree BVH now: set-up, not part of the pass
         trajectory = build_trajectory(config, scene)
         scanner = Scanner.from_config(config.scanner, instrument)
@@ -139,8 +139,9 @@ class PassSetup:
             if self.max_pulses is not None and fired >= self.max_pulses:
                 return
 
-    def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None) -> Chunk:
-        """One chunk of pulse slots (n,) through the whole flow."""
+    def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, footprint: bool = False) -> Chunk:
+        """One chunk of pulse slots (n,) through the whole flow; ``footprint``: also the nominal beam footprint
+        that coverage needs (None otherwise)."""
         times = slots / self.scanner.pulse_rate_hz
         true_poses = self.trajectory.poses(times)
         beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(true_poses)
@@ -153,7 +154,7 @@ class PassSetup:
         lost = ranging.dropout_cause >= 0
         dropouts = DropoutRecords(pulse_index=slots[lost], time_s=times[lost], origin=est_o[lost],
                                   direction=est_d[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
-        return Chunk(points, dropouts, records, nominal_footprint(self.scene, beam_o, beam_d))
+        return Chunk(points, dropouts, records, nominal_footprint(self.scene, beam_o, beam_d) if footprint else None)
 
 
 def hit_echo_range_m(hits: Hits) -> np.ndarray:
@@ -265,7 +266,7 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     with io.LasWriter(out / "points.las", offset_m=setup.scene.local_origin) as las, \
             io.DropoutWriter(out / "dropouts.npz") as dropout_writer:
         for slots in setup.slot_chunks():
-            chunk = setup.simulate_chunk(slots)
+            chunk = setup.simulate_chunk(slots, footprint=coverage is not None)
             points = chunk.points
             las.write(points)
             dropout_writer.write(chunk.dropouts)
