@@ -31,7 +31,7 @@ from typing import Any, Iterator, Mapping
 
 import numpy as np
 
-from .points import DROPOUT_CAUSES, DropoutRecords, PointRecords
+from .records import DROPOUT_CAUSES, DropoutRecords, PointRecords
 
 __all__ = [
     "EXTRA_DIMENSIONS",

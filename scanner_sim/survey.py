@@ -26,7 +26,8 @@ from muls.waveform import OpticalModel, PulseBatch
 from .beams import FIDELITY, beam_pattern
 from .config import SceneConfig
 from .coverage import CoverageAccumulator, CoverageSettings, Footprint, nominal_footprint
-from .points import DropoutRecords, PointRecords, intensity_from_power, match_returns_to_hits
+from .points import intensity_from_power, match_returns_to_hits
+from .records import DropoutRecords, PointRecords
 from .raycast import Hits, cast_beams
 from .scanner import Scanner
 from .scene import build_scene

@@ -12,7 +12,7 @@ import pytest
 import trimesh
 
 from scanner_sim import io
-from scanner_sim.points import DROPOUT_CAUSES, DropoutRecords, PointRecords
+from scanner_sim.records import DROPOUT_CAUSES, DropoutRecords, PointRecords
 
 OFFSET = (500_000.0, 6_000_000.0, -40.0)  # a UTM-like local origin: large world coordinates
 

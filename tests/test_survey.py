@@ -12,7 +12,7 @@ import trimesh
 
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
-from scanner_sim.points import DROPOUT_CAUSES
+from scanner_sim.records import DROPOUT_CAUSES
 from scanner_sim.scene import LABELS
 from scanner_sim.survey import PassOptions, PassSetup, run_pass
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from scanner_sim import cli, io, viz
-from scanner_sim.points import PointRecords
+from scanner_sim.records import PointRecords
 from scanner_sim.scene import LABELS
 
 OFFSET = np.array([500_000.0, 6_000_000.0, -40.0])
