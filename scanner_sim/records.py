@@ -3,16 +3,23 @@
 One survey pass produces, chunk by chunk, a :class:`PointRecords` (every detected return, with its
 ground truth attached) and a :class:`DropoutRecords` (every pulse without a point, with its cause).
 Both are frozen dataclasses of equal-length numpy arrays with a back-reference to the pulse
-(``pulse_index``), never lists of per-point objects (DESIGN section 2).
+(``pulse_index``), never lists of per-point objects.
 
-Time is seconds from the start of the pass (DESIGN section 3). How that maps onto the LAS
-``gps_time`` field is decided in :mod:`scanner_sim.io` and documented in ``docs/outputs.md``.
+Each field is declared once, on its class: name, dtype, shape and where it goes in LAS (a
+:class:`LasStandard` dimension with its conversion, a :class:`LasExtra` extra dimension, or nowhere).
+:mod:`scanner_sim.io.las` derives the LAS layout from those declarations.
+
+Time is seconds from the start of the pass. How that maps onto the LAS
+``gps_time`` field is decided in :mod:`scanner_sim.io.las` and documented in ``docs/outputs.md``.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import ClassVar, Iterable, Mapping
+from typing import Annotated, ClassVar, Literal, get_type_hints
 
 import numpy as np
 
@@ -20,7 +27,10 @@ from muls.ranging import DROPOUT_CAUSES as MULS_DROPOUT_CAUSES
 
 __all__ = [
     "DROPOUT_CAUSES",
+    "Column",
     "DropoutRecords",
+    "LasExtra",
+    "LasStandard",
     "PointRecords",
     "dropout_cause_code",
 ]
@@ -42,6 +52,60 @@ def dropout_cause_code(name: str) -> int:
         raise ValueError(
             f"dropout cause {name!r} is unknown; valid causes: {', '.join(DROPOUT_CAUSES)}"
         ) from None
+
+
+@dataclass(frozen=True)
+class LasStandard:
+    """A field stored in standard LAS point format 6 dimensions.
+
+    ``conversion`` names how :mod:`scanner_sim.io.las` turns the field into the dimensions and back:
+    ``"copy"`` as is; ``"gps_time"`` plus the writer's GPS time offset [s]; ``"scaled"`` int32 counts
+    of the header scale around the header offset (one dimension per column); ``"scan_angle"`` int16 in
+    0.006 degree units.
+    """
+
+    dimensions: tuple[str, ...]
+    conversion: Literal["copy", "gps_time", "scaled", "scan_angle"] = "copy"
+
+
+@dataclass(frozen=True)
+class LasExtra:
+    """A field stored as a LAS extra dimension (extra bytes, LAS 1.4 R15 Table 24)."""
+
+    dtype: np.dtype  # type in the file (bool fields are stored as uint8)
+    description: str  # at most 32 characters
+
+
+@dataclass(frozen=True)
+class Column:
+    """One record field: a (n,) or (n, ``width``) array of ``dtype``, declared on its record class as
+    ``name: Annotated[np.ndarray, Column(...)]``.
+
+    ``las`` says where it goes in LAS (None: not stored); ``unknown`` is the value that stands for
+    "not known", given to the field when a file does not carry it.
+    """
+
+    dtype: np.dtype
+    width: int | None = None
+    las: LasStandard | LasExtra | None = None
+    unknown: float = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "dtype", np.dtype(self.dtype))
+
+
+def _las(*dimensions: str, conversion: str = "copy") -> LasStandard:
+    return LasStandard(dimensions, conversion)
+
+
+def _extra(dtype, description: str) -> LasExtra:
+    return LasExtra(np.dtype(dtype), description)
+
+
+@functools.cache
+def _columns(cls) -> dict[str, Column]:
+    hints = get_type_hints(cls, include_extras=True)
+    return {f.name: hints[f.name].__metadata__[0] for f in dataclasses.fields(cls)}
 
 
 def _coerce_field(cls_name: str, name: str, value, dtype: np.dtype, width: int | None) -> np.ndarray:
@@ -99,20 +163,19 @@ def _coerce_field(cls_name: str, name: str, value, dtype: np.dtype, width: int |
 
 
 class _Records:
-    """Shared behaviour of the struct-of-arrays record classes.
+    """Shared behaviour of the struct-of-arrays record classes, whose fields are annotated with a :class:`Column`."""
 
-    Subclasses declare ``_SCHEMA``: field name -> (dtype, width or None) where width is the size
-    of the second axis of a 2-D field.
-    """
-
-    _SCHEMA: ClassVar[Mapping[str, tuple[np.dtype, int | None]]] = {}
+    @classmethod
+    def columns(cls) -> dict[str, Column]:
+        """Field name -> :class:`Column`, in declaration order."""
+        return _columns(cls)
 
     def __post_init__(self) -> None:
         cls_name = type(self).__name__
         n = None
         first = None
-        for name, (dtype, width) in self._SCHEMA.items():
-            arr = _coerce_field(cls_name, name, getattr(self, name), np.dtype(dtype), width)
+        for name, col in self.columns().items():
+            arr = _coerce_field(cls_name, name, getattr(self, name), col.dtype, col.width)
             object.__setattr__(self, name, arr)
             if n is None:
                 n, first = arr.shape[0], name
@@ -123,20 +186,20 @@ class _Records:
                 )
 
     def __len__(self) -> int:
-        return int(getattr(self, next(iter(self._SCHEMA))).shape[0])
+        return int(getattr(self, dataclasses.fields(self)[0].name).shape[0])
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
         """Names of the record fields, in declaration order."""
-        return tuple(cls._SCHEMA)
+        return tuple(f.name for f in dataclasses.fields(cls))
 
     @classmethod
     def empty(cls):
         """Records with zero entries and the right dtypes and shapes."""
         return cls(
             **{
-                name: np.zeros((0,) if width is None else (0, width), dtype=dtype)
-                for name, (dtype, width) in cls._SCHEMA.items()
+                name: np.zeros((0,) if col.width is None else (0, col.width), dtype=col.dtype)
+                for name, col in cls.columns().items()
             }
         )
 
@@ -146,7 +209,7 @@ class _Records:
         parts = list(parts)
         for i, part in enumerate(parts):
             if not isinstance(part, cls):
-                raise ValueError(
+                raise ValueError(  # noqa: TRY004 - kept: callers and tests expect ValueError
                     f"{cls.__name__}.concatenate: item {i} is a {type(part).__name__}, "
                     f"expected {cls.__name__}"
                 )
@@ -155,7 +218,7 @@ class _Records:
         if len(parts) == 1:
             return parts[0]
         return cls(
-            **{name: np.concatenate([getattr(p, name) for p in parts]) for name in cls._SCHEMA}
+            **{name: np.concatenate([getattr(p, name) for p in parts]) for name in cls.field_names()}
         )
 
     def select(self, index):
@@ -166,106 +229,73 @@ class _Records:
                 f"{type(self).__name__}.select: mask shape {index.shape} does not match "
                 f"the {len(self)} records"
             )
-        return type(self)(**{name: getattr(self, name)[index] for name in self._SCHEMA})
+        return type(self)(**{name: getattr(self, name)[index] for name in self.field_names()})
 
     def as_dict(self) -> dict[str, np.ndarray]:
         """Field name -> array (the arrays themselves, not copies)."""
-        return {name: getattr(self, name) for name in self._SCHEMA}
+        return {name: getattr(self, name) for name in self.field_names()}
 
 
 @dataclass(frozen=True, eq=False)
 class PointRecords(_Records):
-    """Detected returns of a batch of pulses, one entry per point, with ground truth attached.
+    """Detected returns of a batch of pulses, one entry per point (n points), with ground truth attached.
 
-    Fields (n = number of points):
-
-    - ``gps_time_s`` (n,) float64 [s]: emission time of the pulse, seconds from the pass start.
-      Mapped onto LAS ``gps_time`` as Adjusted Standard GPS time plus a configurable offset
-      (``scanner_sim.io.LasWriter``, ``docs/outputs.md``).
-    - ``xyz`` (n, 3) float64 [m]: estimated point position in the world frame (x east, y north,
-      z up), as the instrument and navigation would place it: ranging error and navigation noise included.
-    - ``intensity`` (n,) uint16: LAS intensity (peak amplitude of the chosen channel, scaled; see docs).
-    - ``return_number`` (n,) uint8: 1-based return number within its pulse (1..15).
-    - ``number_of_returns`` (n,) uint8: returns detected for that pulse (1..15).
-    - ``classification`` (n,) uint8: ground-truth class code of the surface hit
-      (the scene label table, ``docs/scene-format.md``).
-    - ``scan_angle_deg`` (n,) float32 [deg]: mirror angle of the pulse, 0 at nadir.
-    - ``channel`` (n,) uint8: detection channel that ranged the point (1..3 for the MUL preset).
-    - ``amplitude_lsb`` (n,) float32 [LSB]: peak amplitude above baseline in the chosen channel.
-    - ``snr`` (n,) float32 [1]: peak amplitude over the channel's noise standard deviation.
-    - ``saturated`` (n,) bool: the chosen channel's echo was clipped by the ADC.
-    - ``true_range_m`` (n,) float32 [m]: range from the transmitter to the true hit on the mesh.
-    - ``range_error_m`` (n,) float32 [m]: measured minus true range.
-    - ``incidence_deg`` (n,) float32 [deg]: angle between the beam and the surface normal.
-    - ``object_id`` (n,) int32: id of the scene object hit (-1 if none or unknown).
-    - ``pulse_index`` (n,) int64: index of the pulse in the pass (back-reference).
+    Each field is a (n,) array, ``xyz`` (n, 3); its dtype and LAS placement are declared beside it, the
+    LAS columns are tabled in ``docs/outputs.md``.
     """
 
-    gps_time_s: np.ndarray
-    xyz: np.ndarray
-    intensity: np.ndarray
-    return_number: np.ndarray
-    number_of_returns: np.ndarray
-    classification: np.ndarray
-    scan_angle_deg: np.ndarray
-    channel: np.ndarray
-    amplitude_lsb: np.ndarray
-    snr: np.ndarray
-    saturated: np.ndarray
-    true_range_m: np.ndarray
-    range_error_m: np.ndarray
-    incidence_deg: np.ndarray
-    object_id: np.ndarray
-    pulse_index: np.ndarray
-
-    _SCHEMA: ClassVar[Mapping[str, tuple[np.dtype, int | None]]] = {
-        "gps_time_s": (np.dtype(np.float64), None),
-        "xyz": (np.dtype(np.float64), 3),
-        "intensity": (np.dtype(np.uint16), None),
-        "return_number": (np.dtype(np.uint8), None),
-        "number_of_returns": (np.dtype(np.uint8), None),
-        "classification": (np.dtype(np.uint8), None),
-        "scan_angle_deg": (np.dtype(np.float32), None),
-        "channel": (np.dtype(np.uint8), None),
-        "amplitude_lsb": (np.dtype(np.float32), None),
-        "snr": (np.dtype(np.float32), None),
-        "saturated": (np.dtype(np.bool_), None),
-        "true_range_m": (np.dtype(np.float32), None),
-        "range_error_m": (np.dtype(np.float32), None),
-        "incidence_deg": (np.dtype(np.float32), None),
-        "object_id": (np.dtype(np.int32), None),
-        "pulse_index": (np.dtype(np.int64), None),
-    }
+    #: [s] emission time of the pulse, seconds from the pass start; LAS ``gps_time`` is Adjusted Standard
+    #: GPS time, this plus ``LasWriter(gps_time_offset_s=)`` (``docs/outputs.md``).
+    gps_time_s: Annotated[np.ndarray, Column(np.float64, las=_las("gps_time", conversion="gps_time"))]
+    #: [m] estimated point in the world frame (x east, y north, z up), as the instrument and navigation
+    #: would place it: ranging error and navigation noise included.
+    xyz: Annotated[np.ndarray, Column(np.float64, 3, las=_las("X", "Y", "Z", conversion="scaled"))]
+    #: LAS intensity: peak amplitude of the chosen channel, scaled (``points.intensity_from_power``).
+    intensity: Annotated[np.ndarray, Column(np.uint16, las=_las("intensity"))]
+    #: 1-based return number within its pulse (1..15), nearest first.
+    return_number: Annotated[np.ndarray, Column(np.uint8, las=_las("return_number"))]
+    #: Returns detected for that pulse (1..15).
+    number_of_returns: Annotated[np.ndarray, Column(np.uint8, las=_las("number_of_returns"))]
+    #: Ground-truth class code of the surface hit (the scene label table, ``docs/scene-format.md``).
+    classification: Annotated[np.ndarray, Column(np.uint8, las=_las("classification"))]
+    #: [deg] mirror angle of the pulse, 0 at nadir.
+    scan_angle_deg: Annotated[np.ndarray, Column(np.float32, las=_las("scan_angle", conversion="scan_angle"))]
+    #: Detection channel that ranged the point (1..3 for the MUL preset).
+    channel: Annotated[np.ndarray, Column(np.uint8, las=_extra(np.uint8, "detection channel (1..3)"))]
+    #: [LSB] peak amplitude above the baseline in the chosen channel.
+    amplitude_lsb: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "peak amplitude [ADC LSB]"))]
+    #: [1] peak amplitude over the channel's noise standard deviation.
+    snr: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "peak signal-to-noise ratio"))]
+    #: The chosen channel's echo was clipped by the ADC.
+    saturated: Annotated[np.ndarray, Column(np.bool_, las=_extra(np.uint8, "1 if the ADC clipped the echo"))]
+    #: [m] range from the transmitter to the true hit on the mesh.
+    true_range_m: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "range to truth mesh [m]"))]
+    #: [m] measured minus true range.
+    range_error_m: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "measured - true range [m]"))]
+    #: [deg] angle between the beam and the surface normal at the hit.
+    incidence_deg: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "incidence angle [deg]"))]
+    #: Scene object hit (index in the scene's object list), -1 if none or unknown.
+    object_id: Annotated[np.ndarray, Column(np.int32, las=_extra(np.int32, "scene object id (-1 none)"), unknown=-1)]
+    #: Index of the pulse in the pass (back-reference); not stored in LAS, -1 when read back.
+    pulse_index: Annotated[np.ndarray, Column(np.int64, unknown=-1)]
 
 
 @dataclass(frozen=True, eq=False)
 class DropoutRecords(_Records):
-    """Pulses that produced no point, one entry per pulse, with the cause.
+    """Pulses that produced no point, one entry per pulse (n dropped pulses), with the cause."""
 
-    Fields (n = number of dropped pulses):
-
-    - ``pulse_index`` (n,) int64: index of the pulse in the pass.
-    - ``time_s`` (n,) float64 [s]: emission time, seconds from the pass start.
-    - ``origin`` (n, 3) float64 [m]: transmitter position in the world frame.
-    - ``direction`` (n, 3) float32 [1]: unit beam axis in the world frame.
-    - ``cause`` (n,) uint8: index into :data:`DROPOUT_CAUSES`.
-    """
-
-    pulse_index: np.ndarray
-    time_s: np.ndarray
-    origin: np.ndarray
-    direction: np.ndarray
-    cause: np.ndarray
+    #: Index of the pulse in the pass.
+    pulse_index: Annotated[np.ndarray, Column(np.int64)]
+    #: [s] emission time, seconds from the pass start.
+    time_s: Annotated[np.ndarray, Column(np.float64)]
+    #: [m] transmitter position in the world frame, (n, 3).
+    origin: Annotated[np.ndarray, Column(np.float64, 3)]
+    #: [1] unit beam axis in the world frame, (n, 3).
+    direction: Annotated[np.ndarray, Column(np.float32, 3)]
+    #: Index into :data:`DROPOUT_CAUSES`.
+    cause: Annotated[np.ndarray, Column(np.uint8)]
 
     CAUSES: ClassVar[tuple[str, ...]] = DROPOUT_CAUSES
-
-    _SCHEMA: ClassVar[Mapping[str, tuple[np.dtype, int | None]]] = {
-        "pulse_index": (np.dtype(np.int64), None),
-        "time_s": (np.dtype(np.float64), None),
-        "origin": (np.dtype(np.float64), 3),
-        "direction": (np.dtype(np.float32), 3),
-        "cause": (np.dtype(np.uint8), None),
-    }
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -1,0 +1,65 @@
+"""Writers and readers of a survey pass's output files (``docs/outputs.md``), one module per format.
+
+- :mod:`~scanner_sim.io.atomic`: :func:`atomic_path`, the atomic write every writer uses.
+- :mod:`~scanner_sim.io.las`: ``points.las``, LAS 1.4 format 6 with extra dimensions, streamed by
+  :class:`LasWriter`; the layout follows the :class:`~scanner_sim.records.PointRecords` declarations.
+- :mod:`~scanner_sim.io.dropouts`: ``dropouts.npz``, streamed by :class:`DropoutWriter`.
+- :mod:`~scanner_sim.io.ply`: ``scene.ply``, the labelled truth meshes.
+- :mod:`~scanner_sim.io.summary`: ``summary.json``.
+- :mod:`~scanner_sim.io.tables`: ``trajectory.csv``, ``waveforms.npz``, ``coverage_grid.npz``, text files.
+"""
+
+from .atomic import atomic_path
+from .dropouts import DropoutWriter, read_dropouts_npz, write_dropouts_npz
+from .las import (
+    EXTRA_DIMENSIONS,
+    LAS_POINT_FORMAT,
+    LAS_SCALE_M,
+    LAS_VERSION,
+    LOCAL_ENGINEERING_WKT,
+    SCAN_ANGLE_UNIT_DEG,
+    LasWriter,
+    read_las,
+    read_las_metadata,
+    scan_angle_to_las,
+    write_las,
+)
+from .ply import read_scene_ply, write_scene_ply
+from .summary import write_summary_json
+from .tables import (
+    read_coverage_grid_npz,
+    read_trajectory_csv,
+    read_waveforms_npz,
+    write_coverage_grid_npz,
+    write_text,
+    write_trajectory_csv,
+    write_waveforms_npz,
+)
+
+__all__ = [
+    "EXTRA_DIMENSIONS",
+    "LAS_POINT_FORMAT",
+    "LAS_SCALE_M",
+    "LAS_VERSION",
+    "LOCAL_ENGINEERING_WKT",
+    "SCAN_ANGLE_UNIT_DEG",
+    "DropoutWriter",
+    "LasWriter",
+    "atomic_path",
+    "read_coverage_grid_npz",
+    "read_dropouts_npz",
+    "read_las",
+    "read_las_metadata",
+    "read_scene_ply",
+    "read_trajectory_csv",
+    "read_waveforms_npz",
+    "scan_angle_to_las",
+    "write_coverage_grid_npz",
+    "write_dropouts_npz",
+    "write_las",
+    "write_scene_ply",
+    "write_summary_json",
+    "write_text",
+    "write_trajectory_csv",
+    "write_waveforms_npz",
+]
