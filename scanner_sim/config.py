@@ -351,7 +351,7 @@ class InstrumentConfig:
 
 
 def _material_fields_validate(obj, path):
-    from .scene import LABELS, MATERIALS
+    from .materials import LABELS, MATERIALS
 
     if obj.material is not None:
         choice(tuple(MATERIALS))(obj.material, f"{path}.material")
@@ -361,7 +361,7 @@ def _material_fields_validate(obj, path):
 
 
 def _reflectance_of(obj) -> float:
-    from .scene import MATERIALS
+    from .materials import MATERIALS
 
     return obj.reflectance if obj.reflectance is not None else MATERIALS[obj.material].reflectance
 

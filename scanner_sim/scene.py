@@ -1,4 +1,4 @@
-"""Scenes: materials, class labels, object generators and the combined mesh the rays see.
+"""Scenes: object generators and the combined mesh the rays see.
 
 A :class:`Scene` is one triangle mesh (world coordinates, float64) with per-triangle object id, class label
 and reflectance, the seabed's height field for fast height queries, and a local origin: the mesh is shifted
@@ -15,47 +15,8 @@ import numpy as np
 
 from muls.errors import ParameterError
 
+from .materials import LABELS
 from .terrain import HeightField, generate_heightfield, rock_meshes
-
-
-@dataclass(frozen=True)
-class Material:
-    """Diffuse (Lambertian) reflectance at 532 nm and where the value comes from."""
-
-    reflectance: float
-    source: str
-
-
-_DESIGN5 = "DESIGN.md section 5 (sourced value; primary citation to be attached there)"
-MATERIALS: dict[str, Material] = {
-    "carbonate_sand": Material(0.43, _DESIGN5),
-    "terrigenous_sand": Material(0.14, _DESIGN5),
-    "green_algae": Material(0.25, _DESIGN5),
-    "brown_algae": Material(0.045, _DESIGN5),
-    "black_painted_aluminium": Material(0.10, "MULS paper sections 4.2 and 4.3: the target panel, reflectance 0.1"),
-    # Named assumptions (docs/scene-format.md gives the reason for each):
-    "mud": Material(0.08, "assumption: dark fine silt, darker than terrigenous sand"),
-    "rock": Material(0.20, "assumption: bare grey rock with light fouling"),
-    "polyethylene": Material(0.30, "assumption: weathered black/yellow polyethylene cable sheath, partly fouled"),
-    "painted_steel": Material(0.15, "assumption: painted steel with fouling and corrosion (mines, wrecks)"),
-    "concrete": Material(0.35, "assumption: grey concrete with light fouling"),
-}
-
-#: Class labels -> LAS 1.4 classification codes. 40 (bathymetric point, seafloor) and 43 (submerged object,
-#: not otherwise specified) are ASPRS standard codes of the topo-bathy domain profile; 64-255 are user
-#: definable, used here for the object classes.
-LABELS: dict[str, int] = {
-    "seabed": 40,
-    "object": 43,
-    "cable": 64,
-    "mine": 65,
-    "panel": 66,
-    "wreck": 67,
-    "rock": 68,
-    "pipeline": 69,
-    "debris": 70,
-}
-LABEL_NAMES: dict[int, str] = {code: name for name, code in LABELS.items()}
 
 
 @dataclass(frozen=True)

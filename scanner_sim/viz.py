@@ -99,7 +99,7 @@ def class_table(class_names: Mapping[int, str] | None = None) -> dict[int, str]:
     if class_names is not None:
         return {int(k): str(v) for k, v in class_names.items()}
     try:
-        from .scene import LABELS  # the geometry's label table
+        from .materials import LABELS  # the label table
     except Exception:  # noqa: BLE001 - no scene module (yet): fall back, colours still work
         return dict(_FALLBACK_CLASS_NAMES)
     table: dict[int, str] = {}

@@ -5,7 +5,8 @@ import pytest
 import yaml
 
 from scanner_sim.config import SCENES_DIR, load_scene, parse_scene
-from scanner_sim.scene import LABELS, MATERIALS, build_scene, cable_centreline, tube
+from scanner_sim.materials import LABELS, MATERIALS
+from scanner_sim.scene import build_scene, cable_centreline, tube
 from scanner_sim.terrain import generate_heightfield
 
 
