@@ -123,17 +123,3 @@ def subrays(beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: np.ndarray
     dirs = beam_dir[:, None, :] + math.tan(half_divergence_rad) * across
     dirs /= np.linalg.norm(dirs, axis=2, keepdims=True)
     return origins.reshape(n * m, 3), dirs.reshape(n * m, 3)
-
-
-def fidelity_subrays(fidelity: str) -> int:
-    """Default sub-ray count of a fidelity level (DESIGN.md section 8)."""
-    return FIDELITY[fidelity]["subrays"]
-
-
-#: What each fidelity level sets in the geometry stage. ``shadow_rays``: cast a visibility ray from each hit
-#: to the receiver aperture (parallax shadows); without it only the FOV cone is checked.
-FIDELITY = {
-    "fast": {"subrays": 7, "shadow_rays": False},
-    "balanced": {"subrays": 19, "shadow_rays": True},
-    "reference": {"subrays": 91, "shadow_rays": True},
-}

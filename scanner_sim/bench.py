@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import tempfile
 
-from .beams import FIDELITY
+from .fidelity import FIDELITY_LEVELS
 
 
 def bench_pass(scene_name: str = "cable_survey", pulses: int = 60000, repeat: int = 2) -> dict:
@@ -21,7 +21,7 @@ def bench_pass(scene_name: str = "cable_survey", pulses: int = 60000, repeat: in
 
     config = load_scene(scene_name)
     result = {"scene": scene_name, "pulses": pulses, "cpu_count": os.cpu_count(), "load_avg": os.getloadavg()[0]}
-    for fidelity, knobs in FIDELITY.items():
+    for fidelity, level in FIDELITY_LEVELS.items():
         best = None
         options = PassOptions(fidelity=fidelity, max_pulses=pulses, progress=False, render=False)
         run_pass(config, tempfile.mkdtemp(prefix="muls-bench-"), PassOptions(
@@ -30,13 +30,13 @@ def bench_pass(scene_name: str = "cable_survey", pulses: int = 60000, repeat: in
             with tempfile.TemporaryDirectory(prefix="muls-bench-") as out:
                 summary = run_pass(config, out, options)
             best = max(best or 0.0, summary["pulses_per_s"])
-        rays = bench_rays(scene_name, min(pulses, 20000), knobs["subrays"], repeat=3)
-        rays_per_pulse = (rays["primary_rays"] + (rays["shadow_rays"] if knobs["shadow_rays"] else 0)) / rays["pulses"]
+        rays = bench_rays(scene_name, min(pulses, 20000), level.subrays, repeat=3)
+        rays_per_pulse = (rays["primary_rays"] + (rays["shadow_rays"] if level.shadow_rays else 0)) / rays["pulses"]
         raw_pulses_per_s = rays["raw_embreex_rays_per_s"] / rays_per_pulse
         result[fidelity] = {
             "pulses_per_s": round(best, 1),
-            "subrays": knobs["subrays"],
-            "shadow_rays": knobs["shadow_rays"],
+            "subrays": level.subrays,
+            "shadow_rays": level.shadow_rays,
             "raw_embreex_rays_per_s": rays["raw_embreex_rays_per_s"],
             "raw_embreex_pulses_per_s": round(raw_pulses_per_s, 1),
             "ratio_to_raw_rays": round(best / raw_pulses_per_s, 3),

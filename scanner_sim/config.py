@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,9 +20,10 @@ import yaml
 
 from muls.errors import ParameterError
 
+from .fidelity import FIDELITY_LEVELS, FidelityLevel
+
 FORMAT_VERSION = 1
 SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
-FIDELITIES = ("fast", "balanced", "reference")
 
 
 class ConfigError(ParameterError):
@@ -689,7 +690,7 @@ class SurveyConfig:
     """How much to simulate and how faithfully."""
 
     seed: int = _spec(integer(0), 0)
-    fidelity: str = _spec(choice(FIDELITIES), "balanced")
+    fidelity: str = _spec(choice(tuple(FIDELITY_LEVELS)), "balanced")
     subrays: int | None = _spec(integer(optional=True, choices=(1, 7, 19, 37, 61, 91, 127, 169, 217)), None)
     beam_profile: str = _spec(choice(("top_hat", "gaussian")), "top_hat")
     shadow_rays: bool | None = _spec(boolean(optional=True), None)
@@ -699,16 +700,11 @@ class SurveyConfig:
     chunk_pulses: int = _spec(integer(1), 20000)
 
     @property
-    def resolved_subrays(self) -> int:
-        from .beams import FIDELITY
-
-        return self.subrays if self.subrays is not None else FIDELITY[self.fidelity]["subrays"]
-
-    @property
-    def resolved_shadow_rays(self) -> bool:
-        from .beams import FIDELITY
-
-        return self.shadow_rays if self.shadow_rays is not None else FIDELITY[self.fidelity]["shadow_rays"]
+    def level(self) -> FidelityLevel:
+        """The fidelity level with this survey's ``subrays`` and ``shadow_rays`` overrides applied."""
+        level = FIDELITY_LEVELS[self.fidelity]
+        return replace(level, subrays=level.subrays if self.subrays is None else self.subrays,
+                       shadow_rays=level.shadow_rays if self.shadow_rays is None else self.shadow_rays)
 
 
 @dataclass(frozen=True, kw_only=True)

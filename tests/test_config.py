@@ -5,7 +5,11 @@ import math
 import pytest
 import yaml
 
-from scanner_sim.config import (SCENES_DIR, ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes)
+from muls.detection import RECORD_MODES
+from muls.errors import ParameterError
+from scanner_sim.beams import SUBRAY_COUNTS
+from scanner_sim.config import SCENES_DIR, ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes
+from scanner_sim.fidelity import FIDELITY_LEVELS, fidelity_level
 
 SHIPPED = ["cable_survey", "mine_field", "seabed_lawnmower", "pool_panel", "pond_panel"]
 
@@ -123,7 +127,7 @@ def test_unknown_scene_name_suggests():
 
 def test_defaults_are_complete():
     cfg = load_scene("pool_panel")
-    assert cfg.survey.resolved_subrays == 91 and cfg.survey.resolved_shadow_rays
+    assert cfg.survey.level == FIDELITY_LEVELS["reference"]
     assert cfg.scanner.mounting == "along_track" and math.isclose(cfg.survey.start_s, 0.0)
 
 
@@ -135,3 +139,37 @@ def test_docs_example_validates():
     block = text.split("```yaml\n", 1)[1].split("```", 1)[0]
     cfg = parse_scene(yaml.safe_load(block), base_dir=SCENES_DIR)
     assert cfg.name == "cable_survey" and cfg.platform.navigation_noise.seed == 11
+
+
+# -- fidelity ------------------------------------------------------------------------------------------
+
+def test_fidelity_table():
+    assert {name: (lv.subrays, lv.shadow_rays, lv.record_mode, lv.column_cut) for name, lv in FIDELITY_LEVELS.items()} \
+        == {"fast": (7, False, "windowed", "pulse"), "balanced": (19, True, "windowed", "pulse"),
+            "reference": (91, True, "full", "pulse")}
+    for name, level in FIDELITY_LEVELS.items():
+        assert level.name == name and level.subrays in SUBRAY_COUNTS and level.record_mode in RECORD_MODES
+    assert fidelity_level("fast") is FIDELITY_LEVELS["fast"]
+    with pytest.raises(ParameterError) as exc:
+        fidelity_level("fastest")
+    assert str(exc.value) == "fidelity = 'fastest': must be one of 'fast', 'balanced', 'reference'"
+
+
+def test_survey_level_applies_the_scene_overrides():
+    def level(**survey):
+        data = _base()
+        data["survey"] = survey
+        return parse_scene(data).survey.level
+
+    assert level(fidelity="fast") == FIDELITY_LEVELS["fast"]
+    assert level(fidelity="fast", subrays=61).subrays == 61
+    assert level(fidelity="fast", shadow_rays=True).shadow_rays
+    overridden = level(fidelity="reference", subrays=37, shadow_rays=False)
+    assert (overridden.name, overridden.subrays, overridden.shadow_rays, overridden.record_mode) == \
+        ("reference", 37, False, "full")
+
+
+def test_fidelity_choices_come_from_the_table():
+    msg = _error(lambda d: d["survey"].update(fidelity="balance"))
+    assert msg == ("survey.fidelity = 'balance': must be one of "
+                   f"{', '.join(map(repr, FIDELITY_LEVELS))} (did you mean 'balanced'?)")
