@@ -15,6 +15,15 @@ import numpy as np
 
 from muls.errors import ParameterError
 
+from .config import (
+    CableObject,
+    ConeMineObject,
+    CylinderMineObject,
+    MeshObject,
+    MooredMineObject,
+    PanelObject,
+    reflectance_of,
+)
 from .materials import LABELS
 from .terrain import HeightField, generate_heightfield, rock_meshes
 
@@ -273,8 +282,6 @@ def build_scene(config, backend: str = "auto") -> Scene:
     """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds)."""
     import trimesh
 
-    from . import config as C
-
     parts: list[Part] = []
     hf = None
     sb = config.seabed
@@ -284,24 +291,24 @@ def build_scene(config, backend: str = "auto") -> Scene:
                                   sb.relief.wavelength_m, sb.relief.hurst, sb.ripples.amplitude_m,
                                   sb.ripples.wavelength_m, sb.ripples.crest_deg, sb.ripples.sinuosity, rng)
         v, f = hf.mesh()
-        parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], C.reflectance_of(sb)))
+        parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb)))
         rk = sb.rocks
         if rk.count:
             rocks = rock_meshes(hf, rk.count, (rk.radius_min_m, rk.radius_max_m), rng)
             v = np.concatenate([r[0] for r in rocks])
             offsets = np.cumsum([0] + [len(r[0]) for r in rocks[:-1]])
             f = np.concatenate([r[1] + o for r, o in zip(rocks, offsets)])
-            parts.append(Part("rocks", "rocks", v, f, LABELS[rk.label], C.reflectance_of(rk)))
+            parts.append(Part("rocks", "rocks", v, f, LABELS[rk.label], reflectance_of(rk)))
 
     for obj in config.objects:
-        refl, label = C.reflectance_of(obj), LABELS[obj.label]
+        refl, label = reflectance_of(obj), LABELS[obj.label]
         centreline = None
-        if isinstance(obj, C.CableObject):
+        if isinstance(obj, CableObject):
             line = cable_centreline(obj.points_m, obj.diameter_m, obj.burial_fraction, hf, obj.step_m,
                                     obj.stiffness_length_m)
             v, f = tube(line, 0.5 * obj.diameter_m, obj.sides)
             centreline = line
-        elif isinstance(obj, C.MooredMineObject):
+        elif isinstance(obj, MooredMineObject):
             ground = _ground_z(obj.position_m, hf)
             x, y = obj.position_m[:2]
             sphere = trimesh.creation.icosphere(subdivisions=3, radius=obj.radius_m)
@@ -311,7 +318,7 @@ def build_scene(config, backend: str = "auto") -> Scene:
             tv = tv + [x, y, ground - 0.05]
             v = np.vstack([sv, tv])
             f = np.vstack([sphere.faces, tf + len(sv)])
-        elif isinstance(obj, C.CylinderMineObject):
+        elif isinstance(obj, CylinderMineObject):
             ground = _ground_z(obj.position_m, hf)
             v, f = frustum(obj.radius_m, obj.radius_m, obj.length_m, sections=32)
             v = v - [0.0, 0.0, 0.5 * obj.length_m]
@@ -319,13 +326,13 @@ def build_scene(config, backend: str = "auto") -> Scene:
             rot = rotation_matrix(0.0, math.pi / 2, float(compass_to_yaw_rad(obj.heading_deg)))
             z = ground + obj.radius_m - obj.burial_fraction * 2.0 * obj.radius_m
             v = v @ rot.T + [obj.position_m[0], obj.position_m[1], z]
-        elif isinstance(obj, C.ConeMineObject):
+        elif isinstance(obj, ConeMineObject):
             ground = _ground_z(obj.position_m, hf)
             v, f = frustum(obj.bottom_radius_m, obj.top_radius_m, obj.height_m, sections=32)
             v = v + [obj.position_m[0], obj.position_m[1], ground - obj.burial_fraction * obj.height_m]
-        elif isinstance(obj, C.PanelObject):
+        elif isinstance(obj, PanelObject):
             v, f = panel_mesh(obj.center_m, obj.size_m, obj.normal, obj.up)
-        elif isinstance(obj, C.MeshObject):
+        elif isinstance(obj, MeshObject):
             mesh = trimesh.load(obj.resolved_path, force="mesh")
             rot = rotation_matrix(*np.radians(obj.rotate_deg))
             v = np.asarray(mesh.vertices, float) * obj.scale @ rot.T

@@ -1,4 +1,5 @@
-"""Scene-file validation: strict keys with suggestions, units, one-line errors naming key and value."""
+"""Scene-file validation: strict keys with suggestions, units, one-line errors naming key and value; overrides
+through the same validation; the fidelity table."""
 
 import math
 
@@ -8,7 +9,20 @@ import yaml
 from muls.detection import RECORD_MODES
 from muls.errors import ParameterError
 from scanner_sim.beams import SUBRAY_COUNTS
-from scanner_sim.config import SCENES_DIR, ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes
+from scanner_sim.config import (
+    SCENES_DIR,
+    ConfigError,
+    InstrumentConfig,
+    OutputConfig,
+    PlatformConfig,
+    ScannerConfig,
+    SceneConfig,
+    SeabedConfig,
+    SurveyConfig,
+    load_scene,
+    parse_scene,
+    shipped_scenes,
+)
 from scanner_sim.fidelity import FIDELITY_LEVELS, fidelity_level
 
 SHIPPED = ["cable_survey", "mine_field", "seabed_lawnmower", "pool_panel", "pond_panel"]
@@ -131,14 +145,53 @@ def test_defaults_are_complete():
     assert cfg.scanner.mounting == "along_track" and math.isclose(cfg.survey.start_s, 0.0)
 
 
-def test_docs_example_validates():
-    """The complete commented example in docs/scene-format.md is a valid scene."""
-    from pathlib import Path
+def test_every_key_names_itself_in_its_error():
+    """A value no key accepts, put at every key of every section, fails with one line starting at that key."""
+    sections = {"platform": PlatformConfig, "instrument": InstrumentConfig, "seabed": SeabedConfig,
+                "scanner": ScannerConfig, "survey": SurveyConfig, "output": OutputConfig}
+    for section, model in sections.items():
+        for key in model.model_fields:
+            data = _base()
+            data[section] = {**data.get(section, {}), key: [[]]}
+            with pytest.raises(ConfigError) as exc:
+                parse_scene(data, base_dir=SCENES_DIR)
+            assert str(exc.value).startswith(f"{section}.{key}") and "\n" not in str(exc.value), str(exc.value)
 
-    text = (Path(__file__).resolve().parent.parent / "docs" / "scene-format.md").read_text()
-    block = text.split("```yaml\n", 1)[1].split("```", 1)[0]
-    cfg = parse_scene(yaml.safe_load(block), base_dir=SCENES_DIR)
-    assert cfg.name == "cable_survey" and cfg.platform.navigation_noise.seed == 11
+
+def test_object_errors_name_the_index_not_the_type():
+    msg = _error(lambda d: d["objects"].append({"type": "cylinder_mine", "position_m": [0, 0], "radius_m": 0}))
+    assert msg == "objects[1].radius_m = 0.0: must be a number > 0"
+    msg = _error(lambda d: d["objects"].append({"type": "cylindre_mine", "position_m": [0, 0]}))
+    assert msg.startswith("objects[1].type = 'cylindre_mine': must be one of 'cable',")
+    assert msg.endswith("(did you mean 'cylinder_mine'?)")
+    msg = _error(lambda d: d["objects"][0].update(colour="red"))
+    assert msg.startswith("objects[0].colour: unknown key; (allowed: material, reflectance, label, type, name, ")
+
+
+def test_translate_takes_two_or_three_numbers():
+    def with_block(translate):
+        return lambda d: d["objects"].append({"type": "mesh", "file": "assets/mooring_block.obj",
+                                              "translate_m": translate})
+
+    data = _base()
+    with_block([1, 2])(data)
+    assert parse_scene(data, base_dir=SCENES_DIR).objects[1].translate_m == (1.0, 2.0)
+    assert _error(with_block([1])) == "objects[1].translate_m = [1]: must be a list of 2 or 3 numbers"
+
+
+def test_empty_section_takes_the_defaults():
+    data = _base()
+    data["scanner"] = None  # `scanner:` with nothing below it
+    assert parse_scene(data).scanner.mode == "continuous"
+
+
+def test_sections_are_frozen():
+    cfg = load_scene("pool_panel")
+    with pytest.raises(ValueError):
+        cfg.survey.seed = 3
+    with pytest.raises(ValueError):
+        cfg.platform = cfg.platform
+    assert cfg.survey.seed == load_scene("pool_panel").survey.seed
 
 
 # -- fidelity ------------------------------------------------------------------------------------------

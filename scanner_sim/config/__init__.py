@@ -1,0 +1,50 @@
+"""Scene files: YAML -> validated, frozen pydantic models, converted once.
+
+The format is versioned (``format_version: 1``) and strict: every key carries its unit, an unknown key is
+rejected with the nearest valid key suggested, and every bad value raises :class:`ConfigError` (a
+``ValueError``) with one line naming the dotted key, the value and what is allowed. The full format, with a
+commented example, is in ``docs/scene-format.md``.
+
+Entry points: :func:`load_scene` (a shipped scene's name or a path) and :func:`parse_scene` (a mapping).
+
+Modules: ``base`` (strict base model, value types, errors), ``sections`` (water, instrument, platform,
+scanner, survey, output), ``geometry`` (seabed and objects), ``scene_config`` (the whole scene),
+``loading`` (YAML files and shipped scenes).
+"""
+
+from .base import ConfigError, build
+from .geometry import (
+                       OBJECT_TYPES,
+                       CableObject,
+                       ConeMineObject,
+                       CylinderMineObject,
+                       MeshObject,
+                       MooredMineObject,
+                       PanelObject,
+                       ReliefConfig,
+                       RipplesConfig,
+                       RocksConfig,
+                       SeabedConfig,
+                       reflectance_of,
+)
+from .loading import SCENES_DIR, load_scene, resolve_scene_path, shipped_scenes
+from .scene_config import FORMAT_VERSION, SceneConfig, parse_scene, scene_json_schema
+from .sections import (
+                       AttitudeConfig,
+                       InstrumentConfig,
+                       LawnmowerConfig,
+                       NavigationNoiseConfig,
+                       OutputConfig,
+                       PlatformConfig,
+                       ScannerConfig,
+                       SurveyConfig,
+                       WaterConfig,
+)
+
+__all__ = [
+    "FORMAT_VERSION", "OBJECT_TYPES", "SCENES_DIR", "AttitudeConfig", "CableObject", "ConeMineObject", "ConfigError",
+    "CylinderMineObject", "InstrumentConfig", "LawnmowerConfig", "MeshObject", "MooredMineObject",
+    "NavigationNoiseConfig", "OutputConfig", "PanelObject", "PlatformConfig", "ReliefConfig", "RipplesConfig",
+    "RocksConfig", "ScannerConfig", "SceneConfig", "SeabedConfig", "SurveyConfig", "WaterConfig", "build",
+    "load_scene", "parse_scene", "reflectance_of", "resolve_scene_path", "scene_json_schema", "shipped_scenes",
+]

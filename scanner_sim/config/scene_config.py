@@ -1,0 +1,91 @@
+"""A whole scene: its sections, the checks across them, and validation of a mapping."""
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from pydantic import PrivateAttr, model_validator
+
+from .base import Choice, StrictModel, build, checked_at, choice_check, invalid
+from .geometry import Objects, SeabedConfig
+from .sections import (
+    InstrumentConfig,
+    OutputConfig,
+    PlatformConfig,
+    ScannerConfig,
+    SurveyConfig,
+    WaterConfig,
+    WaterSection,
+)
+
+FORMAT_VERSION = 1
+
+
+class SceneConfig(StrictModel):
+    """A muls-scanner scene file (YAML): water, instrument, seabed and objects, platform and trajectory,
+    scanner, survey and output settings. Units are in the keys; the format is in docs/scene-format.md."""
+
+    format_version: Choice(FORMAT_VERSION)
+    """Version of the scene format."""
+    name: str
+    platform: PlatformConfig
+    description: str = ""
+    """Its first line is what ``scanner-sim scenes`` prints."""
+    water: WaterSection = WaterConfig(preset="coastal_ocean")
+    instrument: InstrumentConfig = InstrumentConfig()
+    seabed: SeabedConfig | None = None
+    """The procedural seabed; tank scenes have none."""
+    objects: Objects = ()
+    scanner: ScannerConfig = ScannerConfig()
+    survey: SurveyConfig = SurveyConfig()
+    output: OutputConfig = OutputConfig()
+    _source_path: Path | None = PrivateAttr(None)
+
+    def model_post_init(self, context: Any) -> None:
+        context = context or {}
+        self._source_path = context.get("source_path")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _version_first(cls, data: Any) -> Any:
+        """A file of another format version fails on its version, not on the keys that changed."""
+        if isinstance(data, Mapping) and "format_version" in data:
+            checked_at("format_version", choice_check(FORMAT_VERSION), data["format_version"])
+        return data
+
+    @model_validator(mode="after")
+    def _sections_agree(self):
+        if self.platform.mode == "static" and self.survey.duration_s is None and self.survey.max_pulses is None:
+            raise invalid("a static platform needs survey.duration_s or survey.max_pulses", key="survey")
+        if self.seabed is None and (self.platform.altitude_m is not None
+                                    or any(o.rests_on_seabed for o in self.objects)):
+            raise invalid("missing; altitude_m and objects placed on the bottom need a seabed section", key="seabed")
+        return self
+
+    @property
+    def source_path(self) -> Path | None:
+        """The file the scene came from (None for a mapping)."""
+        return self._source_path
+
+    @property
+    def output_dir(self) -> str:
+        return self.output.dir or f"out/{self.name}"
+
+    def water_model(self):
+        """The :class:`muls.water.Water` of this scene."""
+        return self.water.to_water(f"{self.name}_water")
+
+    def instrument_model(self):
+        """The :class:`muls.instrument.Instrument` of this scene (gate and other overrides applied)."""
+        return self.instrument.to_instrument(self.water_model())
+
+
+def parse_scene(data: Mapping, base_dir: Path | None = None, source_path: Path | None = None) -> SceneConfig:
+    """Validate a scene mapping. Mesh files are resolved against ``base_dir`` (default: the working
+    directory) and must exist. Raises :class:`ConfigError` (one line)."""
+    return build(SceneConfig, data, context={"base_dir": base_dir, "source_path": source_path})
+
+
+def scene_json_schema() -> dict:
+    """The JSON Schema (draft 2020-12) of scene files, for editors and other tools."""
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **SceneConfig.model_json_schema()}

@@ -1,0 +1,302 @@
+"""The scene file's sections besides the geometry: water, instrument, platform, scanner, survey, output.
+
+Units are in the keys; angles in ``_deg`` stay degrees here and are converted where they are used.
+"""
+
+import math
+from dataclasses import replace
+from typing import Annotated, Any
+
+from pydantic import BeforeValidator, model_validator
+
+from muls import WATER_PRESETS, instrument_preset, water_preset
+from muls.water import (
+    ATTENUATION_MODELS,
+    BACKSCATTER_MODELS,
+    GROUP_INDEX_SEAWATER,
+    Water,
+)
+
+from ..beams import PROFILES, SUBRAY_COUNTS
+from ..fidelity import FIDELITY_LEVELS, FidelityLevel
+from .base import (
+    Choice,
+    Integer,
+    NonNegative,
+    Number,
+    Points,
+    Positive,
+    Real,
+    StrictModel,
+    Vector,
+    invalid,
+)
+
+WaterPreset = Choice(*sorted(WATER_PRESETS))
+
+
+class WaterConfig(StrictModel):
+    """The water: a preset name, or its optical properties at 532 nm (absorption with exactly one of
+    scattering and attenuation). ``water: turbid_harbor`` is short for ``water: {preset: turbid_harbor}``."""
+
+    preset: WaterPreset | None = None
+    """A muls water preset; takes only attenuation_model and backscatter_model beside it."""
+    absorption_per_m: NonNegative | None = None
+    """Absorption coefficient a [1/m]."""
+    scattering_per_m: NonNegative | None = None
+    """Scattering coefficient b [1/m]."""
+    attenuation_per_m: Positive | None = None
+    """Beam attenuation c = a + b [1/m]."""
+    group_index: Number(ge=1.0, le=2.0) | None = None
+    """Group refractive index (speed of the pulse); default that of sea water."""
+    beta_pi_per_m_sr: NonNegative | None = None
+    """Measured volume scattering function at 180 degrees [1/(m sr)]."""
+    attenuation_model: Choice(*ATTENUATION_MODELS) | None = None
+    """Attenuation the echo sees (muls.water)."""
+    backscatter_model: Choice(*BACKSCATTER_MODELS) | None = None
+    """Water-column backscatter model (muls.water)."""
+
+    @model_validator(mode="after")
+    def _one_description(self):
+        a, b, c = self.absorption_per_m, self.scattering_per_m, self.attenuation_per_m
+        if self.preset is not None:
+            if any(v is not None for v in (a, b, c, self.group_index, self.beta_pi_per_m_sr)):
+                raise invalid("give a preset or optical properties, not both (a preset takes only "
+                              "attenuation_model and backscatter_model)")
+        elif a is None or (b is None) == (c is None):
+            raise invalid("give a preset name, or absorption_per_m with exactly one of scattering_per_m and "
+                          "attenuation_per_m",
+                          value={"absorption_per_m": a, "scattering_per_m": b, "attenuation_per_m": c})
+        elif c is not None and a > c:
+            raise invalid(f"must be <= attenuation_per_m ({c!r})", key="absorption_per_m", value=a)
+        elif b is not None and a + b <= 0.0:
+            raise invalid("absorption_per_m + scattering_per_m = 0: attenuation must be > 0")
+        return self
+
+    def to_water(self, name: str = "custom") -> Water:
+        """The :class:`muls.water.Water` this section describes."""
+        if self.preset is not None:
+            water = water_preset(self.preset)
+        else:
+            kw = {"group_index": self.group_index or GROUP_INDEX_SEAWATER,
+                  "beta_pi_measured_per_m_sr": self.beta_pi_per_m_sr, "source": "scene file"}
+            if self.attenuation_per_m is not None:
+                water = Water.from_attenuation(name, self.attenuation_per_m, self.absorption_per_m, **kw)
+            else:
+                water = Water(name, self.absorption_per_m, self.scattering_per_m, **kw)
+        return replace(water, attenuation_model=self.attenuation_model or water.attenuation_model,
+                       backscatter_model=self.backscatter_model or water.backscatter_model)
+
+
+def _preset_shorthand(value: Any) -> Any:
+    return {"preset": value} if isinstance(value, str) else value
+
+
+#: ``water`` as written: a section, or a preset's name alone (``water: turbid_harbor``).
+WaterSection = Annotated[WaterConfig, BeforeValidator(_preset_shorthand, json_schema_input_type=WaterConfig | WaterPreset)]
+
+
+class InstrumentConfig(StrictModel):
+    """A muls instrument preset and overrides of its values (None keeps the preset's)."""
+
+    preset: Choice("mul2023", "single_channel", "coaxial") = "mul2023"
+    """The MUL prototype of the 2023 paper, one non-gated channel, or the MUL with coaxial optics."""
+    gate_delay_ns: NonNegative | None = None
+    """Opening of the gated channel(s) after the pulse [ns]; give gate_width_ns with it."""
+    gate_width_ns: Positive | None = None
+    """How long the gate stays open [ns]."""
+    pulse_energy_j: Positive | None = None
+    """Pulse energy [J]."""
+    pulse_width_ns: Positive | None = None
+    """Pulse duration (FWHM) [ns]."""
+    beam_diameter_m: Positive | None = None
+    """Beam diameter at the exit window [m]."""
+    beam_divergence_full_rad: Number(ge=0.0, lt=math.pi) | None = None
+    """Full beam divergence angle [rad]."""
+    fov_full_rad: Number(gt=0.0, lt=math.pi) | None = None
+    """Full receiver field-of-view angle [rad]."""
+    receiver_offset_m: NonNegative | None = None
+    """Transmitter-receiver offset d along the mirror shaft [m]."""
+    receiver_area_m2: Positive | None = None
+    """Receiver aperture area [m^2]."""
+
+    @model_validator(mode="after")
+    def _gate_pair(self):
+        if (self.gate_delay_ns is None) != (self.gate_width_ns is None):
+            raise invalid("give both gate_delay_ns and gate_width_ns, or neither")
+        return self
+
+    def to_instrument(self, water: Water | None = None):
+        """The :class:`muls.instrument.Instrument` with the overrides applied."""
+        inst = instrument_preset(self.preset, water)
+        tx = {k: v for k, v in (("pulse_energy_j", self.pulse_energy_j), ("beam_diameter_m", self.beam_diameter_m),
+                                ("beam_divergence_full_rad", self.beam_divergence_full_rad)) if v is not None}
+        if self.pulse_width_ns is not None:
+            tx["pulse_width_s"] = self.pulse_width_ns * 1e-9
+        rx = {k: v for k, v in (("fov_full_rad", self.fov_full_rad), ("offset_m", self.receiver_offset_m),
+                                ("area_m2", self.receiver_area_m2)) if v is not None}
+        inst = replace(inst, transmitter=replace(inst.transmitter, **tx), receiver=replace(inst.receiver, **rx))
+        if self.gate_delay_ns is not None:
+            for ch in inst.channels:
+                if ch.gated:
+                    inst = inst.with_channel(ch.name, gate_delay_s=self.gate_delay_ns * 1e-9,
+                                             gate_width_s=self.gate_width_ns * 1e-9)
+        return inst
+
+
+class LawnmowerConfig(StrictModel):
+    """Survey lines over a rectangle."""
+
+    center_m: Vector(2) = (0.0, 0.0)
+    """Centre of the rectangle [x, y] [m]."""
+    size_m: Vector(2, element=Positive)
+    """Extent along the lines and across them [m]."""
+    heading_deg: Real = 0.0
+    """Compass direction of the first line [deg]."""
+    line_spacing_m: Positive = 4.0
+    """Distance between lines [m]."""
+
+
+class AttitudeConfig(StrictModel):
+    """Attitude on top of the track: constant offsets and sinusoidal motion. Pitch nose-up and roll
+    starboard-down are positive."""
+
+    pitch_deg: Number(ge=-90.0, le=90.0) = 0.0
+    roll_deg: Number(ge=-90.0, le=90.0) = 0.0
+    pitch_amplitude_deg: Number(ge=0.0, le=45.0) = 0.0
+    pitch_period_s: Positive = 8.0
+    roll_amplitude_deg: Number(ge=0.0, le=45.0) = 0.0
+    roll_period_s: Positive = 6.0
+    follow_terrain_pitch: bool = True
+    """Pitch with the smoothed altitude profile."""
+
+
+class NavigationNoiseConfig(StrictModel):
+    """Errors of the *estimated* pose: first-order Gauss-Markov processes with these standard deviations
+    and correlation time, sampled at ``rate_hz`` and interpolated; seeded."""
+
+    position_sigma_m: NonNegative = 0.0
+    """East and north [m]."""
+    depth_sigma_m: NonNegative = 0.0
+    attitude_sigma_deg: NonNegative = 0.0
+    """Roll and pitch [deg]."""
+    heading_sigma_deg: NonNegative = 0.0
+    correlation_time_s: Positive = 10.0
+    rate_hz: Positive = 100.0
+    """Rate of the noise grid [Hz]."""
+    seed: Integer(ge=0) = 0
+
+
+class PlatformConfig(StrictModel):
+    """The vehicle: a trajectory mode, speed, vertical reference (altitude or depth), attitude and
+    navigation noise."""
+
+    mode: Choice("waypoints", "lawnmower", "static") = "waypoints"
+    speed_m_s: Positive = 1.0
+    waypoints_m: Points(2) | None = None
+    """[x, y] points of the track (mode waypoints) [m]."""
+    lawnmower: LawnmowerConfig | None = None
+    """The pattern (mode lawnmower)."""
+    position_m: Vector(2, 3) | None = None
+    """Where a static platform stands: [x, y, z], or [x, y] with altitude_m or depth_m [m]."""
+    heading_deg: Real = 0.0
+    """Compass heading of a static platform [deg]."""
+    altitude_m: Positive | None = None
+    """Height above the smoothed seabed [m]; or depth_m, exactly one."""
+    depth_m: NonNegative | None = None
+    """Constant depth below the surface, z = -depth_m [m]."""
+    follow_length_m: Positive = 1.5
+    """Gaussian sigma of the terrain low-pass for altitude following [m]."""
+    turn_length_m: NonNegative = 1.0
+    """Corners are rounded over this length [m]."""
+    attitude: AttitudeConfig = AttitudeConfig()
+    navigation_noise: NavigationNoiseConfig = NavigationNoiseConfig()
+
+    @model_validator(mode="after")
+    def _mode_needs(self):
+        if self.mode == "waypoints" and self.waypoints_m is None:
+            raise invalid("missing; mode 'waypoints' needs a list of at least 2 [x, y] points", key="waypoints_m")
+        if self.mode == "lawnmower" and self.lawnmower is None:
+            raise invalid("missing; mode 'lawnmower' needs center_m, size_m, heading_deg, line_spacing_m",
+                          key="lawnmower")
+        if self.mode == "static" and self.position_m is None:
+            raise invalid("missing; mode 'static' needs [x, y, z] or [x, y] with altitude_m or depth_m",
+                          key="position_m")
+        needs_vertical = not (self.mode == "static" and len(self.position_m) == 3)
+        given = [k for k in ("altitude_m", "depth_m") if getattr(self, k) is not None]
+        if needs_vertical and len(given) != 1:
+            raise invalid("give exactly one of altitude_m (follow the seabed) and depth_m (constant depth), "
+                          f"got {given or 'neither'}")
+        if not needs_vertical and given:
+            raise invalid("not allowed with a 3-D static position_m", key=given[0])
+        return self
+
+
+class ScannerConfig(StrictModel):
+    """The RM3/RM4 mirror shaft: mode, rates, sector of scan angle from nadir, mounting on the vehicle."""
+
+    mode: Choice("continuous", "oscillating", "static") = "continuous"
+    scan_rate_hz: Positive = 10.0
+    """Revolutions (continuous) or full back-and-forth periods (oscillating) per second [Hz]."""
+    sector_deg: Number(gt=0.0, le=360.0) = 90.0
+    """Active sector of scan angle, centred on center_deg [deg]."""
+    center_deg: Number(ge=-180.0, le=180.0) = 0.0
+    """Centre of the sector; 0 = nadir [deg]."""
+    aim_deg: Number(ge=-180.0, le=180.0) = 0.0
+    """Scan angle of every pulse in static mode [deg]."""
+    oscillation: Choice("triangle", "sine") = "triangle"
+    """Triangle (constant rate) or sine sweep."""
+    pulse_rate_hz: Number(gt=0.0, le=1e7) | None = None
+    """Laser pulse rate [Hz]; null = the instrument's repetition rate."""
+    mounting: Choice("along_track", "across_track") = "along_track"
+    """Shaft along the track (cross-track lines) or across it (fore-aft profile)."""
+    mount_position_m: Vector(3) = (0.0, 0.0, 0.0)
+    """Beam exit point in the platform frame (x forward, y left, z up) [m]."""
+
+    @model_validator(mode="after")
+    def _oscillating_sector(self):
+        if self.mode == "oscillating" and self.sector_deg >= 360.0:
+            raise invalid("must be < 360 in oscillating mode", key="sector_deg", value=self.sector_deg)
+        return self
+
+
+class SurveyConfig(StrictModel):
+    """How much to simulate and how faithfully."""
+
+    seed: Integer(ge=0) = 0
+    fidelity: Choice(*FIDELITY_LEVELS) = "balanced"
+    """A fidelity level (scanner_sim.fidelity): sub-rays, shadow rays, record mode."""
+    subrays: Choice(*SUBRAY_COUNTS) | None = None
+    """Beam sub-rays per pulse, overriding the fidelity level's."""
+    beam_profile: Choice(*PROFILES) = "top_hat"
+    """Energy across the beam: uniform disc or Gaussian (1/e^2 at the edge)."""
+    shadow_rays: bool | None = None
+    """Visibility rays from each hit to the receiver, overriding the fidelity level's choice."""
+    start_s: NonNegative = 0.0
+    """Start of the pass on the trajectory [s]."""
+    duration_s: Positive | None = None
+    """Length of the pass [s]; default the whole trajectory."""
+    max_pulses: Integer(ge=1) | None = None
+    """Stop after this many fired pulses."""
+    chunk_pulses: Integer(ge=1) = 20000
+    """Pulse slots simulated at once (memory against overhead)."""
+
+    @property
+    def level(self) -> FidelityLevel:
+        """The fidelity level with this survey's ``subrays`` and ``shadow_rays`` overrides applied."""
+        level = FIDELITY_LEVELS[self.fidelity]
+        return replace(level, subrays=level.subrays if self.subrays is None else self.subrays,
+                       shadow_rays=level.shadow_rays if self.shadow_rays is None else self.shadow_rays)
+
+
+class OutputConfig(StrictModel):
+    """What a pass writes, and where."""
+
+    dir: str | None = None
+    """Output folder; default out/<name>."""
+    las: bool = True
+    laz: bool = False
+    trajectory_csv: bool = True
+    waveform_every_n_pulses: Integer(ge=0) = 0
+    """Write the full records of every n-th pulse; 0 = none."""
+    waveform_sample_rate_hz: Positive | None = None
