@@ -226,3 +226,55 @@ def test_fidelity_choices_come_from_the_table():
     msg = _error(lambda d: d["survey"].update(fidelity="balance"))
     assert msg == ("survey.fidelity = 'balance': must be one of "
                    f"{', '.join(map(repr, FIDELITY_LEVELS))} (did you mean 'balanced'?)")
+
+
+# -- overrides -----------------------------------------------------------------------------------------
+
+def test_overrides_replace_dotted_keys():
+    cfg = load_scene("cable_survey")
+    new = cfg.with_overrides({"survey.seed": 3, "water": "turbid_harbor", "platform.altitude_m": 5,
+                              "instrument.gate_delay_ns": 20, "survey.fidelity": "fast"})
+    assert new.survey.seed == 3 and new.survey.level == FIDELITY_LEVELS["fast"]
+    assert new.water_model().name == "turbid_harbor" and new.platform.altitude_m == 5.0
+    assert new.instrument_model().channel("ch3").gate_delay_s == pytest.approx(20e-9)
+    assert new.platform.waypoints_m == cfg.platform.waypoints_m and new.seabed == cfg.seabed
+    assert cfg.survey.seed != 3 and cfg.water.preset == "coastal_ocean"  # the original is untouched
+    assert cfg.with_overrides({}) == cfg
+
+
+def test_overrides_are_validated_like_a_file():
+    cfg = load_scene("cable_survey")
+    with pytest.raises(ConfigError) as exc:
+        cfg.with_overrides({"survey.chunk_pulses": 0})
+    assert str(exc.value) == "survey.chunk_pulses = 0: must be an integer >= 1"
+    with pytest.raises(ConfigError, match=r"^platform: give exactly one of altitude_m"):
+        cfg.with_overrides({"platform.depth_m": 10})
+    assert cfg.with_overrides({"platform.depth_m": 10, "platform.altitude_m": None}).platform.depth_m == 10.0
+
+
+def test_unknown_override_keys_are_rejected_like_unknown_scene_keys():
+    cfg = load_scene("cable_survey")
+    with pytest.raises(ConfigError, match=r"^survey\.sed: unknown key; did you mean 'seed'\?"):
+        cfg.with_overrides({"survey.sed": 3})
+    with pytest.raises(ConfigError, match=r"^srvey: unknown key; did you mean 'survey'\?"):
+        cfg.with_overrides({"srvey.seed": 3})
+    with pytest.raises(ConfigError, match=r"^survey\.seed = 1: not a section, so 'survey\.seed\.x' cannot be set"):
+        cfg.with_overrides({"survey.seed.x": 3})
+
+
+def test_overrides_keep_the_source_and_the_mesh_files():
+    cfg = load_scene("mine_field")
+    new = cfg.with_overrides({"survey.seed": 9})
+    assert new.source_path == cfg.source_path == SCENES_DIR / "mine_field.yaml"
+    assert new.objects[3].resolved_path == cfg.objects[3].resolved_path
+    assert new.objects[3].resolved_path.is_file()
+
+
+def test_docs_example_validates():
+    """The complete commented example in docs/scene-format.md is a valid scene."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parent.parent / "docs" / "scene-format.md").read_text()
+    block = text.split("```yaml\n", 1)[1].split("```", 1)[0]
+    cfg = parse_scene(yaml.safe_load(block), base_dir=SCENES_DIR)
+    assert cfg.name == "cable_survey" and cfg.platform.navigation_noise.seed == 11

@@ -5,7 +5,8 @@ rejected with the nearest valid key suggested, and every bad value raises :class
 ``ValueError``) with one line naming the dotted key, the value and what is allowed. The full format, with a
 commented example, is in ``docs/scene-format.md``.
 
-Entry points: :func:`load_scene` (a shipped scene's name or a path) and :func:`parse_scene` (a mapping).
+Entry points: :func:`load_scene` (a shipped scene's name or a path), :func:`parse_scene` (a mapping) and
+:meth:`SceneConfig.with_overrides` (dotted keys, validated the same way).
 
 Modules: ``base`` (strict base model, value types, errors), ``sections`` (water, instrument, platform,
 scanner, survey, output), ``geometry`` (seabed and objects), ``scene_config`` (the whole scene),

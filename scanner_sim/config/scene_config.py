@@ -1,4 +1,4 @@
-"""A whole scene: its sections, the checks across them, and validation of a mapping."""
+"""A whole scene: its sections, the checks across them, validation of a mapping, and overrides."""
 
 from collections.abc import Mapping
 from pathlib import Path
@@ -6,7 +6,15 @@ from typing import Any
 
 from pydantic import PrivateAttr, model_validator
 
-from .base import Choice, StrictModel, build, checked_at, choice_check, invalid
+from .base import (
+    Choice,
+    ConfigError,
+    StrictModel,
+    build,
+    checked_at,
+    choice_check,
+    invalid,
+)
 from .geometry import Objects, SeabedConfig
 from .sections import (
     InstrumentConfig,
@@ -40,10 +48,11 @@ class SceneConfig(StrictModel):
     survey: SurveyConfig = SurveyConfig()
     output: OutputConfig = OutputConfig()
     _source_path: Path | None = PrivateAttr(None)
+    _base_dir: Path | None = PrivateAttr(None)
 
     def model_post_init(self, context: Any) -> None:
         context = context or {}
-        self._source_path = context.get("source_path")
+        self._source_path, self._base_dir = context.get("source_path"), context.get("base_dir")
 
     @model_validator(mode="before")
     @classmethod
@@ -78,6 +87,25 @@ class SceneConfig(StrictModel):
     def instrument_model(self):
         """The :class:`muls.instrument.Instrument` of this scene (gate and other overrides applied)."""
         return self.instrument.to_instrument(self.water_model())
+
+    def with_overrides(self, overrides: Mapping[str, object]) -> "SceneConfig":
+        """This scene with values replaced by dotted key (``{"survey.seed": 3, "water": "turbid_harbor",
+        "platform.altitude_m": 4}``), validated again as a whole the way a file is: a bad value or an unknown
+        key raises the one-line :class:`ConfigError` naming it. Source path and mesh folder are kept."""
+        data = self.model_dump(exclude_unset=True)
+        for key, value in overrides.items():
+            *sections, last = key.split(".")
+            node = data
+            for i, name in enumerate(sections):
+                if node.get(name) is None:  # a section left to its defaults, or absent
+                    node[name] = {}
+                elif not isinstance(node[name], dict):
+                    where = ".".join(sections[: i + 1])
+                    raise ConfigError(f"{where} = {node[name]!r}: not a section, so {key!r} cannot be set; "
+                                      f"override {where!r} whole")
+                node = node[name]
+            node[last] = value
+        return parse_scene(data, base_dir=self._base_dir, source_path=self._source_path)
 
 
 def parse_scene(data: Mapping, base_dir: Path | None = None, source_path: Path | None = None) -> SceneConfig:
