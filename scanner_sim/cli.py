@@ -152,6 +152,28 @@ def _cmd_bench_rays(args) -> int:
     return 0
 
 
+# -- schema ---------------------------------------------------------------------------------------------
+@subcommand("schema")
+def _add_schema(sub):
+    p = sub.add_parser("schema", help="print the JSON Schema of scene files (editors validate and complete with it)")
+    p.add_argument("--out", metavar="FILE", help="write the schema to FILE (atomically) instead of printing it")
+    p.set_defaults(func=_cmd_schema)
+
+
+def _cmd_schema(args) -> int:
+    from .config import scene_json_schema
+
+    text = json.dumps(scene_json_schema(), indent=2) + "\n"
+    if args.out is None:
+        sys.stdout.write(text)
+        return 0
+    from .io import write_text
+
+    write_text(args.out, text)
+    print(args.out)
+    return 0
+
+
 # -- run ------------------------------------------------------------------------------------------------
 @subcommand("run")
 def _add_run(sub):

@@ -3,7 +3,7 @@
 The format is versioned (``format_version: 1``) and strict: every key carries its unit, an unknown key is
 rejected with the nearest valid key suggested, and every bad value raises :class:`ConfigError` (a
 ``ValueError``) with one line naming the dotted key, the value and what is allowed. The full format, with a
-commented example, is in ``docs/scene-format.md``.
+commented example, is in ``docs/scene-format.md``; ``scanner-sim schema`` prints its JSON Schema.
 
 Entry points: :func:`load_scene` (a shipped scene's name or a path), :func:`parse_scene` (a mapping) and
 :meth:`SceneConfig.with_overrides` (dotted keys, validated the same way).
