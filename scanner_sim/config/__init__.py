@@ -8,38 +8,38 @@ commented example, is in ``docs/scene-format.md``; ``scanner-sim schema`` prints
 Entry points: :func:`load_scene` (a shipped scene's name or a path), :func:`parse_scene` (a mapping) and
 :meth:`SceneConfig.with_overrides` (dotted keys, validated the same way).
 
-Modules: ``base`` (strict base model, value types, errors), ``sections`` (water, instrument, platform,
-scanner, survey, output), ``geometry`` (seabed and objects), ``scene_config`` (the whole scene),
-``loading`` (YAML files and shipped scenes).
+Modules: ``errors`` (ConfigError and the one-line messages), ``base`` (strict base model, value types),
+``sections`` (water, instrument, platform, scanner, survey, output), ``geometry`` (seabed and objects),
+``scene_config`` (the whole scene, overrides, JSON Schema), ``loading`` (YAML files and shipped scenes).
 """
 
-from .base import ConfigError, build
+from .errors import ConfigError, build
 from .geometry import (
-                       OBJECT_TYPES,
-                       CableObject,
-                       ConeMineObject,
-                       CylinderMineObject,
-                       MeshObject,
-                       MooredMineObject,
-                       PanelObject,
-                       ReliefConfig,
-                       RipplesConfig,
-                       RocksConfig,
-                       SeabedConfig,
-                       reflectance_of,
+    OBJECT_TYPES,
+    CableObject,
+    ConeMineObject,
+    CylinderMineObject,
+    MeshObject,
+    MooredMineObject,
+    PanelObject,
+    ReliefConfig,
+    RipplesConfig,
+    RocksConfig,
+    SeabedConfig,
+    reflectance_of,
 )
 from .loading import SCENES_DIR, load_scene, resolve_scene_path, shipped_scenes
 from .scene_config import FORMAT_VERSION, SceneConfig, parse_scene, scene_json_schema
 from .sections import (
-                       AttitudeConfig,
-                       InstrumentConfig,
-                       LawnmowerConfig,
-                       NavigationNoiseConfig,
-                       OutputConfig,
-                       PlatformConfig,
-                       ScannerConfig,
-                       SurveyConfig,
-                       WaterConfig,
+    AttitudeConfig,
+    InstrumentConfig,
+    LawnmowerConfig,
+    NavigationNoiseConfig,
+    OutputConfig,
+    PlatformConfig,
+    ScannerConfig,
+    SurveyConfig,
+    WaterConfig,
 )
 
 __all__ = [

@@ -1,10 +1,8 @@
-"""The strict base model of scene sections, the value types of scene files, and one-line errors.
+"""The strict base model of scene sections and the value types of scene files.
 
-Every value type checks its input *before* pydantic does and raises :func:`invalid` with the house message
-(``must be a number > 0``, ``must be one of 'a', 'b' (did you mean 'a'?)``); pydantic's own constraints on
-the same types feed the JSON Schema. :func:`config_error` turns the first error of a ``ValidationError``
-into one :class:`ConfigError` line, ``KEY = VALUE: what is allowed``, with KEY dotted as in the file
-(``objects[2].radius_m``).
+Every value type checks its input *before* pydantic does and raises :func:`~.errors.invalid` with the house
+message (``must be a number > 0``, ``must be one of 'a', 'b' (did you mean 'a'?)``); pydantic's own
+constraints on the same types feed the JSON Schema.
 """
 
 import difflib
@@ -12,37 +10,9 @@ import math
 from collections.abc import Mapping
 from typing import Annotated, Any, Literal
 
-from pydantic import (
-    BaseModel,
-    BeforeValidator,
-    ConfigDict,
-    Field,
-    ValidationError,
-    model_validator,
-)
-from pydantic_core import PydanticCustomError
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
-from muls.errors import ParameterError
-
-
-class ConfigError(ParameterError):
-    """A scene file is wrong; the one-line message names the dotted key, the value and what is allowed."""
-
-
-_HIDDEN = object()
-
-
-def invalid(allowed: str, *, key: str | None = None, value: Any = _HIDDEN) -> PydanticCustomError:
-    """An error :func:`config_error` prints as ``KEY = VALUE: allowed`` (or ``KEY: allowed`` without a value).
-
-    ``key`` extends the path of the failing value: a model's cross-key check names one of its keys with it.
-    """
-    ctx: dict[str, Any] = {"allowed": allowed}
-    if key is not None:
-        ctx["key"] = key
-    if value is not _HIDDEN:
-        ctx["value"] = value
-    return PydanticCustomError("scene", "{allowed}", ctx)
+from .errors import checked_at, invalid
 
 
 class StrictModel(BaseModel):
@@ -68,10 +38,6 @@ class StrictModel(BaseModel):
                 raise invalid(f"unknown key; {suggestion}(allowed: {', '.join(keys)})", key=str(key))
         return data
 
-
-# --------------------------------------------------------------------------------------------------------
-# Value types: Annotated types whose before-check gives the message and whose constraints give the schema.
-# --------------------------------------------------------------------------------------------------------
 
 def number_check(gt: float | None = None, ge: float | None = None, lt: float | None = None,
                  le: float | None = None):
@@ -146,18 +112,15 @@ def Choice(*options: str | int):
     return Annotated[Literal[options], BeforeValidator(choice_check(*options))]
 
 
-def _sequence_check(sizes: tuple[int, ...], allowed: str):
+def Vector(*sizes: int, element=Real):
+    """A list of ``sizes`` numbers (each an ``element``), kept as a tuple of floats."""
+    allowed = f"must be a list of {' or '.join(map(str, sizes))} numbers"
+
     def check(value: Any) -> tuple:
         if not isinstance(value, (list, tuple)) or len(value) not in sizes:
             raise invalid(allowed, value=value)
         return tuple(value)
 
-    return check
-
-
-def Vector(*sizes: int, element=Real):
-    """A list of ``sizes`` numbers (each an ``element``), kept as a tuple of floats."""
-    check = _sequence_check(sizes, f"must be a list of {' or '.join(map(str, sizes))} numbers")
     return Annotated[tuple[element, ...], Field(min_length=min(sizes), max_length=max(sizes)), BeforeValidator(check)]
 
 
@@ -176,14 +139,6 @@ def Points(*sizes: int, min_count: int = 2):
     return Annotated[tuple[Vector(*sizes), ...], Field(min_length=min_count), BeforeValidator(check)]
 
 
-def checked_at(key: str, check, value: Any) -> Any:
-    """``check(value)``, its error placed at ``key`` below the current path."""
-    try:
-        return check(value)
-    except PydanticCustomError as exc:
-        raise invalid(exc.context["allowed"], key=key, value=exc.context["value"]) from None
-
-
 def _fractions(value: Any) -> float | tuple[float, ...]:
     one = number_check(ge=0.0, le=1.0)
     if not isinstance(value, (list, tuple)):
@@ -195,60 +150,3 @@ def _fractions(value: Any) -> float | tuple[float, ...]:
 
 #: A fraction in [0, 1], or a list of them (one per point of a cable).
 Fractions = Annotated[Fraction | Annotated[tuple[Fraction, ...], Field(min_length=1)], BeforeValidator(_fractions)]
-
-
-# --------------------------------------------------------------------------------------------------------
-# Errors
-# --------------------------------------------------------------------------------------------------------
-
-#: Pydantic's error types the value types leave to pydantic, in the house style.
-_MESSAGES = {"string_type": "must be a text string", "bool_type": "must be true or false"}
-
-
-def config_error(exc: ValidationError, data: Any, path: str = "") -> ConfigError:
-    """The first error of ``exc`` (raised validating ``data``) as one line naming the dotted key under
-    ``path``, the value and what is allowed."""
-    error = exc.errors(include_url=False)[0]
-    where = _join(path, _dotted(error["loc"], data))
-    ctx = error.get("ctx") or {}
-    if error["type"] == "scene":
-        where = _join(where, ctx.get("key", ""))
-        if "value" not in ctx:
-            return ConfigError(f"{where}: {ctx['allowed']}")
-        value, allowed = ctx["value"], ctx["allowed"]
-    elif error["type"] == "missing":
-        return ConfigError(f"{where}: missing required key")
-    else:
-        value, allowed = error["input"], _MESSAGES.get(error["type"], error["msg"])
-    return ConfigError(f"{where or 'scene'} = {value!r}: {allowed}")
-
-
-def _join(path: str, key: str) -> str:
-    if not key or key.startswith("["):
-        return path + key
-    return f"{path}.{key}" if path else key
-
-
-def _dotted(loc: tuple, data: Any) -> str:
-    """``objects[2].radius_m`` from pydantic's ``("objects", 2, "cylinder_mine", "radius_m")``: the path
-    follows ``data``, so a discriminated union's tag (the object's ``type``, not a key) is left out."""
-    path, node = "", data
-    for item in loc:
-        if isinstance(node, Mapping) and item not in node and item == node.get("type"):
-            continue
-        path = _join(path, f"[{item}]" if isinstance(item, int) else str(item))
-        if isinstance(node, Mapping):
-            node = node.get(item)
-        elif isinstance(node, (list, tuple)) and isinstance(item, int) and item < len(node):
-            node = node[item]
-        else:
-            node = None
-    return path
-
-
-def build(model: type[BaseModel], data: Any, path: str = "", context: dict | None = None):
-    """``data`` validated as ``model``; raises :class:`ConfigError` naming keys under ``path``."""
-    try:
-        return model.model_validate(data, context=context)
-    except ValidationError as exc:
-        raise config_error(exc, data, path) from None

@@ -5,6 +5,7 @@ Every surface has a material (or a reflectance at 532 nm, which wins) and a clas
 Objects placed by [x, y] rest on the seabed; [x, y, z] gives the ground level z directly.
 """
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal
 
@@ -29,10 +30,9 @@ from .base import (
     Real,
     StrictModel,
     Vector,
-    checked_at,
     choice_check,
-    invalid,
 )
+from .errors import checked_at, invalid
 
 MAX_SEABED_TRIANGLES = 2_000_000
 
@@ -133,7 +133,7 @@ class SeabedConfig(surface("terrigenous_sand", "seabed")):
 def scene_object(tag: str, default_material: str, default_label: str) -> type[StrictModel]:
     """The base model of the objects of type ``tag``: the tag, a ``name`` and the surface fields."""
 
-    class SceneObject(surface(default_material, default_label)):
+    class ObjectBase(surface(default_material, default_label)):
         kind: ClassVar[str] = tag
         type: Literal[tag]
         name: str = tag
@@ -143,7 +143,7 @@ def scene_object(tag: str, default_material: str, default_label: str) -> type[St
             """Placed by [x, y]: the object needs a seabed to stand on."""
             return False
 
-    return SceneObject
+    return ObjectBase
 
 
 class OnSeabed(StrictModel):
@@ -278,14 +278,15 @@ def _object_list(value: Any) -> Any:
     if not isinstance(value, (list, tuple)):
         raise invalid("must be a list of objects, each with a 'type'", value=value)
     for i, item in enumerate(value):
-        if not isinstance(item, dict) or "type" not in item:
+        if not isinstance(item, Mapping) or "type" not in item:
             raise invalid(f"must be a mapping with a 'type' among {', '.join(OBJECT_TYPES)}", key=f"[{i}]",
                           value=item)
         checked_at(f"[{i}].type", choice_check(*OBJECT_TYPES), item["type"])
     return tuple(value)
 
 
-SceneObject = Annotated[CableObject | MooredMineObject | CylinderMineObject | ConeMineObject | PanelObject | MeshObject,
-                        Field(discriminator="type")]
+#: One object: the union of the kinds, told apart by ``type``.
+AnyObject = Annotated[CableObject | MooredMineObject | CylinderMineObject | ConeMineObject | PanelObject | MeshObject,
+                      Field(discriminator="type")]
 #: The ``objects`` list as written.
-Objects = Annotated[tuple[SceneObject, ...], BeforeValidator(_object_list)]
+Objects = Annotated[tuple[AnyObject, ...], BeforeValidator(_object_list)]

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import yaml
 
-from .base import ConfigError
+from .errors import ConfigError
 from .scene_config import SceneConfig, parse_scene
 
 #: The shipped scenes, loaded by name.

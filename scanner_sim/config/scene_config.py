@@ -6,15 +6,8 @@ from typing import Any
 
 from pydantic import PrivateAttr, model_validator
 
-from .base import (
-    Choice,
-    ConfigError,
-    StrictModel,
-    build,
-    checked_at,
-    choice_check,
-    invalid,
-)
+from .base import Choice, StrictModel, choice_check
+from .errors import ConfigError, build, checked_at, invalid
 from .geometry import Objects, SeabedConfig
 from .sections import (
     InstrumentConfig,

@@ -29,8 +29,8 @@ from .base import (
     Real,
     StrictModel,
     Vector,
-    invalid,
 )
+from .errors import invalid
 
 WaterPreset = Choice(*sorted(WATER_PRESETS))
 
