@@ -13,7 +13,7 @@ import math
 import sys
 
 from . import studies
-from .water import WATER_PRESETS
+from .presets import WATER_PRESETS
 
 EXIT_USAGE = 2
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -17,7 +18,7 @@ import numpy as np
 from .errors import check_choice
 from .noise import (FIRST_SIGNAL_STREAM, PHASE_STREAM, REFERENCE_STREAM, normal_at, normal_pair_at, seed_key,
                     stream_base, uniform_at)
-from .waveform import OpticalModel, PulseBatch, column_value, pulse_value, shot_noise_lsb2_per_w
+from .waveform import Echoes, OpticalModel, PulseBatch, column_value, pulse_value
 
 RECORD_MODES = ("windowed", "full")
 
@@ -68,31 +69,6 @@ class Records:
         return -dig.pretrigger_s + k * dig.sample_interval_s + self.phase_s[:, None]
 
 
-@dataclass(frozen=True)
-class ChannelArrays:
-    """Per-channel constants of the kernels, index 0 = CH0 reference, 1.. = signal channels."""
-
-    lsb_per_w: np.ndarray
-    gate_open_s: np.ndarray
-    gate_close_s: np.ndarray
-    dark_mean_lsb: np.ndarray
-    dark_std_lsb: np.ndarray
-    shot_lsb2_per_w: np.ndarray
-
-    @classmethod
-    def of(cls, model: OpticalModel) -> "ChannelArrays":
-        ins = model.instrument
-        dig = ins.digitizer
-        chans = ins.channels
-        lsb = np.array([0.0] + [ch.volts_per_watt * dig.lsb_per_volt for ch in chans])  # MULS Eqs. 12, 13
-        gate_open = np.array([-np.inf] + [ch.gate_delay_s if ch.gated else -np.inf for ch in chans])
-        gate_close = np.array([np.inf] + [ch.gate_delay_s + ch.gate_width_s if ch.gated else np.inf for ch in chans])
-        mean = np.array([ins.reference.dark_mean_lsb] + [ch.dark_mean_lsb for ch in chans])
-        std = np.array([ins.reference.dark_std_lsb] + [ch.dark_std_lsb for ch in chans])
-        shot = np.array([0.0] + [shot_noise_lsb2_per_w(ch, dig.bandwidth_hz, dig.lsb_per_volt) for ch in chans])
-        return cls(lsb, gate_open, gate_close, mean, std, shot)
-
-
 def sampling_phase_s(key: np.uint64, pulse_id: np.ndarray, sample_interval_s: float) -> np.ndarray:
     """Random sampling phase of each pulse in [0, sample interval) [s] (the ADC clock is free-running)."""
     return _phases(key, np.asarray(pulse_id, np.int64)) * sample_interval_s
@@ -106,16 +82,16 @@ def _phases(key, pulse_id):
     return out
 
 
-def plan_windows(model: OpticalModel, batch: PulseBatch, offsets, delay, energy, mode: str):
+def plan_windows(model: OpticalModel, batch: PulseBatch, echoes: Echoes, mode: str):
     """(window_pulse, window_start, n_samples) of the signal-channel records to synthesise."""
     check_choice("record_mode", mode, RECORD_MODES)
     dig = model.instrument.digitizer
     n = batch.n_pulses
     if mode == "full":
         return np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64), dig.n_samples
-    first = np.floor((delay + dig.pretrigger_s - WINDOW_LEAD_S) * dig.sample_rate_hz).astype(np.int64)
-    usable = (energy > 0.0) & (first < dig.n_samples - WINDOW_SAMPLES)
-    pulses, starts = _plan(offsets, np.maximum(first, 0), usable, WINDOW_SAMPLES,
+    first = np.floor((echoes.delay_s + dig.pretrigger_s - WINDOW_LEAD_S) * dig.sample_rate_hz).astype(np.int64)
+    usable = (echoes.energy_j > 0.0) & (first < dig.n_samples - WINDOW_SAMPLES)
+    pulses, starts = _plan(echoes.offsets, np.maximum(first, 0), usable, WINDOW_SAMPLES,
                            int(math.ceil(WINDOW_NEED_S * dig.sample_rate_hz)))
     return pulses, starts, WINDOW_SAMPLES
 
@@ -141,8 +117,19 @@ def _plan(offsets, first, usable, width, need):
     return out_p[:m], out_s[:m]
 
 
+class Sampling(NamedTuple):
+    """How the digitiser samples a batch: sample k of pulse p is taken at ``t0_s + k dt_s + phase_s[p]`` [s
+    after emission]; its noise is keyed by (``key``, ``pulse_id[p]``, stream, k)."""
+
+    t0_s: float
+    dt_s: float
+    phase_s: np.ndarray
+    pulse_id: np.ndarray
+    key: np.uint64
+
+
 def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
-             keep_noise_free: bool = False, noise: bool = True, echoes=None) -> Records:
+             keep_noise_free: bool = False, noise: bool = True, echoes: Echoes | None = None) -> Records:
     """Digitised records of every channel for a batch of pulses (MULS Eqs. 1, 12, 13).
 
     ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
@@ -151,27 +138,22 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     ins = model.instrument
     dig = ins.digitizer
     key = seed_key(seed)
-    offsets, delay, energy = echoes if echoes is not None else model.echoes(batch)
-    window_pulse, window_start, n_samples = plan_windows(model, batch, offsets, delay, energy, mode)
+    echoes = echoes if echoes is not None else model.echoes(batch)
+    window_pulse, window_start, n_samples = plan_windows(model, batch, echoes, mode)
     phase = sampling_phase_s(key, batch.pulse_id, dig.sample_interval_s)
-    chans = ChannelArrays.of(model)
+    sampling = Sampling(-dig.pretrigger_s, dig.sample_interval_s, phase, batch.pulse_id.astype(np.int64), key)
+    chans = model.channels
     n_ref = dig.n_samples if mode == "full" else REFERENCE_SAMPLES
     shape, ref_shape = (window_pulse.shape[0], len(ins.channels), n_samples), (batch.n_pulses, n_ref)
     codes, reference = np.empty(shape, np.uint16), np.empty(ref_shape, np.uint16)
     clean = np.empty(shape if keep_noise_free else (0, 0, 0), np.float32)
     ref_clean = np.empty(ref_shape if keep_noise_free else (0, 0), np.float32)
-    tb = model.tables
     pulse = ins.pulse
-    pulse_id = batch.pulse_id.astype(np.int64)
     scale = 1.0 if noise else 0.0
-    _digitise(codes, clean, window_pulse, window_start, phase, pulse_id, key,
-              -dig.pretrigger_s, dig.sample_interval_s, model.basis, tb.s0a, tb.s1a, tb.s0b, tb.step_s,
-              2.0 * batch.column_cut_m / model.water.speed_m_s, batch.column_cut_weight, offsets, delay, energy,
-              batch.background_w, chans.lsb_per_w[1:], chans.gate_open_s[1:],
-              chans.gate_close_s[1:], chans.dark_mean_lsb[1:], chans.dark_std_lsb[1:], chans.shot_lsb2_per_w[1:],
-              float(dig.max_code), scale)
-    _reference(reference, ref_clean, phase, pulse_id, key, -dig.pretrigger_s, dig.sample_interval_s, model.basis,
-               pulse.duration_s, ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
+    _digitise(codes, clean, window_pulse, window_start, sampling, model.column, model.cuts(batch), echoes,
+              chans.signal(), float(dig.max_code), scale)
+    _reference(reference, ref_clean, sampling, model.basis, pulse.duration_s,
+               ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
                chans.dark_std_lsb[0], float(dig.max_code), scale)
     return Records(reference, codes, window_pulse, window_start, phase, mode,
                    clean if keep_noise_free else None, ref_clean if keep_noise_free else None)
@@ -184,14 +166,14 @@ def _quantise(u, max_code):
 
 
 @numba.njit(cache=True, parallel=True)
-def _reference(reference, clean, phase, pulse_id, key, t0, dt, basis, extent, lsb_per_density, dark_mean,
-               dark_std, max_code, noise_scale):
+def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_mean, dark_std, max_code,
+               noise_scale):
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
     for p in numba.prange(n_pulses):
-        base = stream_base(key, pulse_id[p], REFERENCE_STREAM)
+        base = stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM)
         for k in range(n_ref):
-            u = t0 + k * dt + phase[p]
+            u = sampling.t0_s + k * sampling.dt_s + sampling.phase_s[p]
             level = lsb_per_density * pulse_value(u, basis) if u < extent else 0.0
             if keep:
                 clean[p, k] = level + dark_mean
@@ -199,18 +181,19 @@ def _reference(reference, clean, phase, pulse_id, key, t0, dt, basis, extent, ls
 
 
 @numba.njit(cache=True, parallel=True)
-def _digitise(codes, clean, window_pulse, window_start, phase, pulse_id, key, t0, dt, basis, s0a, s1a, s0b,
-              step, cut_tau, cut_w, offsets, delay, energy, background, lsb_per_w, gate_open,
-              gate_close, dark_mean, dark_std, shot_lsb2_per_w, max_code, noise_scale):
+def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, echoes, chans, max_code, noise_scale):
     n_windows, n_chan, n_samples = codes.shape
     n_pairs = (n_chan + 1) // 2
     keep = clean.shape[0] > 0
+    basis, dt = col.basis, sampling.dt_s
+    offsets, delay, energy = echoes.offsets, echoes.delay_s, echoes.energy_j
+    cut_tau, cut_w = cuts.cut_tau_s, cuts.cut_weight
     ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
     for w in numba.prange(n_windows):
         p = window_pulse[w]
         bases = np.empty(n_pairs, np.uint64)
         for j in range(n_pairs):
-            bases[j] = stream_base(key, pulse_id[p], FIRST_SIGNAL_STREAM + j)
+            bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + j)
         normals = np.empty(2 * n_pairs)
         # Echoes of pulse p (by delay) as three running sums over those started by time t:
         # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
@@ -219,7 +202,7 @@ def _digitise(codes, clean, window_pulse, window_start, phase, pulse_id, key, t0
         nxt = offsets[p]
         for k in range(n_samples):
             index = window_start[w] + k
-            t = t0 + index * dt + phase[p]
+            t = sampling.t0_s + index * dt + sampling.phase_s[p]
             if k > 0:
                 s1 = (s1 + dt * sa) * ra
                 sa *= ra
@@ -231,17 +214,17 @@ def _digitise(codes, clean, window_pulse, window_start, phase, pulse_id, key, t0
                 s1 += u * ea
                 sb += energy[nxt] * math.exp(-basis[1] * u)
                 nxt += 1
-            power = background[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
+            power = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
             for c in range(cut_tau.shape[1]):
                 if cut_w[p, c] != 0.0:
-                    power += cut_w[p, c] * column_value(t, cut_tau[p, c], basis, s0a, s1a, s0b, step)
+                    power += cut_w[p, c] * column_value(t, cut_tau[p, c], col)
             for j in range(n_pairs):
                 normals[2 * j], normals[2 * j + 1] = normal_pair_at(bases[j], index)
             for c in range(n_chan):
-                gated = power if gate_open[c] <= t < gate_close[c] else 0.0
-                level = lsb_per_w[c] * gated  # MULS Eq. 12 in LSB (Eq. 13 without noise)
-                var = dark_std[c] * dark_std[c] + shot_lsb2_per_w[c] * gated
+                gated = power if chans.gate_open_s[c] <= t < chans.gate_close_s[c] else 0.0
+                level = chans.lsb_per_w[c] * gated  # MULS Eq. 12 in LSB (Eq. 13 without noise)
+                var = chans.dark_std_lsb[c] * chans.dark_std_lsb[c] + chans.shot_lsb2_per_w[c] * gated
                 if keep:
-                    clean[w, c, k] = level + dark_mean[c]
-                codes[w, c, k] = _quantise(level + dark_mean[c] + noise_scale * math.sqrt(var) * normals[c],
+                    clean[w, c, k] = level + chans.dark_mean_lsb[c]
+                codes[w, c, k] = _quantise(level + chans.dark_mean_lsb[c] + noise_scale * math.sqrt(var) * normals[c],
                                            max_code)  # MULS Eq. 13

@@ -1,4 +1,4 @@
-"""Instrument description: transmitter, receiver, detection channels, digitiser, processing; presets.
+"""Instrument description: transmitter, receiver, detection channels, digitiser, processing.
 
 Values come from the paper's Table 1 and section 3 unless marked ``# assumption:``; every assumption is
 listed with its reason in docs/assumptions.md. Angles are full angles (DESIGN.md section 4: Table 1's
@@ -232,50 +232,3 @@ class Instrument:
         """Copy with one channel's fields changed (for example its gate)."""
         self.channel(name)
         return replace(self, channels=tuple(replace(ch, **changes) if ch.name == name else ch for ch in self.channels))
-
-
-# Pond experiment gate (section 4.2): 100 ns delay, 400 ns width; the pool used 150 / 400 ns (section 4.3).
-POND_GATE_S = (100e-9, 400e-9)
-POOL_GATE_S = (150e-9, 400e-9)
-
-
-def mul2023(gate_delay_s: float = POND_GATE_S[0], gate_width_s: float = POND_GATE_S[1]) -> Instrument:
-    """The paper's MUL prototype: Table 1, gains of section 4.2, named assumptions elsewhere."""
-    return Instrument(
-        name="mul2023",
-        channels=(
-            # PMT1 (H10720-01, non-gated) gets 2 % of the light; its output splits 9:1 (Table 1, section 3).
-            Channel("ch1", "near", split_ratio=0.02, voltage_ratio=0.9, gain=2000.0),  # M1 = 2000, section 4.2
-            Channel("ch2", "near", split_ratio=0.02, voltage_ratio=0.1, gain=2000.0),
-            # PMT2 (H11526-01, gated) gets 98 % (section 3); M2 = 20,000 (section 4.2).
-            Channel("ch3", "far", split_ratio=0.98, voltage_ratio=1.0, gain=20000.0,
-                    gate_delay_s=gate_delay_s, gate_width_s=gate_width_s),
-        ),
-    )
-
-
-#: assumption: the highest PMT gain a user would set on the single-channel instrument, that of the MUL's
-#: far-field PMT (section 4.2); higher gains only scale the dark noise of a real tube.
-SINGLE_CHANNEL_MAX_GAIN = 20000.0
-
-
-def coaxial() -> Instrument:
-    """The MUL with coaxial optics: no offset (overlap 1), the window return coupled (Eq. 3, O = 1)."""
-    base = mul2023()
-    return replace(base, name="coaxial", receiver=replace(base.receiver, offset_m=0.0, window_coupling=1.0))
-
-
-def instrument_preset(name: str, water=None) -> Instrument:
-    """The named instrument; ``single_channel`` sets its gain for ``water`` (a :class:`muls.water.Water`)."""
-    if name == "mul2023":
-        return mul2023()
-    if name == "coaxial":
-        return coaxial()
-    if name == "single_channel":
-        if water is None:
-            raise ParameterError("instrument 'single_channel' needs a water type: its gain is set for the water")
-        from .waveform import single_channel  # the gain rule needs the water-column model
-
-        return single_channel(water)
-    raise ParameterError(f"instrument = {name!r}: must be one of 'coaxial', 'mul2023', 'single_channel'")
-

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from .detection import ChannelArrays, Records
-from .waveform import OpticalModel, PulseBatch, column_value, optical_power
+from .detection import Records
+from .waveform import Echoes, OpticalModel, PulseBatch, column_value, optical_power, pulse_value
 
 DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
 NO_DROPOUT = -1
@@ -33,7 +34,11 @@ class Peaks:
 
     pulse: batch index; channel: 1-based index into ``instrument.channels``; time_s: after emission;
     range_m: Eq. 14 range from the CH0 peak; amplitude_lsb: residual over the baseline at the peak;
-    snr: amplitude over the local noise; saturated: the run touched the top code.
+    snr: amplitude over the local noise; saturated: the run touched the top code; peak_power_w: the
+    amplitude as optical power at the receiver [W] (Eqs. 12-13 inverted for the channel).
+    echo_index: the :class:`PulseBatch` return whose echo dominates the noise-free signal at the peak (the
+    way trimesh returns ``index_ray``), or -1 where no echo explains the peak (noise, the water column, the
+    window): the echo alone must reach half the detection threshold there, the level at which a run starts.
     """
 
     pulse: np.ndarray
@@ -43,6 +48,8 @@ class Peaks:
     amplitude_lsb: np.ndarray
     snr: np.ndarray
     saturated: np.ndarray
+    peak_power_w: np.ndarray
+    echo_index: np.ndarray
 
     def select(self, mask) -> "Peaks":
         return Peaks(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
@@ -68,35 +75,57 @@ class Ranging:
 FIT_CODES = {"pulse": 0, "gaussian": 1, "parabolic": 2}
 
 
-def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records) -> tuple[Peaks, np.ndarray]:
-    """All peaks of all signal channels, with Eq. 14 ranges, and the CH0 reference times (n_pulses,) [s]."""
+class PeakSettings(NamedTuple):
+    """Scalars of the peak kernel: threshold k [sigma], tail tolerance [-], top code, fit code (FIT_CODES),
+    the pulse's peak delay after its start [s] and its unit-area value there [1/s]."""
+
+    k_sigma: float
+    tail_tolerance: float
+    max_code: float
+    fit: int
+    peak_delay_s: float
+    peak_density: float
+
+
+class PeakSlots(NamedTuple):
+    """Output slots of the peak kernel: ``MAX_PEAKS_PER_WINDOW`` per (window, channel), ``counts`` filled."""
+
+    window: np.ndarray
+    channel: np.ndarray
+    index: np.ndarray
+    amplitude: np.ndarray
+    snr: np.ndarray
+    saturated: np.ndarray
+    counts: np.ndarray
+
+    @classmethod
+    def empty(cls, n_slots: int) -> "PeakSlots":
+        cap = n_slots * MAX_PEAKS_PER_WINDOW
+        return cls(np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap), np.empty(cap), np.empty(cap),
+                   np.empty(cap, np.bool_), np.zeros(n_slots, np.int64))
+
+
+def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes: Echoes) -> tuple[Peaks, np.ndarray]:
+    """All peaks of all signal channels, with Eq. 14 ranges and the echo behind each, and the CH0 reference
+    times (n_pulses,) [s]."""
     ins = model.instrument
     dig = ins.digitizer
     proc = ins.processing
-    chans = ChannelArrays.of(model)
-    tb = model.tables
+    chans = model.channels
     n_windows, n_chan, _ = records.codes.shape
-    cap = n_windows * n_chan * MAX_PEAKS_PER_WINDOW
-    out_w = np.empty(cap, np.int64)
-    out_c = np.empty(cap, np.int64)
-    out_idx = np.empty(cap)
-    out_amp = np.empty(cap)
-    out_snr = np.empty(cap)
-    out_sat = np.empty(cap, np.bool_)
-    counts = np.zeros(n_windows * n_chan, np.int64)
+    out = PeakSlots.empty(n_windows * n_chan)
     fit = FIT_CODES[proc.peak_fit]
-    shape = template_tables(model)
+    settings = PeakSettings(proc.threshold_sigma, proc.tail_tolerance, float(dig.max_code), fit,
+                            ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)))
     _peaks(records.codes, records.window_pulse, records.window_start, records.phase_s, -dig.pretrigger_s,
-           dig.sample_interval_s, model.basis, tb.s0a, tb.s1a, tb.s0b, tb.step_s, batch.background_w,
-           chans.lsb_per_w[1:], chans.gate_open_s[1:], chans.gate_close_s[1:], chans.dark_mean_lsb[1:],
-           chans.dark_std_lsb[1:], chans.shot_lsb2_per_w[1:], proc.threshold_sigma, proc.tail_tolerance,
-           float(dig.max_code), fit, ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)), *shape,
-           *clip_tables(model), out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts)
-    ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], fit, *shape)
+           dig.sample_interval_s, model.column, batch.background_w, chans.signal(), settings, model.fit_table,
+           model.clip_table, out)
+    ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], fit, model.fit_table)
     # Gather the filled slots: slot s holds counts[s] peaks from position s * MAX_PEAKS_PER_WINDOW.
+    counts = out.counts
     first = np.repeat(np.arange(counts.size) * MAX_PEAKS_PER_WINDOW - (np.cumsum(counts) - counts), counts)
     slot = first + np.arange(first.size)
-    w, c, idx = out_w[slot], out_c[slot] + 1, out_idx[slot]
+    w, c, idx = out.window[slot], out.channel[slot] + 1, out.index[slot]
     pulse = records.window_pulse[w]
     phase = records.phase_s
     time_s = -dig.pretrigger_s + idx * dig.sample_interval_s + phase[pulse]
@@ -110,32 +139,44 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records) -> tupl
         idx[order][1:] != idx[order][:-1])
     order = order[unique]
     order = order[np.lexsort((time_s[order], pulse[order]))]
-    peaks = Peaks(pulse[order], c[order], time_s[order], range_m[order], out_amp[slot][order],
-                  out_snr[slot][order], out_sat[slot][order])
+    pulse, c, time_s = pulse[order], c[order], time_s[order]
+    amp, snr = out.amplitude[slot][order], out.snr[slot][order]
+    power_w = amp / chans.lsb_per_w[c]  # MULS Eqs. 12-13 inverted
+    # The echo that explains a peak must reach half the threshold (k sigma, sigma = amp / snr) on its own.
+    need_w = 0.5 * proc.threshold_sigma * (amp / snr) / chans.lsb_per_w[c]
+    echo = dominant_echo(pulse, time_s, need_w, echoes, model.basis, ins.pulse.duration_s)
+    peaks = Peaks(pulse, c, time_s, range_m[order], amp, snr, out.saturated[slot][order], power_w, echo)
     return peaks, ref_time
 
 
-def template_tables(model: OpticalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Three-point fit to the known pulse shape: (feature, offset [samples], sample over peak), by feature.
+def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, extent_s: float) -> np.ndarray:
+    """(n,) int64: the :class:`PulseBatch` return whose echo gives the most noise-free power at each peak
+    (``pulse`` (n,) batch index, ``time_s`` (n,) [s]), or -1 where that power is below ``need_w`` (n,) [W]."""
+    best = _dominant(np.asarray(pulse, np.int64), np.asarray(time_s, float), np.asarray(need_w, float),
+                     echoes.offsets, echoes.delay_s, echoes.energy_j, basis, extent_s)
+    out = np.full(best.shape, -1, np.int64)
+    out[best >= 0] = echoes.source[best[best >= 0]]
+    return out
 
-    For samples y(-1), y(0), y(1) around a maximum, the parabolic feature (y1 - y-1) / (2 (2 y0 - y-1 - y1))
-    is a monotone function of the true peak's offset from sample 0 for the (asymmetric) pulse; inverting it
-    removes the phase-dependent bias of parabolic and Gaussian fits.
-    """
-    pulse = model.instrument.pulse
-    dt = model.instrument.digitizer.sample_interval_s
-    offset = np.linspace(-0.5, 0.5, 1001)
 
-    def shape(u):
-        return pulse(u + pulse.peak_delay_s) / pulse(pulse.peak_delay_s)
-
-    before, centre, after = shape((-1.0 - offset) * dt), shape(-offset * dt), shape((1.0 - offset) * dt)
-    feature = (after - before) / (2.0 * (2.0 * centre - before - after))
-    return feature, offset, centre
+@numba.njit(cache=True)
+def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent):
+    out = np.full(pulse.shape[0], -1, np.int64)
+    for i in range(pulse.shape[0]):
+        p = pulse[i]
+        top = need_w[i]
+        for j in range(offsets[p], offsets[p + 1]):
+            u = time_s[i] - delay[j]
+            if 0.0 <= u < extent:
+                power = energy[j] * pulse_value(u, basis)
+                if power >= top:
+                    top = power
+                    out[i] = j
+    return out
 
 
 @numba.njit(cache=True, inline="always")
-def _refine(y0, y1, y2, fit, feature, offset, centre):
+def _refine(y0, y1, y2, fit, table):
     """(offset of the peak from the middle sample [samples], middle sample over peak) from three samples."""
     den = y0 - 2.0 * y1 + y2
     if den >= 0.0:
@@ -147,11 +188,11 @@ def _refine(y0, y1, y2, fit, feature, offset, centre):
     d = 0.5 * (y0 - y2) / den
     if fit != 0:
         return min(0.5, max(-0.5, d)), 1.0
-    return np.interp(d, feature, offset), np.interp(d, feature, centre)
+    return np.interp(d, table.feature, table.offset), np.interp(d, table.feature, table.centre)
 
 
 @numba.njit(cache=True, parallel=True)
-def _reference_peaks(reference, dark_mean, fit, feature, offset, centre):
+def _reference_peaks(reference, dark_mean, fit, table):
     """Sub-sample index of the CH0 peak of each pulse."""
     n_pulses, n_ref = reference.shape
     out = np.empty(n_pulses)
@@ -161,25 +202,28 @@ def _reference_peaks(reference, dark_mean, fit, feature, offset, centre):
             if reference[p, k] > reference[p, best]:
                 best = k
         d, _ = _refine(reference[p, best - 1] - dark_mean, reference[p, best] - dark_mean,
-                       reference[p, best + 1] - dark_mean, fit, feature, offset, centre)
+                       reference[p, best + 1] - dark_mean, fit, table)
         out[p] = best + d
     return out
 
 
 @numba.njit(cache=True, parallel=True)
-def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0b, step, background,
-           lsb_per_w, gate_open, gate_close, dark_mean, dark_std, shot, k_sigma, tail_tolerance, max_code, fit,
-           peak_delay, peak_density, feature, offset, centre, clip_ratio, clip_rise, clip_fall,
-           out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts):
+def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
+           clip_table, out):
     n_windows, n_chan, n_samples = codes.shape
-    cap = out_w.shape[0] // max(1, n_windows * n_chan)
+    cap = out.window.shape[0] // max(1, n_windows * n_chan)
+    basis = col.basis
+    lsb_per_w, gate_open, gate_close = chans.lsb_per_w, chans.gate_open_s, chans.gate_close_s
+    dark_mean, dark_std, shot = chans.dark_mean_lsb, chans.dark_std_lsb, chans.shot_lsb2_per_w
+    k_sigma, tail_tolerance, max_code = settings.k_sigma, settings.tail_tolerance, settings.max_code
+    out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts = out
     for w in numba.prange(n_windows):
         p = window_pulse[w]
         times = np.empty(n_samples)
         base_w = np.empty(n_samples)
         for k in range(n_samples):
             times[k] = t0 + (window_start[w] + k) * dt + phase[p]
-            base_w[k] = background[p] + column_value(times[k], np.inf, basis, s0a, s1a, s0b, step)
+            base_w[k] = background[p] + column_value(times[k], np.inf, col)
         resid = np.empty(n_samples)
         sigma = np.empty(n_samples)
         echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
@@ -251,17 +295,16 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, basis, s0a, s1a, s0
                     level_last = resid[clipped_last] - echoes[clipped_last]
                     if not (level_first > 0.0 and level_last > 0.0):
                         continue
-                    idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_ratio,
-                                             clip_rise, clip_fall)
+                    idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_table)
                     idx += window_start[w]
                 else:
                     d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
-                                       fit, feature, offset, centre)
+                                       settings.fit, fit_table)
                     idx = float(window_start[w] + top) + d
                     amp = height / ratio
                     k = top + 1  # look again behind this echo once its modelled shape is taken off
-                _add_echo(echoes, top + 1, times[top + 1] - (t0 + idx * dt + phase[p]) + peak_delay, dt,
-                          amp / peak_density, basis)
+                u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
+                _add_echo(echoes, top + 1, u, dt, amp / settings.peak_density, basis)
                 j = slot * cap + counts[slot]
                 out_w[j] = w
                 out_c[j] = c
@@ -290,20 +333,6 @@ def _add_echo(echoes, first, u, dt, scale, basis):
         eb *= rb
 
 
-def clip_tables(model: OpticalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For a pulse cut at ``ratio`` of its peak (ascending): how long before its peak it rises through that
-    level, and how long after it falls through it, both in samples."""
-    pulse = model.instrument.pulse
-    dt = model.instrument.digitizer.sample_interval_s
-    u = np.linspace(0.0, 2.0 * pulse.duration_s, 80001)
-    f = pulse(u) / pulse(pulse.peak_delay_s)
-    i_peak = int(np.argmax(f))
-    ratio = np.geomspace(1e-9, 1.0, 600)
-    rising = np.interp(ratio, f[: i_peak + 1], u[: i_peak + 1])
-    falling = np.interp(ratio, f[i_peak:][::-1], u[i_peak:][::-1])
-    return ratio, (u[i_peak] - rising) / dt, (falling - u[i_peak]) / dt
-
-
 @numba.njit(cache=True, inline="always")
 def _on_geometric_grid(x, ratio, table):
     """Linear interpolation of ``table`` at ``x`` on the geometric grid ``ratio`` (O(1): index from log x)."""
@@ -321,10 +350,11 @@ def _on_geometric_grid(x, ratio, table):
 
 
 @numba.njit(cache=True)
-def _clipped_peak(first, last, level_first, level_last, ratio, rise, fall):
+def _clipped_peak(first, last, level_first, level_last, table):
     """(peak index [samples], amplitude) of an echo clipped from sample ``first`` to ``last``, where the clip
     level above the baseline was ``level_first`` and ``level_last``: the amplitude A whose pulse exceeds those
     levels for exactly the plateau's width (rising and falling crossings half a sample outside it)."""
+    ratio, rise, fall = table.ratio, table.rise, table.fall
     width = last - first + 1.0
     lo = math.log(max(level_first, level_last, 1e-9))
     hi = lo + math.log(1.0 / ratio[0])
@@ -376,7 +406,7 @@ def choose_returns(model: OpticalModel, peaks: Peaks):
     return chosen, return_number, number_of_returns, dropped
 
 
-def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped, echoes=None) -> np.ndarray:
+def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped, echoes: Echoes) -> np.ndarray:
     """Cause of each pulse without a return (index into DROPOUT_CAUSES), NO_DROPOUT otherwise.
 
     Judged on the noise-free signal at the strongest echo's peak: ``blind_zone`` if no light reaches the
@@ -386,7 +416,7 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     """
     ins = model.instrument
     dig = ins.digitizer
-    offsets, delay, energy = echoes if echoes is not None else model.echoes(batch)
+    offsets, delay, energy = echoes.offsets, echoes.delay_s, echoes.energy_j
     record_end = dig.record_length_s
     cause = np.full(batch.n_pulses, NO_DROPOUT, np.int8)
     missing = ~np.asarray(has_return, bool)
@@ -407,11 +437,8 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
         order = np.lexsort((masked_energy, pulse_of))
         strongest[pulse_of[order]] = order  # last (largest energy) per pulse wins
         t_star = delay[strongest[todo]] + ins.pulse.peak_delay_s
-        chans = ChannelArrays.of(model)
-        tb = model.tables
-        cut_tau = 2.0 * batch.column_cut_m / model.water.speed_m_s
-        total = _powers(t_star, todo, model.basis, tb.s0a, tb.s1a, tb.s0b, tb.step_s, cut_tau,
-                        batch.column_cut_weight, offsets, delay, energy, batch.background_w, ins.pulse.duration_s)
+        chans = model.channels
+        total = _powers(t_star, todo, model.column, model.cuts(batch), echoes, ins.pulse.duration_s)
         base = batch.background_w[todo] + model.column_power_w(t_star)
         echo = np.maximum(total - model.column_power_w(t_star, batch.column_cut_m[todo].min(axis=1))
                           - batch.background_w[todo], 0.0)
@@ -434,17 +461,17 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
 
 
 @numba.njit(cache=True)
-def _powers(t, pulses, basis, s0a, s1a, s0b, step, cut_tau, cut_w, offsets, delay, energy, background, extent):
+def _powers(t, pulses, col, cuts, echoes, extent):
     out = np.empty(t.shape[0])
     for i in range(t.shape[0]):
-        out[i] = optical_power(t[i], pulses[i], basis, s0a, s1a, s0b, step, cut_tau, cut_w, offsets, delay,
-                               energy, background, extent)
+        out[i] = optical_power(t[i], pulses[i], col, cuts, echoes, extent)
     return out
 
 
-def range_batch(model: OpticalModel, batch: PulseBatch, records: Records, echoes=None) -> Ranging:
+def range_batch(model: OpticalModel, batch: PulseBatch, records: Records, echoes: Echoes | None = None) -> Ranging:
     """Peaks, chosen returns and dropout causes of a digitised batch (``echoes``: ``model.echoes(batch)``)."""
-    peaks, ref_time = find_peaks(model, batch, records)
+    echoes = echoes if echoes is not None else model.echoes(batch)
+    peaks, ref_time = find_peaks(model, batch, records, echoes)
     chosen, return_number, number_of_returns, dropped = choose_returns(model, peaks)
     has_return = np.zeros(batch.n_pulses, bool)
     has_return[chosen.pulse] = True

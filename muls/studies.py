@@ -23,11 +23,11 @@ import time
 import numpy as np
 
 from .errors import ParameterError, check_fraction, check_positive
-from .instrument import POND_GATE_S, POOL_GATE_S, mul2023, coaxial
+from .presets import POND_GATE_S, POOL_GATE_S, coaxial, mul2023, single_channel, water_preset
 from .ranging import DROPOUT_CAUSES, Peaks
 from .simulate import simulate
-from .water import Water, water_preset
-from .waveform import OpticalModel, PulseBatch, single_channel
+from .water import Water
+from .waveform import OpticalModel, PulseBatch
 
 #: Detection criterion of the maximum-range and precision studies: a measured range counts as the target
 #: when it lies within this many range bins (c_w x sample interval / 2) of the truth.
@@ -411,7 +411,7 @@ def coaxial_study(water: str | Water = "turbid_harbor", t_max_ns: float = 200.0,
     non_model = OpticalModel.build(mul2023(), w)
     co = co_model.column_power_w(t)
     non = non_model.column_power_w(t)
-    _, delay, energy = co_model.echoes(PulseBatch.flat_target(co_model.instrument, [np.inf]))
+    energy = co_model.echoes(PulseBatch.flat_target(co_model.instrument, [np.inf])).energy_j
     window_peak = float(energy.max() * co_model.instrument.pulse(co_model.instrument.pulse.peak_delay_s)) \
         if energy.size else 0.0
     geometry = non_model.instrument.geometry

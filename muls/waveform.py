@@ -15,15 +15,19 @@ and S0b likewise with b. The three running integrals are tabulated once per wate
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from scipy.signal import lfilter
 
+from .channels import ChannelArrays
 from .errors import ParameterError
-from .instrument import SINGLE_CHANNEL_MAX_GAIN, Channel, Instrument, mul2023
+from .instrument import Instrument
 from .radiometry import column_density_per_m, lambertian_weight, target_factor, window_factor
+from .shape_tables import ClipTable, FitTable
 from .water import Water
 
 #: Step of the column tables in two-way time [s]: 1/160 of the 4 ns pulse decay time.
@@ -132,9 +136,45 @@ class PulseBatch:
         )
 
 
+class ColumnKernel(NamedTuple):
+    """What the kernels need to evaluate the column: the pulse basis (5,) (see :meth:`PulseShape.basis`) and
+    the running integrals of :class:`ColumnTables` on their grid of ``step_s`` [s]."""
+
+    basis: np.ndarray
+    s0a: np.ndarray
+    s1a: np.ndarray
+    s0b: np.ndarray
+    step_s: float
+
+
+class Echoes(NamedTuple):
+    """The echoes of a batch in CSR form, sorted by delay within each pulse.
+
+    offsets (n_pulses + 1,) int64: echoes of pulse p are ``offsets[p]:offsets[p + 1]``; delay_s (m,) [s]:
+    start of each echo's pulse after emission; energy_j (m,) [J] received; source (m,) int64: index of the
+    :class:`PulseBatch` return that made it, -1 for the window return (Eq. 3).
+    """
+
+    offsets: np.ndarray
+    delay_s: np.ndarray
+    energy_j: np.ndarray
+    source: np.ndarray
+
+
+class ColumnCuts(NamedTuple):
+    """Per pulse: where the column is cut, in two-way time, and the background (from a :class:`PulseBatch`).
+
+    cut_tau_s (n, c) [s]; cut_weight (n, c) energy shares; background_w (n,) [W].
+    """
+
+    cut_tau_s: np.ndarray
+    cut_weight: np.ndarray
+    background_w: np.ndarray
+
+
 @dataclass(frozen=True)
 class OpticalModel:
-    """Everything the compiled kernels need about one instrument in one water (built once, reused)."""
+    """One instrument in one water, with every table the kernels need, each built once and reused."""
 
     instrument: Instrument
     water: Water
@@ -144,20 +184,40 @@ class OpticalModel:
     def build(cls, instrument: Instrument, water: Water) -> "OpticalModel":
         return cls(instrument, water, ColumnTables.build(instrument, water))
 
-    @property
+    @cached_property
     def basis(self) -> np.ndarray:
         return np.array(self.instrument.pulse.basis())
 
-    def echoes(self, batch: PulseBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """CSR echoes per pulse, by delay within a pulse: (offsets (n+1,), delay_s (m',), energy_j (m',)).
+    @cached_property
+    def column(self) -> ColumnKernel:
+        tb = self.tables
+        return ColumnKernel(self.basis, tb.s0a, tb.s1a, tb.s0b, tb.step_s)
 
-        The window return (Eq. 3), when coupled, is one more echo per pulse.
-        """
+    @cached_property
+    def channels(self) -> ChannelArrays:
+        """Per-channel constants, index 0 the CH0 reference."""
+        return ChannelArrays.of(self.instrument)
+
+    @cached_property
+    def fit_table(self) -> FitTable:
+        return FitTable.build(self.instrument.pulse, self.instrument.digitizer.sample_interval_s)
+
+    @cached_property
+    def clip_table(self) -> ClipTable:
+        return ClipTable.build(self.instrument.pulse, self.instrument.digitizer.sample_interval_s)
+
+    def cuts(self, batch: "PulseBatch") -> ColumnCuts:
+        return ColumnCuts(2.0 * batch.column_cut_m / self.water.speed_m_s, batch.column_cut_weight,
+                          batch.background_w)
+
+    def echoes(self, batch: PulseBatch) -> Echoes:
+        """The echoes of ``batch``: one per return (Eq. 7), plus the window return (Eq. 3) when coupled."""
         e_t = self.instrument.transmitter.pulse_energy_j
         c_w = self.water.speed_m_s
         delay = 2.0 * batch.return_range_m / c_w
         energy = e_t * target_factor(self.instrument, self.water, batch.return_range_m, batch.return_weight_per_sr)
         pulse = batch.return_pulse
+        source = np.arange(pulse.shape[0], dtype=np.int64)
         window = window_factor(self.instrument)
         if window > 0.0:
             n = batch.n_pulses
@@ -165,34 +225,32 @@ class OpticalModel:
             pulse = np.concatenate([np.arange(n), pulse])
             delay = np.concatenate([np.full(n, 2.0 * d / c_w), delay])
             energy = np.concatenate([np.full(n, e_t * window), energy])
-        if window > 0.0:
+            source = np.concatenate([np.full(n, -1, np.int64), source])
             order = np.argsort(pulse, kind="stable")
-            pulse, delay, energy = pulse[order], delay[order], energy[order]
+            pulse, delay, energy, source = pulse[order], delay[order], energy[order], source[order]
         offsets = np.searchsorted(pulse, np.arange(batch.n_pulses + 1)).astype(np.int64)
-        delay, energy = delay.copy(), energy.copy()
-        _sort_by_delay_within(offsets, delay, energy)  # the digitiser adds echoes as they start
-        return offsets, delay, energy
+        delay, energy, source = delay.copy(), energy.copy(), source.copy()
+        _sort_by_delay_within(offsets, delay, energy, source)  # the digitiser adds echoes as they start
+        return Echoes(offsets, delay, energy, source)
 
     def column_power_w(self, t_s, cut_m=np.inf):
         """Noise-free column power [W] at times ``t_s`` for a beam cut at ``cut_m`` (numpy, for studies)."""
         t = np.atleast_1d(np.asarray(t_s, float))
         cut_tau = 2.0 * np.asarray(cut_m, float) / self.water.speed_m_s
-        tb = self.tables
-        return _column_many(t, np.broadcast_to(cut_tau, t.shape).astype(float), self.basis,
-                            tb.s0a, tb.s1a, tb.s0b, tb.step_s)
+        return _column_many(t, np.broadcast_to(cut_tau, t.shape).astype(float), self.column)
 
 
 @numba.njit(cache=True)
-def _sort_by_delay_within(offsets, delay, energy):
+def _sort_by_delay_within(offsets, delay, energy, source):
     """Sort each pulse's echoes by delay in place (insertion sort: a pulse has a few tens at most)."""
     for p in range(offsets.shape[0] - 1):
         for i in range(offsets[p] + 1, offsets[p + 1]):
-            d, e = delay[i], energy[i]
+            d, e, s = delay[i], energy[i], source[i]
             j = i - 1
             while j >= offsets[p] and delay[j] > d:
-                delay[j + 1], energy[j + 1] = delay[j], energy[j]
+                delay[j + 1], energy[j + 1], source[j + 1] = delay[j], energy[j], source[j]
                 j -= 1
-            delay[j + 1], energy[j + 1] = d, e
+            delay[j + 1], energy[j + 1], source[j + 1] = d, e, s
 
 
 @numba.njit(cache=True, inline="always")
@@ -204,12 +262,14 @@ def pulse_value(u, basis):
 
 
 @numba.njit(cache=True, inline="always")
-def column_value(t, cut_tau, basis, s0a, s1a, s0b, step):
-    """Column power [W] at time t [s] of a beam cut at two-way time cut_tau [s] (exact cut, see module doc)."""
+def column_value(t, cut_tau, col):
+    """Column power [W] at time t [s] of a beam cut at two-way time cut_tau [s] (exact cut, see module doc);
+    ``col`` a :class:`ColumnKernel`."""
     if t <= 0.0:
         return 0.0
+    basis, s0a, s1a, s0b = col.basis, col.s0a, col.s1a, col.s0b
     tau = t if t < cut_tau else cut_tau
-    x = tau / step
+    x = tau / col.step_s
     i = int(x)
     if i >= s0a.shape[0] - 1:
         return 0.0
@@ -225,64 +285,22 @@ def column_value(t, cut_tau, basis, s0a, s1a, s0b, step):
 
 
 @numba.njit(cache=True)
-def _column_many(t, cut_tau, basis, s0a, s1a, s0b, step):
+def _column_many(t, cut_tau, col):
     out = np.empty(t.shape[0])
     for i in range(t.shape[0]):
-        out[i] = column_value(t[i], cut_tau[i], basis, s0a, s1a, s0b, step)
+        out[i] = column_value(t[i], cut_tau[i], col)
     return out
 
 
 @numba.njit(cache=True, inline="always")
-def optical_power(t, p, basis, s0a, s1a, s0b, step, cut_tau, cut_w, offsets, delay, energy, background, extent):
-    """Total received power [W] of batch pulse p at time t [s] (MULS Eq. 1)."""
-    power = background[p]
-    for c in range(cut_tau.shape[1]):
-        if cut_w[p, c] != 0.0:
-            power += cut_w[p, c] * column_value(t, cut_tau[p, c], basis, s0a, s1a, s0b, step)
-    for j in range(offsets[p], offsets[p + 1]):
-        u = t - delay[j]
+def optical_power(t, p, col, cuts, echoes, extent):
+    """Total received power [W] of batch pulse p at time t [s] (MULS Eq. 1): column, echoes, background."""
+    power = cuts.background_w[p]
+    for c in range(cuts.cut_tau_s.shape[1]):
+        if cuts.cut_weight[p, c] != 0.0:
+            power += cuts.cut_weight[p, c] * column_value(t, cuts.cut_tau_s[p, c], col)
+    for j in range(echoes.offsets[p], echoes.offsets[p + 1]):
+        u = t - echoes.delay_s[j]
         if 0.0 <= u < extent:
-            power += energy[j] * pulse_value(u, basis)
+            power += echoes.energy_j[j] * pulse_value(u, col.basis)
     return power
-
-
-def single_channel(water: Water, base: Instrument | None = None) -> Instrument:
-    """One non-gated detector receiving all the light, its gain set for ``water`` as a user would.
-
-    The gain is the highest (up to ``SINGLE_CHANNEL_MAX_GAIN``) at which the noise-free water-column
-    backscatter plus the dark level and five standard deviations of noise stays below the top code.
-    """
-    base = base or mul2023()
-    template = Channel("ch1", "single", split_ratio=1.0, voltage_ratio=1.0, gain=1.0)
-    unit = replace(base, name="single_channel", channels=(template,))
-    model = OpticalModel.build(unit, water)
-    t = np.arange(0.0, unit.digitizer.record_length_s, 0.25e-9)
-    peak_w = float(np.max(model.column_power_w(t)))
-    dig = unit.digitizer
-    e = 1.602176634e-19
-
-    def headroom(gain: float) -> float:
-        ch = replace(template, gain=gain)
-        level = ch.volts_per_watt * peak_w * dig.lsb_per_volt
-        shot_var = shot_noise_lsb2_per_w(ch, dig.bandwidth_hz, dig.lsb_per_volt, e) * peak_w
-        return dig.max_code - (ch.dark_mean_lsb + level + 5.0 * math.sqrt(ch.dark_std_lsb**2 + shot_var))
-
-    if headroom(SINGLE_CHANNEL_MAX_GAIN) >= 0.0:
-        gain = SINGLE_CHANNEL_MAX_GAIN
-    else:
-        lo, hi = 0.0, math.log(SINGLE_CHANNEL_MAX_GAIN)
-        if headroom(1.0) < 0.0:
-            raise ParameterError(f"water '{water.name}': the column backscatter clips the digitiser even at gain 1")
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if headroom(math.exp(mid)) >= 0.0 else (lo, mid)
-        gain = math.exp(lo)
-    return replace(unit, channels=(replace(template, gain=gain),))
-
-
-def shot_noise_lsb2_per_w(channel: Channel, bandwidth_hz: float, lsb_per_volt: float,
-                          electron_charge_c: float = 1.602176634e-19) -> float:
-    """Shot-noise variance per watt of received power [LSB^2/W]: 2 e B F M^2 S_k (xi_i P) (xi_v R_L)^2."""
-    ch = channel
-    return (2.0 * electron_charge_c * bandwidth_hz * ch.excess_noise * ch.gain**2 * ch.sensitivity_a_per_w
-            * ch.split_ratio * (ch.voltage_ratio * ch.load_ohm) ** 2 * lsb_per_volt**2)

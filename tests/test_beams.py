@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from muls.instrument import mul2023
+from muls.presets import mul2023
 from scanner_sim.beams import SUBRAY_COUNTS, beam_pattern, subrays
-from scanner_sim.raycast import raycast_overlap
+from scanner_sim.overlap import raycast_overlap
 
 GEOMETRY = mul2023().geometry
 OVERLAP_TOLERANCE = 0.03  # issue 3 acceptance: ray-cast overlap within 0.03 of Eq. 11 with >= 61 sub-rays

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from muls import Digitizer, ParameterError, PulseShape, Transmitter, Water, mul2023, water_preset
-from muls.instrument import coaxial
+from muls.presets import coaxial
 from muls.radiometry import (background_power_w, column_density_per_m, lambertian_weight, target_factor,
                              two_way_transmission, window_factor)
 from muls.waveform import OpticalModel

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from muls import studies
-from muls.instrument import POND_GATE_S, POOL_GATE_S
+from muls.presets import POND_GATE_S, POOL_GATE_S
 from muls.ranging import Peaks
-from muls.water import water_preset
+from muls.presets import water_preset
 
 MAXRANGE_KEYS = {"single_channel_m", "near_field_m", "far_field_m", "total_m", "improvement"}
 CHANNEL_KEYS = {"precision_m", "mean_deviation_m", "detected_fraction", "saturated_fraction"}
@@ -33,7 +33,8 @@ def test_far_gate_opens_20_to_30_ns_before_the_echo():
 def test_nearest_to_truth_picks_the_closest_peak_per_pulse_and_channel():
     peaks = Peaks(pulse=np.array([0, 0, 0, 2]), channel=np.array([1, 1, 3, 1]),
                   time_s=np.zeros(4), range_m=np.array([4.0, 5.1, 5.0, 7.3]), amplitude_lsb=np.ones(4),
-                  snr=np.ones(4), saturated=np.array([False, True, False, False]))
+                  snr=np.ones(4), saturated=np.array([False, True, False, False]), peak_power_w=np.ones(4),
+                  echo_index=np.arange(4))
     truth = np.array([5.0, 6.0, 7.0])
     err, sat = studies.nearest_to_truth(peaks, truth, (1,))
     np.testing.assert_allclose(err[[0, 2]], [0.1, 0.3])
