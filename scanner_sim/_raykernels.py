@@ -9,18 +9,88 @@ and points along a_p + tan(theta_h) (x_j u_p + y_j v_p), normalised (MULS Eq. 11
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 
+class PulseRays(NamedTuple):
+    """Per pulse of a chunk, (n, 3) float64 in the scene's local frame: beam origin and unit direction, the
+    beam's perpendicular basis u, v, the receiver aperture and its unit axis."""
+
+    beam: np.ndarray
+    beam_dir: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    rx: np.ndarray
+    rx_dir: np.ndarray
+
+
+class SubrayLayout(NamedTuple):
+    """The beam's sub-rays: xy (m, 2) in the unit disc, weight (m,), beam radius r_t [m] at the window and
+    tan of the half divergence."""
+
+    xy: np.ndarray
+    weight: np.ndarray
+    r_t: float
+    tan_h: float
+
+
+class SceneFaces(NamedTuple):
+    """Per-face attributes of the scene (normal (f, 3) local frame, reflectance, label, object), its local
+    origin (3,) [m] and the step off a surface for shadow rays ``eps`` [m]."""
+
+    normal: np.ndarray
+    reflectance: np.ndarray
+    label: np.ndarray
+    object_id: np.ndarray
+    local_origin: np.ndarray
+    eps: float
+
+
+class HitRows(NamedTuple):
+    """Output rows of the hit kernel (sized for every sub-ray hitting); see :func:`hit_block`."""
+
+    pulse: np.ndarray
+    sub: np.ndarray
+    range_m: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    cos_inc: np.ndarray
+    reflectance: np.ndarray
+    label: np.ndarray
+    object_id: np.ndarray
+    weight: np.ndarray
+    rx_dist: np.ndarray
+    seen: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> "HitRows":
+        return cls(np.empty(n, np.int64), np.empty(n, np.int32), np.empty(n), np.empty((n, 3)),
+                   np.empty((n, 3), np.float32), np.empty(n), np.empty(n), np.empty(n, np.int16),
+                   np.empty(n, np.int32), np.empty(n), np.empty(n, np.float32), np.empty(n))
+
+
+class ShadowRays(NamedTuple):
+    """Shadow rays of one block: origin (b, 3), unit direction (b, 3) and length (b,), float32 local frame."""
+
+    origin: np.ndarray
+    direction: np.ndarray
+    length: np.ndarray
+
+
 @njit(cache=True, fastmath=False)
-def subrays_local32(beam_local, beam_dir, u, v, xy, r_t, tan_h, origins, dirs):
-    """Fill ``origins`` and ``dirs`` ((n m, 3) float32, pulse-major, local frame) with the sub-rays."""
-    n, m = beam_local.shape[0], xy.shape[0]
-    for p in range(n):
+def subrays_local32(rays, p0, p1, layout, origins, dirs):
+    """Fill ``origins`` and ``dirs`` ((n m, 3) float32, pulse-major, local frame) with the sub-rays of pulses
+    p0 .. p1 - 1 of ``rays`` (:class:`PulseRays`)."""
+    xy, r_t, tan_h = layout.xy, layout.r_t, layout.tan_h
+    beam_local, beam_dir, u, v = rays.beam, rays.beam_dir, rays.u, rays.v
+    m = xy.shape[0]
+    for q in range(p1 - p0):
+        p = p0 + q
         for j in range(m):
-            k = p * m + j
+            k = q * m + j
             x, y = xy[j, 0], xy[j, 1]
             dx = beam_dir[p, 0] + tan_h * (x * u[p, 0] + y * v[p, 0])
             dy = beam_dir[p, 1] + tan_h * (x * u[p, 1] + y * v[p, 1])
@@ -34,23 +104,28 @@ def subrays_local32(beam_local, beam_dir, u, v, xy, r_t, tan_h, origins, dirs):
 
 
 @njit(cache=True, fastmath=False)
-def hit_block(prim, tfar, ray0, m, beam_local, beam_dir, u, v, xy, r_t, tan_h, rx_local, rx_dir, face_normal,
-              face_reflectance, face_label, face_object, weights, local_origin, apex_behind, cos_half_fov, eps,
-              base, pulse, sub, rng, point, normal, cos_inc, refl, label, obj, weight, rx_dist, seen,
-              sh_o, sh_d, sh_len):
+def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half_fov, rows, shadows):
     """Turn one block of Embree first-hit results into hit rows, and set up their shadow rays.
 
-    prim (b,) int32 / tfar (b,) float32: Embree's answer for rays ray0 .. ray0 + b - 1 (-1: miss). Hits are
-    written in ray (scan) order at rows base, base + 1, ... of the output arrays: pulse int64, sub int32,
-    range_m float64, point (., 3) float64 world, normal (., 3) float32 facing the ray, cos_inc float64
-    (cosine of the incidence angle), refl float64, label int16, obj int32, weight float64, rx_dist float32
-    [m], seen float64 (1 when inside the FOV cone with the aperture on the lit side). Shadow ray c of the
-    block (for hit row base + c) goes into sh_o / sh_d / sh_len (float32, local frame): from the hit
-    stepped ``eps`` off the surface toward the aperture, stopping ``eps`` short of it; length -1 (an empty
-    ray Embree skips) when the hit is not in the cone. Returns the block's hit count.
+    prim (b,) int32 / tfar (b,) float32: Embree's answer for rays ray0 .. ray0 + b - 1 (-1: miss) of the
+    chunk's :class:`PulseRays` with the sub-rays of ``layout``. Hits are written in ray (scan) order at rows
+    base, base + 1, ... of ``rows`` (:class:`HitRows`): pulse int64, sub int32, range_m float64, point (., 3)
+    float64 world, normal (., 3) float32 facing the ray, cos_inc float64 (cosine of the incidence angle),
+    reflectance float64, label int16, object_id int32, weight float64, rx_dist float32 [m], seen float64 (1
+    when inside the receiver's FOV cone, virtual apex ``apex_behind`` [m] behind the aperture and half-angle
+    cosine ``cos_half_fov``, with the aperture on the lit side). Shadow ray c of the block (for hit row
+    base + c) goes into ``shadows`` (float32, local frame): from the hit stepped ``faces.eps`` off the surface
+    toward the aperture, stopping ``eps`` short of it; length -1 (an empty ray Embree skips) when the hit is
+    not in the cone. Returns the block's hit count.
     """
+    pulse, sub, rng, point, normal, cos_inc, refl, label, obj, weight, rx_dist, seen = rows
+    sh_o, sh_d, sh_len = shadows
+    beam_local, beam_dir, u, v, rx_local, rx_dir = rays
+    xy, weights, r_t, tan_h = layout
+    face_normal, eps = faces.normal, faces.eps
+    m = xy.shape[0]
     c = 0
-    ox, oy, oz = local_origin[0], local_origin[1], local_origin[2]
+    ox, oy, oz = faces.local_origin[0], faces.local_origin[1], faces.local_origin[2]
     for b in range(prim.shape[0]):
         f = prim[b]
         if f < 0:
@@ -61,9 +136,9 @@ def hit_block(prim, tfar, ray0, m, beam_local, beam_dir, u, v, xy, r_t, tan_h, r
         j = r - p * m
         pulse[i] = p
         sub[i] = j
-        refl[i] = face_reflectance[f]
-        label[i] = face_label[f]
-        obj[i] = face_object[f]
+        refl[i] = faces.reflectance[f]
+        label[i] = faces.label[f]
+        obj[i] = faces.object_id[f]
         weight[i] = weights[j]
         x, y = xy[j, 0], xy[j, 1]
         ax = x * u[p, 0] + y * v[p, 0]

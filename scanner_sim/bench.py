@@ -28,7 +28,7 @@ def bench_pass(scene_name: str = "cable_survey", pulses: int = 60000, repeat: in
             fidelity=fidelity, max_pulses=2000, progress=False, render=False))  # compile and warm up
         for _ in range(repeat):
             with tempfile.TemporaryDirectory(prefix="muls-bench-") as out:
-                summary = run_pass(config, out, options)
+                summary = run_pass(config, out, options).summary
             best = max(best or 0.0, summary["pulses_per_s"])
         rays = bench_rays(scene_name, min(pulses, 20000), level.subrays, repeat=3)
         rays_per_pulse = (rays["primary_rays"] + (rays["shadow_rays"] if level.shadow_rays else 0)) / rays["pulses"]

@@ -88,10 +88,9 @@ def _cmd_overlap(args) -> int:
     import numpy as np
 
     from muls.errors import ParameterError
-    from muls.instrument import instrument_preset
-    from muls.water import water_preset
+    from muls.presets import instrument_preset, water_preset
 
-    from .raycast import raycast_overlap
+    from .overlap import raycast_overlap
 
     dist = np.asarray(args.distances_m, float)
     if np.any(~np.isfinite(dist)) or np.any(dist <= 0):
@@ -202,7 +201,7 @@ def _cmd_run(args) -> int:
                           chunk_pulses=args.chunk_pulses, waveforms=args.waveforms, progress=not args.quiet,
                           render=not args.no_render)
     out = Path(args.out or config.output_dir)
-    summary = run_pass(config, out, options)
+    summary = run_pass(config, out, options).summary
     if not args.quiet:
         dropped = ", ".join(f"{k} {v}" for k, v in summary["dropouts"].items() if v) or "none"
         print(f"{summary['pulses']:,} pulses -> {summary['points']:,} points in {summary['wall_s']:.1f} s "

@@ -166,11 +166,12 @@ class Footprint:
     object_id: np.ndarray
 
 
-def nominal_footprint(scene, beam_origin: np.ndarray, beam_direction: np.ndarray) -> Footprint:
-    """First hit of each beam axis (n, 3) world [m] / unit: what the scan pattern reaches geometrically."""
+def nominal_footprint(caster, scene, beam_origin: np.ndarray, beam_direction: np.ndarray) -> Footprint:
+    """First hit of each beam axis (n, 3) world [m] / unit: what the scan pattern reaches geometrically;
+    ``caster``: the scene's :class:`scanner_sim.raycast.RayCaster`."""
     n = beam_origin.shape[0]
-    ray, tri, dist = scene.caster().first_hits((beam_origin - scene.local_origin).astype(np.float32),
-                                               beam_direction.astype(np.float32))
+    ray, tri, dist = caster.first_hits((beam_origin - scene.local_origin).astype(np.float32),
+                                       beam_direction.astype(np.float32))
     xyz = np.full((n, 3), np.nan)
     xyz[ray] = beam_origin[ray] + dist[:, None].astype(float) * beam_direction[ray]
     object_id = np.full(n, -1, np.int64)

@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 from muls.errors import ParameterError
-from muls.instrument import instrument_preset
-from muls.water import water_preset
+from muls.presets import instrument_preset, water_preset
 
 from .config import SceneConfig
 from .coverage import CoverageSettings
@@ -74,17 +73,19 @@ def combination_config(config: SceneConfig, water: str, altitude_m: float | None
     if altitude_m is not None and base_altitude is None:
         raise ParameterError(f"altitudes_m: scene '{config.name}' flies at constant depth or stands still "
                              "(platform.altitude_m is not set), so its altitude cannot be varied")
-    inst_cfg = replace(config.instrument, preset=instrument)
+    changes: dict = {"instrument.preset": instrument}
     gated = [ch for ch in instrument_preset(instrument, water_preset(water)).channels if ch.gated]
+    own = config.instrument
     if gated and gate == "follow" and altitude_m is not None:
-        delay_ns = inst_cfg.gate_delay_ns if inst_cfg.gate_delay_ns is not None else gated[0].gate_delay_s * 1e9
-        width_ns = inst_cfg.gate_width_ns if inst_cfg.gate_width_ns is not None else gated[0].gate_width_s * 1e9
+        delay_ns = own.gate_delay_ns if own.gate_delay_ns is not None else gated[0].gate_delay_s * 1e9
+        width_ns = own.gate_width_ns if own.gate_width_ns is not None else gated[0].gate_width_s * 1e9
         shift_ns = 2.0 * (altitude_m - base_altitude) / water_preset(water).speed_m_s * 1e9
-        inst_cfg = replace(inst_cfg, gate_delay_ns=max(0.0, delay_ns + shift_ns), gate_width_ns=width_ns)
+        changes |= {"instrument.gate_delay_ns": max(0.0, delay_ns + shift_ns), "instrument.gate_width_ns": width_ns}
     elif not gated:
-        inst_cfg = replace(inst_cfg, gate_delay_ns=None, gate_width_ns=None)
-    platform = config.platform if altitude_m is None else replace(config.platform, altitude_m=float(altitude_m))
-    return replace(config, platform=platform, instrument=inst_cfg)
+        changes |= {"instrument.gate_delay_ns": None, "instrument.gate_width_ns": None}
+    if altitude_m is not None:
+        changes["platform.altitude_m"] = float(altitude_m)
+    return config.with_overrides(changes)
 
 
 def combination_name(water: str, altitude_m: float | None, instrument: str) -> str:
@@ -123,7 +124,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
             print(f"[{k + 1}/{len(combos)}] {name}", flush=True)
         options = PassOptions(water=water, seed=seed, fidelity=fidelity, max_pulses=max_pulses, progress=progress,
                               render=render, render_size=STUDY_RENDER_SIZE, write_scene=False, coverage=settings)
-        summary = run_pass(cfg, out / name, options, scene=scene)
+        summary = run_pass(cfg, out / name, options, scene=scene).summary
         records.append(study_record(cfg, summary, water, altitude, instrument, name))
     study = {
         "scene": config.name,

@@ -1,12 +1,44 @@
-"""Georeferencing: the instrument's ranged returns to world points with their ground truth attached."""
+"""Georeferencing: the instrument's ranged returns to world points with their ground truth attached.
+
+:func:`georeference` is a pure function of what the stages before it produced: the ranging of a chunk (each
+return carries the index of the echo that dominates it, :attr:`muls.ranging.Peaks.echo_index`), the hits that
+made those echoes, and each pulse's line of sight as navigation estimates it, with the truth along it.
+"""
 
 from __future__ import annotations
 
-import numba
+from typing import NamedTuple
+
 import numpy as np
+
+from muls.ranging import Ranging
+
+from .raycast import Hits
+from .records import PointRecords
 
 #: Intensity scale: log10 of the echo's peak optical power [W] from 1 nW (0) to 1 W (65535).
 INTENSITY_LOG10_RANGE_W = (-9.0, 0.0)
+
+#: LAS class of a return that no echo explains (noise, a false alarm on the water column): ASPRS class 7,
+#: "low point (noise)", which LAS tools treat as noise. Its object_id is -1.
+NOISE_CLASS = 7
+NO_OBJECT = -1
+
+
+class LinesOfSight(NamedTuple):
+    """Each pulse's beam where navigation puts it, and the truth along it (one row per pulse of a chunk).
+
+    origin_m (n, 3), direction (n, 3) unit: the estimated beam in the world frame; true_range_m (n,): range to
+    the first truth surface along it (nan where it meets none); scan_angle_deg (n,); time_s (n,) [s from the
+    pass start]; slot (n,) int64: the pulse's number in the pass.
+    """
+
+    origin_m: np.ndarray
+    direction: np.ndarray
+    true_range_m: np.ndarray
+    scan_angle_deg: np.ndarray
+    time_s: np.ndarray
+    slot: np.ndarray
 
 
 def intensity_from_power(peak_power_w: np.ndarray) -> np.ndarray:
@@ -17,20 +49,37 @@ def intensity_from_power(peak_power_w: np.ndarray) -> np.ndarray:
     return np.round(np.clip(level, 0.0, 1.0) * 65535.0).astype(np.uint16)
 
 
-@numba.njit(cache=True)
-def match_returns_to_hits(return_pulse, return_range_m, hit_offsets, hit_range_m, hit_energy, window_m):
-    """Index of the hit that made each return: the most energetic hit of its pulse within ``window_m`` of the
-    measured range (a merged echo is attributed to its strongest part), else the nearest in range; -1 if the
-    pulse has no hit. Returns (n_returns,) int64; hits of pulse p are ``hit_offsets[p]:hit_offsets[p + 1]``."""
-    out = np.full(return_pulse.shape[0], -1, np.int64)
-    for i in range(return_pulse.shape[0]):
-        p = return_pulse[i]
-        best, best_energy, nearest, nearest_gap = -1, -1.0, -1, np.inf
-        for j in range(hit_offsets[p], hit_offsets[p + 1]):
-            gap = abs(hit_range_m[j] - return_range_m[i])
-            if gap < nearest_gap:
-                nearest, nearest_gap = j, gap
-            if gap <= window_m and hit_energy[j] > best_energy:
-                best, best_energy = j, hit_energy[j]
-        out[i] = best if best >= 0 else nearest
-    return out
+def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight) -> PointRecords:
+    """Points where the instrument and its navigation put them, with the truth attached.
+
+    xyz = estimated beam origin + measured range x estimated beam direction. Class, object and incidence are
+    those of the hit whose echo the instrument ranged (``Peaks.echo_index``; the chunk's PulseBatch has one
+    return per hit, in hit order); a return no echo explains gets :data:`NOISE_CLASS`, object -1 and
+    incidence nan. true_range_m is where the truth mesh lies along the point's own line of sight, so
+    range_error_m is the point's signed distance from the surface along that line (ranging error, merged
+    echoes and navigation noise all show in it); where that line meets no surface, the ranged hit's own range
+    stands in, and a noise return has none (nan): never another pulse's hit.
+    """
+    r = ranging.returns
+    pulse = r.pulse
+    echo = r.echo_index
+    explained = echo >= 0
+    j = np.where(explained, echo, 0)
+    have = explained & (len(hits) > 0)
+
+    def of_hit(values, missing):
+        out = np.full(pulse.shape, missing, dtype=np.result_type(values.dtype, np.asarray(missing).dtype))
+        out[have] = values[j[have]]
+        return out
+
+    true_range = sight.true_range_m[pulse].astype(np.float64)
+    unseen = np.isnan(true_range)
+    true_range[unseen] = of_hit(hits.range_m, np.nan)[unseen]
+    return PointRecords(
+        gps_time_s=sight.time_s[pulse], xyz=sight.origin_m[pulse] + r.range_m[:, None] * sight.direction[pulse],
+        intensity=intensity_from_power(r.peak_power_w), return_number=ranging.return_number,
+        number_of_returns=ranging.number_of_returns, classification=of_hit(hits.label, NOISE_CLASS).astype(np.uint8),
+        scan_angle_deg=sight.scan_angle_deg[pulse], channel=r.channel.astype(np.uint8), amplitude_lsb=r.amplitude_lsb,
+        snr=r.snr, saturated=r.saturated, true_range_m=true_range, range_error_m=r.range_m - true_range,
+        incidence_deg=np.degrees(of_hit(hits.incidence_rad, np.nan)), object_id=of_hit(hits.object_id, NO_OBJECT),
+        pulse_index=sight.slot[pulse])

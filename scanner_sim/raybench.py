@@ -24,14 +24,14 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
     from . import _raykernels
     from .beams import beam_pattern, perpendicular_basis
     from .config import load_scene
-    from .raycast import ReceiverCone, cast_beams
+    from .raycast import RayCaster, ReceiverCone, cast_beams, shadow_offset_m
     from .scanner import Scanner
     from .scene import build_scene
     from .trajectory import build_trajectory
 
     cfg = load_scene(scene_name)
     inst = cfg.instrument_model()
-    scene = build_scene(cfg, backend="embree")
+    scene = build_scene(cfg)
     traj = build_trajectory(cfg, scene)
     scanner = Scanner.from_config(cfg.scanner, inst)
     mid = 0.5 * traj.duration_s
@@ -42,30 +42,27 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
     geometry = inst.geometry
 
     # The exact float32 rays the pipeline casts (primary and shadow), prepared outside the raw timing.
-    beam_local = np.ascontiguousarray(rays[0] - scene.local_origin)
     u, v = perpendicular_basis(rays[1], rays[2])
-    o32 = np.empty((len(times) * pattern.count, 3), np.float32)
+    pulse_rays = _raykernels.PulseRays(np.ascontiguousarray(rays[0] - scene.local_origin), rays[1], u, v,
+                                       np.ascontiguousarray(rays[3] - scene.local_origin), rays[4])
+    layout = _raykernels.SubrayLayout(np.ascontiguousarray(pattern.xy), pattern.weight,
+                                      0.5 * geometry.beam_diameter_m,
+                                      float(np.tan(0.5 * geometry.beam_divergence_full_rad)))
+    n_pulses = len(times)
+    o32 = np.empty((n_pulses * pattern.count, 3), np.float32)
     d32 = np.empty_like(o32)
-    _raykernels.subrays_local32(beam_local, rays[1], u, v, np.ascontiguousarray(pattern.xy),
-                                0.5 * geometry.beam_diameter_m, float(np.tan(0.5 * geometry.beam_divergence_full_rad)),
-                                o32, d32)
-    caster = scene.caster()
+    _raykernels.subrays_local32(pulse_rays, 0, n_pulses, layout, o32, d32)
+    caster = RayCaster.for_scene(scene, backend="embree")
     prim, tfar = caster.first_hits_raw(o32, d32)
     cone = ReceiverCone.from_geometry(geometry)
     n_sub = o32.shape[0]
-    rows = [np.empty(n_sub, np.int64), np.empty(n_sub, np.int32), np.empty(n_sub), np.empty((n_sub, 3)),
-            np.empty((n_sub, 3), np.float32), np.empty(n_sub), np.empty(n_sub), np.empty(n_sub, np.int16),
-            np.empty(n_sub, np.int32), np.empty(n_sub), np.empty(n_sub, np.float32), np.empty(n_sub)]
-    sh_o = np.empty((n_sub, 3), np.float32)
-    sh_d = np.empty_like(sh_o)
-    sh_len = np.empty(n_sub, np.float32)
-    c = _raykernels.hit_block(prim, tfar, 0, pattern.count, beam_local, rays[1], u, v,
-                              np.ascontiguousarray(pattern.xy), 0.5 * geometry.beam_diameter_m,
-                              float(np.tan(0.5 * geometry.beam_divergence_full_rad)),
-                              np.ascontiguousarray(rays[3] - scene.local_origin), rays[4], scene.face_normal,
-                              scene.face_reflectance, scene.face_label, scene.face_object, pattern.weight,
-                              scene.local_origin, cone.apex_behind_m, cone.cos_half_fov, scene.shadow_offset_m,
-                              0, *rows, sh_o, sh_d, sh_len)
+    faces = _raykernels.SceneFaces(scene.face_normal, scene.face_reflectance, scene.face_label, scene.face_object,
+                                   scene.local_origin, shadow_offset_m(scene.local_extent_m))
+    shadows = _raykernels.ShadowRays(np.empty((n_sub, 3), np.float32), np.empty((n_sub, 3), np.float32),
+                                     np.empty(n_sub, np.float32))
+    c = _raykernels.hit_block(prim, tfar, 0, 0, pulse_rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov,
+                              _raykernels.HitRows.empty(n_sub), shadows)
+    sh_o, sh_d, sh_len = shadows
     sh_o, sh_d, sh_len = sh_o[:c].copy(), sh_d[:c].copy(), sh_len[:c].copy()
     n_shadow = int(np.count_nonzero(sh_len > 0))
     n_rays = o32.shape[0] + n_shadow
@@ -78,7 +75,7 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
         raw_scene.run(sh_o, sh_d, dists=sh_len, query="OCCLUDED")
 
     def pipeline():
-        return cast_beams(scene, *rays, pattern, geometry, shadow_rays=True)
+        return cast_beams(caster, scene, *rays, pattern, geometry, shadow_rays=True)
 
     raw()
     hits = pipeline()  # warm both (BVH build, numba compile)

@@ -97,6 +97,11 @@ class RayCaster:
             self._mesh = trimesh.Trimesh(self.vertices.astype(np.float64), self.faces, process=False)
             self._numpy = RayMeshIntersector(self._mesh)
 
+    @classmethod
+    def for_scene(cls, scene, backend: str = "auto") -> "RayCaster":
+        """The caster over a :class:`scanner_sim.scene.Scene`'s mesh in its local frame (builds the BVH)."""
+        return cls(scene.vertices - scene.local_origin, scene.faces, backend=backend)
+
     def workspace(self, name: str, shape: tuple, dtype) -> np.ndarray:
         """A reusable scratch array (per thread) for temporaries that never leave the ray stage.
 
@@ -247,7 +252,7 @@ def shadow_offset_m(local_extent_m: float) -> float:
     return max(1e-5, 1e-6 * float(local_extent_m))
 
 
-def cast_beams(scene, beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: np.ndarray,
+def cast_beams(caster: "RayCaster", scene, beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: np.ndarray,
                rx_origin: np.ndarray, rx_dir: np.ndarray, pattern: BeamPattern, geometry,
                shadow_rays: bool = True) -> Hits:
     """Cast the sub-rays of a chunk of pulses into ``scene`` and check each hit against the receiver.
@@ -256,38 +261,25 @@ def cast_beams(scene, beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: 
     :meth:`scanner_sim.scanner.Scanner.world_rays`); pattern: sub-ray layout; geometry: the instrument's
     :class:`muls.overlap.TransceiverGeometry` (beam radius, divergence, receiver aperture and FOV);
     shadow_rays: cast a visibility ray from each in-cone hit to the receiver aperture (else only the cone).
-    Returns :class:`Hits` in scan order.
+    ``caster``: the :class:`RayCaster` over ``scene`` (:meth:`RayCaster.for_scene`). Returns :class:`Hits`
+    in scan order.
 
     The work around the two Embree calls is two fused numba kernels (sub-rays in; hit attributes, FOV cone
     and shadow rays out), so the stage keeps most of Embree's raw throughput (``scanner-sim bench-rays``).
     """
     n_pulses, m = beam_origin.shape[0], pattern.count
-    r_t = 0.5 * geometry.beam_diameter_m
-    tan_h = math.tan(0.5 * geometry.beam_divergence_full_rad)
-    beam_local = np.ascontiguousarray(beam_origin - scene.local_origin)
-    beam_dir = np.ascontiguousarray(beam_dir, dtype=np.float64)
-    rx_local = np.ascontiguousarray(rx_origin - scene.local_origin)
-    rx_dir = np.ascontiguousarray(rx_dir, dtype=np.float64)
-    u, v = perpendicular_basis(beam_dir, np.asarray(shaft_dir, float))
-    xy = np.ascontiguousarray(pattern.xy)
-    cone = ReceiverCone.from_geometry(geometry)
-    caster = scene.caster()
     kernels = _kernels()
-
-    # Outputs sized for every sub-ray hitting; only the rows written are touched (and returned).
-    n_max = n_pulses * m
-    pulse = np.empty(n_max, np.int64)
-    sub = np.empty(n_max, np.int32)
-    range_m = np.empty(n_max)
-    point = np.empty((n_max, 3))
-    normal = np.empty((n_max, 3), np.float32)
-    incidence = np.empty(n_max)
-    reflectance = np.empty(n_max)
-    label = np.empty(n_max, np.int16)
-    object_id = np.empty(n_max, np.int32)
-    weight = np.empty(n_max)
-    rx_dist = np.empty(n_max, np.float32)
-    seen = np.empty(n_max)
+    beam_dir = np.ascontiguousarray(beam_dir, dtype=np.float64)
+    u, v = perpendicular_basis(beam_dir, np.asarray(shaft_dir, float))
+    rays = kernels.PulseRays(np.ascontiguousarray(beam_origin - scene.local_origin), beam_dir, u, v,
+                             np.ascontiguousarray(rx_origin - scene.local_origin),
+                             np.ascontiguousarray(rx_dir, dtype=np.float64))
+    layout = kernels.SubrayLayout(np.ascontiguousarray(pattern.xy), pattern.weight, 0.5 * geometry.beam_diameter_m,
+                                  math.tan(0.5 * geometry.beam_divergence_full_rad))
+    faces = kernels.SceneFaces(scene.face_normal, scene.face_reflectance, scene.face_label, scene.face_object,
+                               scene.local_origin, shadow_offset_m(scene.local_extent_m))
+    cone = ReceiverCone.from_geometry(geometry)
+    rows = kernels.HitRows.empty(n_pulses * m)  # sized for every sub-ray hitting; only rows written are kept
 
     # Blocks of pulses small enough that each block's rays, Embree answers and shadow rays stay in cache.
     block = max(1, BLOCK_RAYS // m)
@@ -297,27 +289,25 @@ def cast_beams(scene, beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: 
         b = (p1 - p0) * m
         o32 = caster.workspace("origins32", (b, 3), np.float32)
         d32 = caster.workspace("dirs32", (b, 3), np.float32)
-        kernels.subrays_local32(beam_local[p0:p1], beam_dir[p0:p1], u[p0:p1], v[p0:p1], xy, r_t, tan_h, o32, d32)
+        kernels.subrays_local32(rays, p0, p1, layout, o32, d32)
         prim, tfar = caster.first_hits_raw(o32, d32)
-        sh_o = caster.workspace("shadow_origins32", (b, 3), np.float32)
-        sh_d = caster.workspace("shadow_dirs32", (b, 3), np.float32)
-        sh_len = caster.workspace("shadow_length32", (b,), np.float32)
-        c = kernels.hit_block(prim, tfar, p0 * m, m, beam_local, beam_dir, u, v, xy, r_t, tan_h, rx_local, rx_dir,
-                              scene.face_normal, scene.face_reflectance, scene.face_label, scene.face_object,
-                              pattern.weight, scene.local_origin, cone.apex_behind_m, cone.cos_half_fov,
-                              scene.shadow_offset_m, base, pulse, sub, range_m, point, normal, incidence,
-                              reflectance, label, object_id, weight, rx_dist, seen, sh_o, sh_d, sh_len)
+        shadows = kernels.ShadowRays(caster.workspace("shadow_origins32", (b, 3), np.float32),
+                                     caster.workspace("shadow_dirs32", (b, 3), np.float32),
+                                     caster.workspace("shadow_length32", (b,), np.float32))
+        c = kernels.hit_block(prim, tfar, p0 * m, base, rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov,
+                              rows, shadows)
         if shadow_rays and c:  # hits outside the cone have empty (length -1) shadow rays, skipped by Embree
-            occluded = caster.occluded_raw(sh_o[:c], sh_d[:c], sh_len[:c])
-            kernels.clear_blocked(occluded, sh_len[:c], seen, base)
+            occluded = caster.occluded_raw(shadows.origin[:c], shadows.direction[:c], shadows.length[:c])
+            kernels.clear_blocked(occluded, shadows.length[:c], rows.seen, base)
         base += c
 
     k = base
-    incidence = incidence[:k]
+    incidence = rows.cos_inc[:k]
     np.arccos(incidence, out=incidence)  # the kernel wrote cos(incidence)
-    return Hits(pulse_index=pulse[:k], subray_index=sub[:k], range_m=range_m[:k], point=point[:k],
-                normal=normal[:k], incidence_rad=incidence, reflectance=reflectance[:k], label=label[:k],
-                object_id=object_id[:k], receiver_weight=seen[:k], weight=weight[:k], rx_distance_m=rx_dist[:k],
+    return Hits(pulse_index=rows.pulse[:k], subray_index=rows.sub[:k], range_m=rows.range_m[:k],
+                point=rows.point[:k], normal=rows.normal[:k], incidence_rad=incidence,
+                reflectance=rows.reflectance[:k], label=rows.label[:k], object_id=rows.object_id[:k],
+                receiver_weight=rows.seen[:k], weight=rows.weight[:k], rx_distance_m=rows.rx_dist[:k],
                 n_pulses=n_pulses, n_subrays=m)
 
 
@@ -335,26 +325,3 @@ def _kernels():
 
         _KERNELS = _raykernels
     return _KERNELS
-
-
-def raycast_overlap(distances_m, geometry, subrays_count: int = 61, profile: str = "top_hat",
-                    origin_m=(0.0, 0.0, 0.0), shadow_rays: bool = True) -> np.ndarray:
-    """Ray-cast overlap at each distance: a plate perpendicular to the beam, ``distance_m`` away.
-
-    One pulse per distance, beam straight down (nadir) from ``origin_m`` with the shaft along +x, so the
-    receiver sits ``geometry.offset_m`` along x. Returns (n,) the share of beam energy hitting the plate
-    inside the receiver's FOV cone and seen from the aperture: it converges to MULS Eq. 11 as sub-rays grow.
-    """
-    from .beams import beam_pattern
-    from .scene import plate_scene
-
-    pattern = beam_pattern(subrays_count, profile)
-    out = []
-    o = np.asarray(origin_m, float)
-    for z in np.asarray(distances_m, float):  # one small scene per distance
-        scene = plate_scene(float(z), size_m=max(4.0, 4.0 * z), origin_m=o)
-        one = lambda v: np.asarray(v, float)[None, :]  # noqa: E731
-        hits = cast_beams(scene, one(o), one([0, 0, -1]), one([1, 0, 0]), one(o + [geometry.offset_m, 0, 0]),
-                          one([0, 0, -1]), pattern, geometry, shadow_rays=shadow_rays)
-        out.append(hits.seen_fraction()[0])
-    return np.array(out)

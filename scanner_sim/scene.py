@@ -65,7 +65,7 @@ class Scene:
     """
 
     def __init__(self, parts: list[Part], heightfield: HeightField | None = None,
-                 local_origin: np.ndarray | None = None, backend: str = "auto"):
+                 local_origin: np.ndarray | None = None):
         if not parts:
             raise ParameterError("scene: no geometry (give a seabed or at least one object)")
         verts, faces, obj, label, refl, objects = [], [], [], [], [], []
@@ -98,14 +98,6 @@ class Scene:
         self.face_normal = n / np.linalg.norm(n, axis=1, keepdims=True)
         self.face_plane_m = np.einsum("ij,ij->i", self.face_normal, a)
         self.local_extent_m = float(np.abs(local).max())
-        self._backend = backend
-        self._caster = None
-
-    @property
-    def shadow_offset_m(self) -> float:
-        from .raycast import shadow_offset_m
-
-        return shadow_offset_m(self.local_extent_m)
 
     @property
     def n_faces(self) -> int:
@@ -115,14 +107,6 @@ class Scene:
     def bounds_m(self) -> np.ndarray:
         """(2, 3) world bounding box [m]."""
         return np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
-
-    def caster(self):
-        """The :class:`scanner_sim.raycast.RayCaster` over this mesh in the local frame (built once)."""
-        if self._caster is None:
-            from .raycast import RayCaster
-
-            self._caster = RayCaster(self.vertices - self.local_origin, self.faces, backend=self._backend)
-        return self._caster
 
     def surface_height(self, x_m, y_m) -> np.ndarray:
         """Seabed z [m] at world (x, y) from the height field (rocks and objects not included)."""
@@ -278,7 +262,7 @@ def panel_mesh(center_m, size_m, normal, up):
 # Scene from a validated config
 # ------------------------------------------------------------------------------------------------------
 
-def build_scene(config, backend: str = "auto") -> Scene:
+def build_scene(config) -> Scene:
     """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds)."""
     import trimesh
 
@@ -345,7 +329,7 @@ def build_scene(config, backend: str = "auto") -> Scene:
         else:  # pragma: no cover - config only produces the types above
             raise ParameterError(f"object type {type(obj).__name__} is not supported")
         parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline))
-    return Scene(parts, hf, backend=backend)
+    return Scene(parts, hf)
 
 
 def plate_scene(distance_m: float, size_m: float = 20.0, center_xy_m=(0.0, 0.0), origin_m=(0.0, 0.0, 0.0),

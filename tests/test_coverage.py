@@ -195,14 +195,15 @@ def test_bad_settings_name_the_key(kw, key):
 def test_scene_without_seabed_has_no_coverage(tmp_path):
     with pytest.raises(ParameterError, match="no seabed"):
         CoverageAccumulator(build_scene(load_scene("pool_panel")))
-    summary = run_pass(load_scene("pool_panel"), tmp_path, PassOptions(max_pulses=50, progress=False, render=False))
+    summary = run_pass(load_scene("pool_panel"), tmp_path,
+                       PassOptions(max_pulses=50, progress=False, render=False)).summary
     assert "coverage" not in summary and not (tmp_path / "coverage_grid.npz").exists()
 
 
 def test_pass_coverage_is_consistent_with_its_counts(tmp_path):
     """A short real pass: every missed cell has a cause, gaps add up, reaching pulses <= pulses."""
     config = load_scene("cable_survey")
-    summary = run_pass(config, tmp_path, PassOptions(max_pulses=6000, progress=False, render=False))
+    summary = run_pass(config, tmp_path, PassOptions(max_pulses=6000, progress=False, render=False)).summary
     f = summary["coverage"]
     assert 0.0 < f["covered_fraction"] <= 1.0
     assert sum(f["gaps_m2"].values()) == pytest.approx(f["reached_area_m2"] - f["covered_area_m2"])

@@ -6,13 +6,17 @@ import sys
 import numpy as np
 import pytest
 
-from muls.instrument import mul2023
+from muls.presets import mul2023
 from scanner_sim.beams import beam_pattern
 from scanner_sim.raycast import RayCaster, cast_beams
 from scanner_sim.scene import LABELS, Part, Scene, frustum, panel_mesh
 
 GEOMETRY = mul2023().geometry
 FLOAT32_RANGE_TOL_M = 2e-6  # float32 spacing near 10 m is 1e-6 m
+
+
+def _cast(scene, *rays, **kw):
+    return cast_beams(RayCaster.for_scene(scene), scene, *rays, **kw)
 
 
 def _plate(distance_m, tilt_rad, origin):
@@ -35,7 +39,7 @@ def test_range_point_and_incidence_on_a_tilted_plane(origin, distance_m, tilt_de
     origin and in UTM-sized coordinates alike (the scene is shifted to a local origin before Embree)."""
     tilt = math.radians(tilt_deg)
     scene = Scene([_plate(distance_m, tilt, origin)])
-    hits = cast_beams(scene, *_nadir_pulse(origin), beam_pattern(1), GEOMETRY)
+    hits = _cast(scene, *_nadir_pulse(origin), beam_pattern(1), GEOMETRY)
     assert len(hits) == 1
     assert abs(hits.range_m[0] - distance_m) < FLOAT32_RANGE_TOL_M
     np.testing.assert_allclose(hits.point[0], np.asarray(origin) + [0, 0, -distance_m], atol=FLOAT32_RANGE_TOL_M)
@@ -50,7 +54,7 @@ def test_all_subrays_range_exactly_on_a_plane(tilt_deg):
     tilt = math.radians(tilt_deg)
     origin = np.array([0.0, 0.0, 0.0])
     scene = Scene([_plate(5.0, tilt, origin)])
-    hits = cast_beams(scene, *_nadir_pulse(origin), beam_pattern(91), GEOMETRY)
+    hits = _cast(scene, *_nadir_pulse(origin), beam_pattern(91), GEOMETRY)
     assert len(hits) == 91
     n = np.array([0.0, -math.sin(tilt), math.cos(tilt)])
     # Recompute sub-ray origins/directions and the exact plane distance.
@@ -73,7 +77,7 @@ def test_far_scene_ranges_as_accurately_as_at_origin():
         bo = np.tile(origin, (n, 1))
         bd = np.c_[np.zeros(n), np.sin(theta), -np.cos(theta)]
         shaft = np.tile([1.0, 0, 0], (n, 1))
-        hits = cast_beams(scene, bo, bd, shaft, bo + [GEOMETRY.offset_m, 0, 0], bd, beam_pattern(7), GEOMETRY)
+        hits = _cast(scene, bo, bd, shaft, bo + [GEOMETRY.offset_m, 0, 0], bd, beam_pattern(7), GEOMETRY)
         results.append(hits)
     a, b = results
     assert len(a) == len(b) == 350
@@ -91,20 +95,20 @@ def test_box_between_receiver_and_lit_point_zeroes_receiver_weight():
     bv, bf = frustum(0.02, 0.02, 0.1, sections=16)
     box = Part("box", "mesh", bv + [0.065, 0.0, -2.05], bf, LABELS["debris"], 0.2)
     pulse = _nadir_pulse(origin)
-    clear = cast_beams(Scene([plate]), *pulse, beam_pattern(1), GEOMETRY)
-    blocked = cast_beams(Scene([plate, box]), *pulse, beam_pattern(1), GEOMETRY)
+    clear = _cast(Scene([plate]), *pulse, beam_pattern(1), GEOMETRY)
+    blocked = _cast(Scene([plate, box]), *pulse, beam_pattern(1), GEOMETRY)
     assert clear.receiver_weight.tolist() == [1.0]
     assert len(blocked) == 1 and blocked.label[0] == LABELS["panel"]
     assert blocked.range_m[0] == pytest.approx(4.0, abs=FLOAT32_RANGE_TOL_M)
     assert blocked.receiver_weight.tolist() == [0.0]
     # Without shadow rays (fidelity 'fast') only the cone counts.
-    fast = cast_beams(Scene([plate, box]), *pulse, beam_pattern(1), GEOMETRY, shadow_rays=False)
+    fast = _cast(Scene([plate, box]), *pulse, beam_pattern(1), GEOMETRY, shadow_rays=False)
     assert fast.receiver_weight.tolist() == [1.0]
 
 
 def test_blind_zone_hit_is_outside_the_fov_cone():
     origin = np.zeros(3)
-    hits = cast_beams(Scene([_plate(1.0, 0.0, origin)]), *_nadir_pulse(origin), beam_pattern(19), GEOMETRY)
+    hits = _cast(Scene([_plate(1.0, 0.0, origin)]), *_nadir_pulse(origin), beam_pattern(19), GEOMETRY)
     assert len(hits) == 19 and hits.receiver_weight.sum() == 0.0
     assert hits.hit_fraction()[0] == pytest.approx(1.0)
 
@@ -117,7 +121,7 @@ def test_misses_have_no_rows_and_scan_order_is_kept():
     bo = np.zeros((n, 3))
     bd = np.c_[np.zeros(n), np.sin(theta), -np.cos(theta)]
     shaft = np.tile([1.0, 0, 0], (n, 1))
-    hits = cast_beams(scene, bo, bd, shaft, bo + [0.13, 0, 0], bd, beam_pattern(7), GEOMETRY)
+    hits = _cast(scene, bo, bd, shaft, bo + [0.13, 0, 0], bd, beam_pattern(7), GEOMETRY)
     assert sorted(set(hits.pulse_index.tolist())) == [0, 2, 4]
     assert np.all(np.diff(hits.pulse_index * 7 + hits.subray_index) > 0)
     assert np.allclose(hits.hit_fraction(), [1, 0, 1, 0, 1])

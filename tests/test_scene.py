@@ -6,6 +6,7 @@ import yaml
 
 from scanner_sim.config import SCENES_DIR, load_scene, parse_scene
 from scanner_sim.materials import LABELS, MATERIALS
+from scanner_sim.raycast import RayCaster
 from scanner_sim.scene import build_scene, cable_centreline, tube
 from scanner_sim.terrain import generate_heightfield
 
@@ -24,7 +25,7 @@ def test_height_query_matches_the_mesh_the_rays_see():
     scene = Scene([Part("seabed", "seabed", v, f, LABELS["seabed"], 0.14)], hf)
     xy = np.c_[rng.uniform(96, 104, 500), rng.uniform(48, 52, 500)]
     origins = np.c_[xy, np.zeros(500)] - scene.local_origin
-    ray, tri, dist = scene.caster().first_hits(origins.astype(np.float32), np.tile(np.float32([0, 0, -1]), (500, 1)))
+    ray, tri, dist = RayCaster.for_scene(scene).first_hits(origins.astype(np.float32), np.tile(np.float32([0, 0, -1]), (500, 1)))
     assert len(ray) == 500
     np.testing.assert_allclose(-dist.astype(float), hf.height(xy[:, 0], xy[:, 1]), atol=2e-5)  # rays start at z = 0
     assert np.all(scene.face_normal[tri, 2] > 0)  # seabed normals point up

@@ -28,7 +28,7 @@ def cable_survey():
 def _pass(config, out, **kw):
     kw.setdefault("progress", False)
     kw.setdefault("render", False)
-    return run_pass(config, out, PassOptions(**kw))
+    return run_pass(config, out, PassOptions(**kw)).summary
 
 
 def test_pool_points_lie_on_the_truth_meshes(cable_survey):
