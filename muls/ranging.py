@@ -38,7 +38,8 @@ class Peaks:
     amplitude as optical power at the receiver [W] (Eqs. 12-13 inverted for the channel).
     echo_index: the :class:`PulseBatch` return whose echo dominates the noise-free signal at the peak (the
     way trimesh returns ``index_ray``), or -1 where no echo explains the peak (noise, the water column, the
-    window): the echo alone must reach half the detection threshold there, the level at which a run starts.
+    window): the echoes together must reach half the detection threshold there, the level at which a run
+    starts.
     """
 
     pulse: np.ndarray
@@ -142,7 +143,7 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes:
     pulse, c, time_s = pulse[order], c[order], time_s[order]
     amp, snr = out.amplitude[slot][order], out.snr[slot][order]
     power_w = amp / chans.lsb_per_w[c]  # MULS Eqs. 12-13 inverted
-    # The echo that explains a peak must reach half the threshold (k sigma, sigma = amp / snr) on its own.
+    # The echoes behind a peak must reach half the threshold (k sigma, sigma = amp / snr) there together.
     need_w = 0.5 * proc.threshold_sigma * (amp / snr) / chans.lsb_per_w[c]
     echo = dominant_echo(pulse, time_s, need_w, echoes, model.basis, ins.pulse.duration_s)
     peaks = Peaks(pulse, c, time_s, range_m[order], amp, snr, out.saturated[slot][order], power_w, echo)
@@ -151,7 +152,8 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes:
 
 def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, extent_s: float) -> np.ndarray:
     """(n,) int64: the :class:`PulseBatch` return whose echo gives the most noise-free power at each peak
-    (``pulse`` (n,) batch index, ``time_s`` (n,) [s]), or -1 where that power is below ``need_w`` (n,) [W]."""
+    (``pulse`` (n,) batch index, ``time_s`` (n,) [s]), or -1 where the echoes together give less than
+    ``need_w`` (n,) [W] there (a footprint's sub-ray echoes add up: one of them alone may be faint)."""
     best = _dominant(np.asarray(pulse, np.int64), np.asarray(time_s, float), np.asarray(need_w, float),
                      echoes.offsets, echoes.delay_s, echoes.energy_j, basis, extent_s)
     out = np.full(best.shape, -1, np.int64)
@@ -164,14 +166,16 @@ def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent):
     out = np.full(pulse.shape[0], -1, np.int64)
     for i in range(pulse.shape[0]):
         p = pulse[i]
-        top = need_w[i]
+        total, top, best = 0.0, 0.0, -1
         for j in range(offsets[p], offsets[p + 1]):
             u = time_s[i] - delay[j]
             if 0.0 <= u < extent:
                 power = energy[j] * pulse_value(u, basis)
-                if power >= top:
-                    top = power
-                    out[i] = j
+                total += power
+                if power > top:
+                    top, best = power, j
+        if total >= need_w[i]:
+            out[i] = best
     return out
 
 
