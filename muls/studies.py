@@ -22,9 +22,11 @@ import time
 
 import numpy as np
 
+from .detection import digitise
 from .errors import ParameterError, check_fraction, check_positive
+from .peaks import Peaks
 from .presets import POND_GATE_S, POOL_GATE_S, coaxial, mul2023, single_channel, water_preset
-from .ranging import DROPOUT_CAUSES, Peaks
+from .ranging import DROPOUT_CAUSES, range_batch
 from .simulate import simulate
 from .water import Water
 from .waveform import OpticalModel, PulseBatch
@@ -470,9 +472,6 @@ def bench_study(pulses: int = 100_000, full_pulses: int = 10_000, water: str | W
     compiles the kernels. Each mode is timed ``repeats`` times; the reported rate is the median, with the
     digitise / ranging split of that run (``simulate`` is exactly ``digitise`` then ``range_batch``).
     """
-    from .detection import digitise
-    from .ranging import range_batch
-
     pulses = _shots("pulses", pulses)
     full_pulses = _shots("full_pulses", full_pulses)
     repeats = _shots("repeats", repeats)

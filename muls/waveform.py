@@ -44,7 +44,7 @@ class ColumnTables:
     s0b: np.ndarray
 
     @classmethod
-    def build(cls, instrument: Instrument, water: Water, step_s: float = COLUMN_TABLE_STEP_S) -> "ColumnTables":
+    def build(cls, instrument: Instrument, water: Water, step_s: float = COLUMN_TABLE_STEP_S) -> ColumnTables:
         a, b, _, _, _ = instrument.pulse.basis()
         dig = instrument.digitizer
         n = int(math.ceil((dig.record_length_s + 4.0 * instrument.pulse.duration_s) / step_s)) + 2
@@ -93,7 +93,8 @@ class PulseBatch:
         m = self.return_pulse.shape[0]
         if self.return_range_m.shape != (m,) or self.return_weight_per_sr.shape != (m,):
             raise ParameterError("return_range_m and return_weight_per_sr must have the shape of return_pulse")
-        if self.column_cut_m.ndim != 2 or self.column_cut_m.shape[0] != n or self.column_cut_weight.shape != self.column_cut_m.shape:
+        cuts = self.column_cut_m
+        if cuts.ndim != 2 or cuts.shape[0] != n or self.column_cut_weight.shape != cuts.shape:
             raise ParameterError("column_cut_m and column_cut_weight must be (n_pulses, n_cuts)")
         if self.background_w.shape != (n,):
             raise ParameterError("background_w must be (n_pulses,)")
@@ -110,7 +111,7 @@ class PulseBatch:
 
     @classmethod
     def flat_target(cls, instrument: Instrument, range_m, reflectance=0.1, incidence_rad=0.0,
-                    pulse_id=None, background_w=None) -> "PulseBatch":
+                    pulse_id=None, background_w=None) -> PulseBatch:
         """One flat Lambertian target per pulse at ``range_m`` (n,) [m], the beam filling it (Eq. 7, 11).
 
         ``reflectance`` must lie in [0, 1]; a range of inf means the pulse meets nothing.
@@ -181,7 +182,7 @@ class OpticalModel:
     tables: ColumnTables
 
     @classmethod
-    def build(cls, instrument: Instrument, water: Water) -> "OpticalModel":
+    def build(cls, instrument: Instrument, water: Water) -> OpticalModel:
         return cls(instrument, water, ColumnTables.build(instrument, water))
 
     @cached_property
@@ -206,7 +207,7 @@ class OpticalModel:
     def clip_table(self) -> ClipTable:
         return ClipTable.build(self.instrument.pulse, self.instrument.digitizer.sample_interval_s)
 
-    def cuts(self, batch: "PulseBatch") -> ColumnCuts:
+    def cuts(self, batch: PulseBatch) -> ColumnCuts:
         return ColumnCuts(2.0 * batch.column_cut_m / self.water.speed_m_s, batch.column_cut_weight,
                           batch.background_w)
 

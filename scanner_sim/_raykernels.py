@@ -66,7 +66,7 @@ class HitRows(NamedTuple):
     seen: np.ndarray
 
     @classmethod
-    def empty(cls, n: int) -> "HitRows":
+    def empty(cls, n: int) -> HitRows:
         return cls(np.empty(n, np.int64), np.empty(n, np.int32), np.empty(n), np.empty((n, 3)),
                    np.empty((n, 3), np.float32), np.empty(n), np.empty(n), np.empty(n, np.int16),
                    np.empty(n, np.int32), np.empty(n), np.empty(n, np.float32), np.empty(n))

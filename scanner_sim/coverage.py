@@ -105,7 +105,7 @@ class PlanGrid:
     shape: tuple[int, int]
 
     @classmethod
-    def over(cls, x_range_m, y_range_m, cell_m: float) -> "PlanGrid":
+    def over(cls, x_range_m, y_range_m, cell_m: float) -> PlanGrid:
         nx = max(1, math.ceil((x_range_m[1] - x_range_m[0]) / cell_m - 1e-9))
         ny = max(1, math.ceil((y_range_m[1] - y_range_m[0]) / cell_m - 1e-9))
         return cls((float(x_range_m[0]), float(y_range_m[0])), float(cell_m), (ny, nx))

@@ -46,3 +46,10 @@ LABELS: dict[str, int] = {
     "pipeline": 69,
     "debris": 70,
 }
+
+#: LAS class of a return that no echo explains (noise, a false alarm on the water column): ASPRS class 7,
+#: "low point (noise)", which LAS tools treat as noise. It is not a label a scene can give a surface.
+NOISE_CLASS = 7
+
+#: Class code -> name, for legends: the labels and noise.
+CLASS_NAMES: dict[int, str] = {code: name for name, code in LABELS.items()} | {NOISE_CLASS: "noise"}

@@ -22,8 +22,8 @@ def raycast_overlap(distances_m, geometry, subrays_count: int = 61, profile: str
     o = np.asarray(origin_m, float)
     for z in np.asarray(distances_m, float):  # one small scene per distance
         scene = plate_scene(float(z), size_m=max(4.0, 4.0 * z), origin_m=o)
-        one = lambda v: np.asarray(v, float)[None, :]  # noqa: E731
-        hits = cast_beams(RayCaster.for_scene(scene), scene, one(o), one([0, 0, -1]), one([1, 0, 0]), one(o + [geometry.offset_m, 0, 0]),
-                          one([0, 0, -1]), pattern, geometry, shadow_rays=shadow_rays)
+        down = np.array([[0.0, 0.0, -1.0]])
+        hits = cast_beams(RayCaster.for_scene(scene), scene, o[None, :], down, np.array([[1.0, 0.0, 0.0]]),
+                          o[None, :] + [geometry.offset_m, 0, 0], down, pattern, geometry, shadow_rays=shadow_rays)
         out.append(hits.seen_fraction()[0])
     return np.array(out)

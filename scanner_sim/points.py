@@ -13,15 +13,14 @@ import numpy as np
 
 from muls.ranging import Ranging
 
+from .materials import NOISE_CLASS
 from .raycast import Hits
 from .records import PointRecords
 
 #: Intensity scale: log10 of the echo's peak optical power [W] from 1 nW (0) to 1 W (65535).
 INTENSITY_LOG10_RANGE_W = (-9.0, 0.0)
 
-#: LAS class of a return that no echo explains (noise, a false alarm on the water column): ASPRS class 7,
-#: "low point (noise)", which LAS tools treat as noise. Its object_id is -1.
-NOISE_CLASS = 7
+#: object_id of a point that no object made (a noise return, class :data:`NOISE_CLASS`).
 NO_OBJECT = -1
 
 

@@ -1,8 +1,8 @@
 """Ray-throughput benchmark: the pipeline's ray stage against raw embreex on the same rays, in one run.
 
 The rays are a scan-ordered chunk of a real pass (the middle of the scene's pass, ``pulses`` pulses with
-``subrays`` sub-rays each), plus the shadow rays the receiver check casts for them (one slot per hit; hits outside the FOV cone get
-an empty ray that Embree skips, in both timings). *Pipeline* times
+``subrays`` sub-rays each), plus the shadow rays the receiver check casts for them (one slot per hit; hits
+outside the FOV cone get an empty ray that Embree skips, in both timings). *Pipeline* times
 :func:`scanner_sim.raycast.cast_beams` end to end: world beam rays in, :class:`Hits` out (sub-ray
 generation, local-frame float32 conversion, first hits, hit attributes, FOV cone, shadow rays). *Raw* times
 only embreex's two calls (first-hit query with distances, occlusion query), each once over the whole

@@ -98,7 +98,7 @@ class RayCaster:
             self._numpy = RayMeshIntersector(self._mesh)
 
     @classmethod
-    def for_scene(cls, scene, backend: str = "auto") -> "RayCaster":
+    def for_scene(cls, scene, backend: str = "auto") -> RayCaster:
         """The caster over a :class:`scanner_sim.scene.Scene`'s mesh in its local frame (builds the BVH)."""
         return cls(scene.vertices - scene.local_origin, scene.faces, backend=backend)
 
@@ -231,7 +231,7 @@ class ReceiverCone:
     cos_half_fov: float
 
     @classmethod
-    def from_geometry(cls, geometry) -> "ReceiverCone":
+    def from_geometry(cls, geometry) -> ReceiverCone:
         """From a :class:`muls.overlap.TransceiverGeometry`."""
         half = 0.5 * geometry.fov_full_rad
         return cls(apex_behind_m=0.5 * geometry.receiver_diameter_m / math.tan(half), cos_half_fov=math.cos(half))
@@ -252,7 +252,7 @@ def shadow_offset_m(local_extent_m: float) -> float:
     return max(1e-5, 1e-6 * float(local_extent_m))
 
 
-def cast_beams(caster: "RayCaster", scene, beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: np.ndarray,
+def cast_beams(caster: RayCaster, scene, beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: np.ndarray,
                rx_origin: np.ndarray, rx_dir: np.ndarray, pattern: BeamPattern, geometry,
                shadow_rays: bool = True) -> Hits:
     """Cast the sub-rays of a chunk of pulses into ``scene`` and check each hit against the receiver.

@@ -55,7 +55,7 @@ class Scanner:
             raise ParameterError("scanner: pulse_rate_hz and scan_rate_hz must be > 0, sector in (0, 360] deg")
 
     @classmethod
-    def from_config(cls, cfg, instrument) -> "Scanner":
+    def from_config(cls, cfg, instrument) -> Scanner:
         """From a :class:`scanner_sim.config.ScannerConfig` and the muls instrument (pulse rate, offset d)."""
         return cls(
             mode=cfg.mode, scan_rate_hz=cfg.scan_rate_hz, sector_rad=math.radians(cfg.sector_deg),

@@ -15,7 +15,7 @@ import numpy as np
 
 from muls.ranging import DROPOUT_CAUSES
 
-from . import io
+from . import io, viz
 from .coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
 
 #: Resolution and extent of the streaming |range error| histogram behind the summary's quantiles [m].
@@ -146,8 +146,6 @@ def render_pass(setup, out: Path, window_size=(1600, 1000), max_points: int = 1_
     """render.png: the point cloud coloured by class over the faded truth mesh (decimated read-back)."""
     import laspy
 
-    from . import viz
-
     with laspy.open(out / "points.las") as reader:
         stride = max(1, math.ceil(reader.header.point_count / max_points))
         xyz, cls = [], []
@@ -171,8 +169,6 @@ def pass_label(setup) -> str:
 
 def render_coverage_map(setup, coverage: CoverageAccumulator, path: Path, summary: dict) -> None:
     """coverage_map.png: plan cells covered or missed by cause, cables drawn along, objects marked."""
-    from . import viz
-
     scene = setup.scene
     lines = [(o.name, o.centreline[:, :2]) for o in scene.objects if o.centreline is not None]
     markers = []

@@ -16,11 +16,13 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+from tqdm import tqdm
 
 from muls.ranging import Ranging
 from muls.simulate import simulate
 from muls.waveform import OpticalModel, PulseBatch
 
+from . import io, sinks
 from .beams import BeamPattern, beam_pattern
 from .config import SceneConfig
 from .coverage import CoverageSettings, Footprint, nominal_footprint
@@ -87,7 +89,7 @@ class PassSetup:
 
     @classmethod
     def build(cls, config: SceneConfig, options: PassOptions = PassOptions(), scene: Scene | None = None
-              ) -> "PassSetup":
+              ) -> PassSetup:
         """``scene``: the already built :class:`Scene` of ``config`` to reuse, if any."""
         config = config.with_overrides(options.scene_overrides())
         survey = config.survey
@@ -204,10 +206,6 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     scene, BVH and tables built before it. A scene with a seabed also gets its coverage: the summary's
     ``coverage``, coverage_grid.npz and, when rendering, coverage_map.png. ``scene`` reuses a built scene.
     """
-    from tqdm import tqdm
-
-    from . import io, sinks
-
     t_setup = time.perf_counter()
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup

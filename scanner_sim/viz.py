@@ -2,10 +2,13 @@
 
 This is the only module of ``scanner_sim`` that imports plotting or rendering libraries, and it
 imports them inside the functions, so ``import scanner_sim`` stays light and works without a
-display. Every picture is written atomically (:func:`scanner_sim.io.atomic_path`).
+display. Every picture is written atomically (:func:`scanner_sim.io.atomic_path`). It is longer than the
+other modules on purpose: the lint rule that keeps plotting libraries out of the rest of the package makes
+it the one home of every picture.
 
 Class colours (:data:`CLASS_COLOURS`) are keyed by the scene's label *names*; the codes come from
-the scene label table (``scanner_sim.scene.LABELS``, ``docs/scene-format.md``):
+the class table (``scanner_sim.materials.CLASS_NAMES``: the scene labels of ``docs/scene-format.md``, and
+noise):
 
 =================  =========================  ==========
 label name         colour                     RGB
@@ -22,6 +25,7 @@ object             light blue                 110 180 230
 debris             olive                      150 140  90
 vegetation, algae  green                       60 160  60
 unlabelled, none   dark grey                   70  70  70
+noise (LAS 7)      magenta                    255   0 255
 =================  =========================  ==========
 
 Other names take a colour from a fixed qualitative cycle indexed by their code.
@@ -29,11 +33,12 @@ Other names take a colour from a fixed qualitative cycle indexed by their code.
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from .io import atomic_path
+from .materials import CLASS_NAMES
 
 __all__ = [
     "CLASS_COLOURS",
@@ -69,13 +74,13 @@ CLASS_COLOURS: dict[str, tuple[int, int, int]] = {
     "algae": (60, 160, 60),
     "unlabelled": (70, 70, 70),
     "none": (70, 70, 70),
+    "noise": (255, 0, 255),
 }
 
 _CYCLE = [(31, 119, 180), (44, 160, 44), (148, 103, 189), (23, 190, 207), (188, 189, 34),
           (227, 119, 194), (255, 187, 120), (152, 223, 138), (197, 176, 213), (158, 218, 229)]
 
 #: Fallback code -> name table, used only when ``scanner_sim.scene.LABELS`` cannot be read.
-_FALLBACK_CLASS_NAMES: dict[int, str] = {0: "unlabelled", 40: "seabed"}
 
 #: ``color_by`` value -> (matplotlib colour map, scalar bar title, symmetric limits?).
 SCALAR_COLOUR_MAPS: dict[str, tuple[str, str, bool]] = {
@@ -91,27 +96,11 @@ _BACKGROUND = "#0b1a2a"  # deep-water navy: white panels and the grey truth mesh
 
 
 def class_table(class_names: Mapping[int, str] | None = None) -> dict[int, str]:
-    """Class code -> label name.
-
-    ``class_names`` wins when given; otherwise the scene label table ``scanner_sim.scene.LABELS``
-    (either name -> code or code -> name), and a minimal fallback if the scene module is absent.
-    """
+    """Class code -> name: ``class_names`` when given, else the scene labels and noise
+    (:data:`scanner_sim.materials.CLASS_NAMES`)."""
     if class_names is not None:
         return {int(k): str(v) for k, v in class_names.items()}
-    try:
-        from .materials import LABELS  # the label table
-    except Exception:  # noqa: BLE001 - no scene module (yet): fall back, colours still work
-        return dict(_FALLBACK_CLASS_NAMES)
-    table: dict[int, str] = {}
-    items = LABELS.items() if isinstance(LABELS, Mapping) else enumerate(LABELS)
-    for k, v in items:
-        code, name = (v, k) if isinstance(k, str) else (k, v)
-        code = getattr(code, "code", code)
-        try:
-            table[int(code)] = str(getattr(name, "name", name))
-        except (TypeError, ValueError):
-            return dict(_FALLBACK_CLASS_NAMES)
-    return table
+    return dict(CLASS_NAMES)
 
 
 def _class_colour(code: int, name: str | None) -> tuple[int, int, int]:

@@ -5,8 +5,16 @@ import pytest
 
 from muls.errors import ParameterError
 from scanner_sim.config import load_scene, parse_scene
-from scanner_sim.coverage import (COVERED, GAP_CAUSES, NOT_REACHED, CableBins, CoverageAccumulator, CoverageSettings,
-                                  Footprint, PlanGrid)
+from scanner_sim.coverage import (
+    COVERED,
+    GAP_CAUSES,
+    NOT_REACHED,
+    CableBins,
+    CoverageAccumulator,
+    CoverageSettings,
+    Footprint,
+    PlanGrid,
+)
 from scanner_sim.records import DROPOUT_CAUSES, DropoutRecords, PointRecords
 from scanner_sim.scene import build_scene
 from scanner_sim.survey import PassOptions, run_pass

@@ -3,11 +3,11 @@
 import base64
 import contextlib
 import io as stdio
+import json
 import os
+import re
 import shutil
 import subprocess
-import json
-import re
 from html.parser import HTMLParser
 
 import numpy as np

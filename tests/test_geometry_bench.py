@@ -2,8 +2,8 @@
 
 import pytest
 
-from scanner_sim.raycast import tune_memory
 from scanner_sim.raybench import bench_rays
+from scanner_sim.raycast import tune_memory
 
 REQUIRED_RATIO = 0.8  # issue 3 acceptance
 

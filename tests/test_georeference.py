@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from scanner_sim.config import parse_scene
-from scanner_sim.points import NOISE_CLASS, NO_OBJECT
+from scanner_sim.points import NO_OBJECT, NOISE_CLASS
 from scanner_sim.scene import LABELS
 from scanner_sim.survey import PassOptions, PassSetup
 

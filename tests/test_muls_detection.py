@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from muls import mul2023, water_preset
+from muls.channels import shot_noise_lsb2_per_w
 from muls.noise import standard_normal
 from muls.ranging import DROPOUT_CAUSES, NO_DROPOUT
 from muls.simulate import simulate
-from muls.channels import shot_noise_lsb2_per_w
 from muls.waveform import OpticalModel, PulseBatch
 
 RANGE_TOL_NOISE_FREE_M = 0.01
@@ -193,7 +193,7 @@ def test_regression_second_plateau_explained_by_the_first_echo_does_not_hang():
     single_channel coastal water). Once the first echo's model was taken off, the second plateau's clip level
     was negative, log() gave NaN, the peak index -inf, and adding that echo's model looped ~2^63 times.
     A plateau whose clip level the echoes before it already explain is not ranged; the grid lookup is total."""
-    from muls.ranging import _on_geometric_grid
+    from muls.peaks import _on_geometric_grid
 
     ratio, rise, _ = _model().clip_table
     for x in (0.0, -1.0, float("nan")):
@@ -215,7 +215,6 @@ def test_regression_second_plateau_explained_by_the_first_echo_does_not_hang():
 
 def test_two_echoes_in_one_footprint_give_two_returns_and_close_ones_merge():
     model = _model()
-    ins = model.instrument
 
     def batch_for(ranges):
         n = 20

@@ -9,8 +9,14 @@ import pytest
 
 from muls import Digitizer, ParameterError, PulseShape, Transmitter, Water, mul2023, water_preset
 from muls.presets import coaxial
-from muls.radiometry import (background_power_w, column_density_per_m, lambertian_weight, target_factor,
-                             two_way_transmission, window_factor)
+from muls.radiometry import (
+    background_power_w,
+    column_density_per_m,
+    lambertian_weight,
+    target_factor,
+    two_way_transmission,
+    window_factor,
+)
 from muls.waveform import OpticalModel
 
 REL_TOL_TABLE = 2e-3  # column tables: trapezoid rule on a 25 ps grid

@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 
 from muls import studies
-from muls.presets import POND_GATE_S, POOL_GATE_S
-from muls.ranging import Peaks
-from muls.presets import water_preset
+from muls.peaks import Peaks
+from muls.presets import POND_GATE_S, POOL_GATE_S, water_preset
 
 MAXRANGE_KEYS = {"single_channel_m", "near_field_m", "far_field_m", "total_m", "improvement"}
 CHANNEL_KEYS = {"precision_m", "mean_deviation_m", "detected_fraction", "saturated_fraction"}

@@ -1,0 +1,355 @@
+"""Peaks in the digitised records, as the instrument finds them: runs over the local baseline, sub-sample
+refinement on the known pulse shape, ranges from the CH0 reference peak (MULS Eq. 14), and the echo behind
+each peak.
+
+The baseline of each channel is the calibrated no-target record of the water (column backscatter plus
+background, as measured in open water), and its noise the dark noise plus the shot noise of that baseline:
+the processor knows its own noise model. A peak is the maximum of a run of samples whose residual over the
+baseline exceeds half the threshold, kept when the maximum exceeds the threshold (hysteresis stops noise
+on a peak's shoulder from splitting one echo in two). Echoes closer than a pulse merge into one run, and
+its range is biased, as in a real instrument.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from .detection import Records
+from .waveform import Echoes, OpticalModel, PulseBatch, column_value, pulse_value
+
+#: Most peaks kept per window and channel (more means noise, not echoes).
+MAX_PEAKS_PER_WINDOW = 8
+
+
+@dataclass(frozen=True)
+class Peaks:
+    """Every peak of every signal channel (struct of arrays, shape (n,) each).
+
+    pulse: batch index; channel: 1-based index into ``instrument.channels``; time_s: after emission;
+    range_m: Eq. 14 range from the CH0 peak; amplitude_lsb: residual over the baseline at the peak;
+    snr: amplitude over the local noise; saturated: the run touched the top code; peak_power_w: the
+    amplitude as optical power at the receiver [W] (Eqs. 12-13 inverted for the channel).
+    echo_index: the :class:`PulseBatch` return whose echo dominates the noise-free signal at the peak (the
+    way trimesh returns ``index_ray``), or -1 where no echo explains the peak (noise, the water column, the
+    window): the echoes together must reach half the detection threshold there, the level at which a run
+    starts.
+    """
+
+    pulse: np.ndarray
+    channel: np.ndarray
+    time_s: np.ndarray
+    range_m: np.ndarray
+    amplitude_lsb: np.ndarray
+    snr: np.ndarray
+    saturated: np.ndarray
+    peak_power_w: np.ndarray
+    echo_index: np.ndarray
+
+    def select(self, mask) -> Peaks:
+        return Peaks(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
+
+
+FIT_CODES = {"pulse": 0, "gaussian": 1, "parabolic": 2}
+
+
+class PeakSettings(NamedTuple):
+    """Scalars of the peak kernel: threshold k [sigma], tail tolerance [-], top code, fit code (FIT_CODES),
+    the pulse's peak delay after its start [s] and its unit-area value there [1/s]."""
+
+    k_sigma: float
+    tail_tolerance: float
+    max_code: float
+    fit: int
+    peak_delay_s: float
+    peak_density: float
+
+
+class PeakSlots(NamedTuple):
+    """Output slots of the peak kernel: ``MAX_PEAKS_PER_WINDOW`` per (window, channel), ``counts`` filled."""
+
+    window: np.ndarray
+    channel: np.ndarray
+    index: np.ndarray
+    amplitude: np.ndarray
+    snr: np.ndarray
+    saturated: np.ndarray
+    counts: np.ndarray
+
+    @classmethod
+    def empty(cls, n_slots: int) -> PeakSlots:
+        cap = n_slots * MAX_PEAKS_PER_WINDOW
+        return cls(np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap), np.empty(cap), np.empty(cap),
+                   np.empty(cap, np.bool_), np.zeros(n_slots, np.int64))
+
+
+def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes: Echoes) -> tuple[Peaks, np.ndarray]:
+    """All peaks of all signal channels, with Eq. 14 ranges and the echo behind each, and the CH0 reference
+    times (n_pulses,) [s]."""
+    ins = model.instrument
+    dig = ins.digitizer
+    proc = ins.processing
+    chans = model.channels
+    n_windows, n_chan, _ = records.codes.shape
+    out = PeakSlots.empty(n_windows * n_chan)
+    fit = FIT_CODES[proc.peak_fit]
+    settings = PeakSettings(proc.threshold_sigma, proc.tail_tolerance, float(dig.max_code), fit,
+                            ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)))
+    _peaks(records.codes, records.window_pulse, records.window_start, records.phase_s, -dig.pretrigger_s,
+           dig.sample_interval_s, model.column, batch.background_w, chans.signal(), settings, model.fit_table,
+           model.clip_table, out)
+    ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], fit, model.fit_table)
+    # Gather the filled slots: slot s holds counts[s] peaks from position s * MAX_PEAKS_PER_WINDOW.
+    counts = out.counts
+    first = np.repeat(np.arange(counts.size) * MAX_PEAKS_PER_WINDOW - (np.cumsum(counts) - counts), counts)
+    slot = first + np.arange(first.size)
+    w, c, idx = out.window[slot], out.channel[slot] + 1, out.index[slot]
+    pulse = records.window_pulse[w]
+    phase = records.phase_s
+    time_s = -dig.pretrigger_s + idx * dig.sample_interval_s + phase[pulse]
+    ref_time = -dig.pretrigger_s + ref_index * dig.sample_interval_s + phase
+    offsets = np.array([0.0] + [ch.range_offset_m for ch in ins.channels])
+    range_m = 0.5 * model.water.speed_m_s * (time_s - ref_time[pulse]) + offsets[c]  # MULS Eq. 14
+    order = np.lexsort((idx, c, pulse))
+    # Overlapping windows find a run they both hold twice, identically: keep one.
+    unique = np.ones(order.size, bool)
+    unique[1:] = (pulse[order][1:] != pulse[order][:-1]) | (c[order][1:] != c[order][:-1]) | (
+        idx[order][1:] != idx[order][:-1])
+    order = order[unique]
+    order = order[np.lexsort((time_s[order], pulse[order]))]
+    pulse, c, time_s = pulse[order], c[order], time_s[order]
+    amp, snr = out.amplitude[slot][order], out.snr[slot][order]
+    power_w = amp / chans.lsb_per_w[c]  # MULS Eqs. 12-13 inverted
+    # The echoes behind a peak must reach half the threshold (k sigma, sigma = amp / snr) there together.
+    need_w = 0.5 * proc.threshold_sigma * (amp / snr) / chans.lsb_per_w[c]
+    echo = dominant_echo(pulse, time_s, need_w, echoes, model.basis, ins.pulse.duration_s)
+    peaks = Peaks(pulse, c, time_s, range_m[order], amp, snr, out.saturated[slot][order], power_w, echo)
+    return peaks, ref_time
+
+
+def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, extent_s: float) -> np.ndarray:
+    """(n,) int64: the :class:`PulseBatch` return whose echo gives the most noise-free power at each peak
+    (``pulse`` (n,) batch index, ``time_s`` (n,) [s]), or -1 where the echoes together give less than
+    ``need_w`` (n,) [W] there (a footprint's sub-ray echoes add up: one of them alone may be faint)."""
+    best = _dominant(np.asarray(pulse, np.int64), np.asarray(time_s, float), np.asarray(need_w, float),
+                     echoes.offsets, echoes.delay_s, echoes.energy_j, basis, extent_s)
+    out = np.full(best.shape, -1, np.int64)
+    out[best >= 0] = echoes.source[best[best >= 0]]
+    return out
+
+
+@numba.njit(cache=True)
+def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent):
+    out = np.full(pulse.shape[0], -1, np.int64)
+    for i in range(pulse.shape[0]):
+        p = pulse[i]
+        total, top, best = 0.0, 0.0, -1
+        for j in range(offsets[p], offsets[p + 1]):
+            u = time_s[i] - delay[j]
+            if 0.0 <= u < extent:
+                power = energy[j] * pulse_value(u, basis)
+                total += power
+                if power > top:
+                    top, best = power, j
+        if total >= need_w[i]:
+            out[i] = best
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _refine(y0, y1, y2, fit, table):
+    """(offset of the peak from the middle sample [samples], middle sample over peak) from three samples."""
+    den = y0 - 2.0 * y1 + y2
+    if den >= 0.0:
+        return 0.0, 1.0
+    if fit == 1 and y0 > 0.0 and y1 > 0.0 and y2 > 0.0:
+        l0, l1, l2 = math.log(y0), math.log(y1), math.log(y2)
+        d = 0.5 * (l0 - l2) / (l0 - 2.0 * l1 + l2)
+        return min(0.5, max(-0.5, d)), 1.0
+    d = 0.5 * (y0 - y2) / den
+    if fit != 0:
+        return min(0.5, max(-0.5, d)), 1.0
+    return np.interp(d, table.feature, table.offset), np.interp(d, table.feature, table.centre)
+
+
+@numba.njit(cache=True, parallel=True)
+def _reference_peaks(reference, dark_mean, fit, table):
+    """Sub-sample index of the CH0 peak of each pulse."""
+    n_pulses, n_ref = reference.shape
+    out = np.empty(n_pulses)
+    for p in numba.prange(n_pulses):
+        best = 1
+        for k in range(1, n_ref - 1):
+            if reference[p, k] > reference[p, best]:
+                best = k
+        d, _ = _refine(reference[p, best - 1] - dark_mean, reference[p, best] - dark_mean,
+                       reference[p, best + 1] - dark_mean, fit, table)
+        out[p] = best + d
+    return out
+
+
+@numba.njit(cache=True, parallel=True)
+def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
+           clip_table, out):
+    n_windows, n_chan, n_samples = codes.shape
+    cap = out.window.shape[0] // max(1, n_windows * n_chan)
+    basis = col.basis
+    lsb_per_w, gate_open, gate_close = chans.lsb_per_w, chans.gate_open_s, chans.gate_close_s
+    dark_mean, dark_std, shot = chans.dark_mean_lsb, chans.dark_std_lsb, chans.shot_lsb2_per_w
+    k_sigma, tail_tolerance, max_code = settings.k_sigma, settings.tail_tolerance, settings.max_code
+    out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts = out
+    for w in numba.prange(n_windows):
+        p = window_pulse[w]
+        times = np.empty(n_samples)
+        base_w = np.empty(n_samples)
+        for k in range(n_samples):
+            times[k] = t0 + (window_start[w] + k) * dt + phase[p]
+            base_w[k] = background[p] + column_value(times[k], np.inf, col)
+        resid = np.empty(n_samples)
+        sigma = np.empty(n_samples)
+        echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
+        open_ = np.empty(n_samples, np.bool_)
+        blind = np.empty(n_samples, np.bool_)
+        for c in range(n_chan):
+            slot = w * n_chan + c
+            # No sample over half the threshold above the dark level: no run can start (the baseline and
+            # its noise only raise the bar).
+            highest = 0
+            for k in range(n_samples):
+                highest = max(highest, codes[w, c, k])
+            if highest - dark_mean[c] <= 0.5 * k_sigma * math.sqrt(dark_std[c] ** 2 + 1.0 / 12.0):
+                continue
+            for k in range(n_samples):
+                open_[k] = gate_open[c] <= times[k] < gate_close[c]
+                base = base_w[k] if open_[k] else 0.0
+                expected = dark_mean[c] + lsb_per_w[c] * base
+                sigma[k] = math.sqrt(dark_std[c] ** 2 + shot[c] * base + 1.0 / 12.0)
+                # Where the backscatter alone clips the channel, nothing can be seen in it.
+                blind[k] = expected >= max_code
+                resid[k] = 0.0 if blind[k] else codes[w, c, k] - expected
+                echoes[k] = 0.0
+            k = 0
+            while k < n_samples:
+                if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
+                    k += 1
+                    continue
+                start = k
+                top = k
+                clipped_first = -1
+                clipped_last = -1
+                while k < n_samples and resid[k] - echoes[k] > 0.5 * k_sigma * sigma[k]:
+                    if resid[k] - echoes[k] > resid[top] - echoes[top]:
+                        top = k
+                    if codes[w, c, k] >= max_code:
+                        if clipped_first < 0:
+                            clipped_first = k
+                        clipped_last = k
+                    k += 1
+                # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
+                # threshold there, over what the echoes already found leave if their shape is a little off.
+                if start == 0 or k >= n_samples:
+                    continue
+                if clipped_first < 0 and (top == start or not open_[top - 1]):
+                    continue  # no rising edge inside the gate: a gate opening on a tail, not an echo
+                if clipped_first >= 0:
+                    # The plateau may have begun before the run did (clipped samples with a small residual on a
+                    # high baseline): it must rise from a sample the channel sees, or its width is unknown.
+                    # A plateau that runs through samples the backscatter alone clips began in the column.
+                    through_blind = False
+                    while clipped_first > 0 and codes[w, c, clipped_first - 1] >= max_code:
+                        clipped_first -= 1
+                        through_blind = through_blind or blind[clipped_first]
+                    if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
+                        continue
+                if blind[top - 1]:
+                    continue
+                height = resid[top] - echoes[top]
+                if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
+                    continue
+                if counts[slot] >= cap:
+                    continue
+                if clipped_first >= 0:
+                    # Clipped: the plateau and the clip levels at its ends (over a baseline that may slope) give
+                    # amplitude and peak time through the known pulse shape. A clip level that the echoes found
+                    # before already explain leaves the plateau's edge, so its width, unknown.
+                    level_first = resid[clipped_first] - echoes[clipped_first]
+                    level_last = resid[clipped_last] - echoes[clipped_last]
+                    if not (level_first > 0.0 and level_last > 0.0):
+                        continue
+                    idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_table)
+                    idx += window_start[w]
+                else:
+                    d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
+                                       settings.fit, fit_table)
+                    idx = float(window_start[w] + top) + d
+                    amp = height / ratio
+                    k = top + 1  # look again behind this echo once its modelled shape is taken off
+                u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
+                _add_echo(echoes, top + 1, u, dt, amp / settings.peak_density, basis)
+                j = slot * cap + counts[slot]
+                out_w[j] = w
+                out_c[j] = c
+                out_idx[j] = idx
+                out_amp[j] = amp
+                out_snr[j] = amp / sigma[top]
+                out_sat[j] = clipped_first >= 0
+                counts[slot] += 1
+
+
+@numba.njit(cache=True, inline="always")
+def _add_echo(echoes, first, u, dt, scale, basis):
+    """echoes[first:] += scale * w(u + i dt): the pulse basis steps by constant factors, two exps in all."""
+    if u < 0.0:  # the echo starts after this sample: first sample at or after its start
+        skip = int(math.ceil(-u / dt))
+        first += skip
+        u += skip * dt
+    if first >= echoes.shape[0]:
+        return
+    ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
+    ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
+    for j in range(first, echoes.shape[0]):
+        echoes[j] += scale * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
+        u += dt
+        ea *= ra
+        eb *= rb
+
+
+@numba.njit(cache=True, inline="always")
+def _on_geometric_grid(x, ratio, table):
+    """Linear interpolation of ``table`` at ``x`` on the geometric grid ``ratio`` (O(1): index from log x)."""
+    n = ratio.shape[0]
+    if not x > ratio[0]:  # also x <= 0 and NaN: below the grid
+        return table[0]
+    pos = (math.log(x) - math.log(ratio[0])) / (math.log(ratio[n - 1]) - math.log(ratio[0])) * (n - 1)
+    if pos <= 0.0:
+        return table[0]
+    if pos >= n - 1:
+        return table[n - 1]
+    i = int(pos)
+    f = pos - i
+    return table[i] + f * (table[i + 1] - table[i])
+
+
+@numba.njit(cache=True)
+def _clipped_peak(first, last, level_first, level_last, table):
+    """(peak index [samples], amplitude) of an echo clipped from sample ``first`` to ``last``, where the clip
+    level above the baseline was ``level_first`` and ``level_last``: the amplitude A whose pulse exceeds those
+    levels for exactly the plateau's width (rising and falling crossings half a sample outside it)."""
+    ratio, rise, fall = table.ratio, table.rise, table.fall
+    width = last - first + 1.0
+    lo = math.log(max(level_first, level_last, 1e-9))
+    hi = lo + math.log(1.0 / ratio[0])
+    for _ in range(32):  # bisection on log A: 2^-32 of the bracket
+        mid = 0.5 * (lo + hi)
+        a = math.exp(mid)
+        span = _on_geometric_grid(level_first / a, ratio, rise) + _on_geometric_grid(level_last / a, ratio, fall)
+        if span < width:
+            lo = mid
+        else:
+            hi = mid
+    a = math.exp(0.5 * (lo + hi))
+    return first - 0.5 + _on_geometric_grid(level_first / a, ratio, rise), a
