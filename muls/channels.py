@@ -34,7 +34,7 @@ class ChannelArrays(NamedTuple):
     shot_lsb2_per_w: np.ndarray
 
     @classmethod
-    def of(cls, instrument: Instrument) -> "ChannelArrays":
+    def of(cls, instrument: Instrument) -> ChannelArrays:
         dig = instrument.digitizer
         chans = instrument.channels
         lsb = np.array([0.0] + [ch.volts_per_watt * dig.lsb_per_volt for ch in chans])  # MULS Eqs. 12, 13
@@ -45,6 +45,6 @@ class ChannelArrays(NamedTuple):
         shot = np.array([0.0] + [shot_noise_lsb2_per_w(ch, dig.bandwidth_hz, dig.lsb_per_volt) for ch in chans])
         return cls(lsb, gate_open, gate_close, mean, std, shot)
 
-    def signal(self) -> "ChannelArrays":
+    def signal(self) -> ChannelArrays:
         """The signal channels only (CH0 dropped): what the digitiser and peak kernels index by channel."""
         return ChannelArrays(*(a[1:] for a in self))

@@ -16,8 +16,16 @@ import numba
 import numpy as np
 
 from .errors import check_choice
-from .noise import (FIRST_SIGNAL_STREAM, PHASE_STREAM, REFERENCE_STREAM, normal_at, normal_pair_at, seed_key,
-                    stream_base, uniform_at)
+from .noise import (
+    FIRST_SIGNAL_STREAM,
+    PHASE_STREAM,
+    REFERENCE_STREAM,
+    normal_at,
+    normal_pair_at,
+    seed_key,
+    stream_base,
+    uniform_at,
+)
 from .waveform import Echoes, OpticalModel, PulseBatch, column_value, pulse_value
 
 RECORD_MODES = ("windowed", "full")

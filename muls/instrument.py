@@ -10,8 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
-from .errors import (ParameterError, check_choice, check_fraction, check_non_negative,
-                     check_positive)
+from .errors import ParameterError, check_choice, check_fraction, check_non_negative, check_positive
 from .overlap import TransceiverGeometry
 from .pulse import PulseShape
 
@@ -113,7 +112,7 @@ class Channel:
         """V_i / P_T [V/W] of this channel."""
         return self.split_ratio * self.voltage_ratio * self.sensitivity_a_per_w * self.gain * self.load_ohm  # MULS Eq. 12
 
-    def with_gate(self, delay_s: float | None, width_s: float | None) -> "Channel":
+    def with_gate(self, delay_s: float | None, width_s: float | None) -> Channel:
         return replace(self, gate_delay_s=delay_s, gate_width_s=width_s)
 
 
@@ -228,7 +227,7 @@ class Instrument:
                 return ch
         raise ParameterError(f"channel = {name!r}: instrument '{self.name}' has {', '.join(self.channel_names)}")
 
-    def with_channel(self, name: str, **changes) -> "Instrument":
+    def with_channel(self, name: str, **changes) -> Instrument:
         """Copy with one channel's fields changed (for example its gate)."""
         self.channel(name)
         return replace(self, channels=tuple(replace(ch, **changes) if ch.name == name else ch for ch in self.channels))

@@ -24,7 +24,7 @@ class FitTable(NamedTuple):
     centre: np.ndarray
 
     @classmethod
-    def build(cls, pulse: PulseShape, sample_interval_s: float) -> "FitTable":
+    def build(cls, pulse: PulseShape, sample_interval_s: float) -> FitTable:
         dt = sample_interval_s
         offset = np.linspace(-0.5, 0.5, 1001)
 
@@ -46,7 +46,7 @@ class ClipTable(NamedTuple):
     fall: np.ndarray
 
     @classmethod
-    def build(cls, pulse: PulseShape, sample_interval_s: float) -> "ClipTable":
+    def build(cls, pulse: PulseShape, sample_interval_s: float) -> ClipTable:
         dt = sample_interval_s
         u = np.linspace(0.0, 2.0 * pulse.duration_s, 80001)
         f = pulse(u) / pulse(pulse.peak_delay_s)

@@ -74,7 +74,7 @@ class Water:
         check_choice("backscatter_model", self.backscatter_model, BACKSCATTER_MODELS)
 
     @classmethod
-    def from_attenuation(cls, name: str, attenuation_per_m: float, absorption_per_m: float, **kw) -> "Water":
+    def from_attenuation(cls, name: str, attenuation_per_m: float, absorption_per_m: float, **kw) -> Water:
         """Build from measured c and a (as the paper's pool and pond were measured), b = c - a."""
         check_non_negative(f"water '{name}': attenuation_per_m", attenuation_per_m)
         check_non_negative(f"water '{name}': absorption_per_m", absorption_per_m)
@@ -133,7 +133,7 @@ class Water:
         """Group velocity of light in this water [m/s] (used for all times of flight, Eq. 14)."""
         return SPEED_OF_LIGHT_M_S / self.group_index
 
-    def with_models(self, attenuation_model: str | None = None, backscatter_model: str | None = None) -> "Water":
+    def with_models(self, attenuation_model: str | None = None, backscatter_model: str | None = None) -> Water:
         """Copy with other attenuation / backscatter options."""
         return replace(
             self,
