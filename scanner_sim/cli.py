@@ -13,6 +13,8 @@ import json
 import sys
 from collections.abc import Callable
 
+from .fidelity import FIDELITY_LEVELS
+
 SUBCOMMANDS: dict[str, Callable] = {}
 
 
@@ -181,7 +183,7 @@ def _add_run(sub):
     p.add_argument("--out", help="output directory (default: the scene's output.dir)")
     p.add_argument("--water", help="water preset instead of the scene's (clean_ocean, coastal_ocean, ...)")
     p.add_argument("--seed", type=int, help="seed of the pass (default: the scene's survey.seed)")
-    p.add_argument("--fidelity", choices=["fast", "balanced", "reference"])
+    p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS))
     p.add_argument("--max-pulses", type=int, help="stop after this many pulses")
     p.add_argument("--chunk-pulses", type=int, help="pulse slots per chunk (memory vs overhead)")
     p.add_argument("--waveforms", type=int, default=0, help="also write the full records of N sampled pulses")
@@ -233,7 +235,7 @@ def _cmd_bench(args) -> int:
     if args.json:
         print(json.dumps(result))
     else:
-        for fidelity in ("fast", "balanced", "reference"):
+        for fidelity in FIDELITY_LEVELS:
             r = result[fidelity]
             print(f"{fidelity:10s} {r['pulses_per_s']:>10,.0f} pulses/s  raw embreex {r['raw_embreex_pulses_per_s']:>10,.0f}"
                   f" pulses/s  ratio {r['ratio_to_raw_rays']:.2f}")
@@ -319,7 +321,7 @@ def _add_coverage(sub):
     p.add_argument("--tolerance-m", type=float, default=CoverageSettings.tolerance_m,
                    help="largest |range error| of a valid point [m] (default: %(default)s, IHO S-44 Exclusive Order)")
     p.add_argument("--out", help="output directory (default: the scene's output.dir + /coverage)")
-    p.add_argument("--fidelity", choices=["fast", "balanced", "reference"])
+    p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS))
     p.add_argument("--seed", type=int, help="seed of every pass (default: the scene's survey.seed)")
     p.add_argument("--max-pulses", type=int, help="stop each pass after this many pulses")
     p.add_argument("--no-render", action="store_true", help="tables and coverage.json only: no pictures, no report")

@@ -18,6 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from tqdm import tqdm
 
+from muls.radiometry import background_power_w
 from muls.ranging import Ranging
 from muls.simulate import simulate
 from muls.waveform import OpticalModel, PulseBatch
@@ -143,7 +144,7 @@ class PassSetup:
         beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(self.trajectory.poses(times))
         hits = cast_beams(self.caster, self.scene, beam_o, beam_d, shaft, rx_o, rx_d, self.pattern,
                           self.model.instrument.geometry, self.level.shadow_rays)
-        batch = pulse_batch(hits, slots, self.model)
+        batch = pulse_batch(hits, slots, self.model, self.config.water.background_radiance_w_m2_sr_nm)
         records, ranging = simulate(self.model, batch, self.seed, record_mode or self.level.record_mode)
         sight = self.lines_of_sight(slots, times, ranging)
         lost = ranging.dropout_cause >= 0
@@ -169,13 +170,15 @@ def hit_echo_range_m(hits: Hits) -> np.ndarray:
     return 0.5 * (hits.range_m + hits.rx_distance_m)
 
 
-def pulse_batch(hits: Hits, slots: np.ndarray, model: OpticalModel) -> PulseBatch:
+def pulse_batch(hits: Hits, slots: np.ndarray, model: OpticalModel, background_radiance: float = 0.0) -> PulseBatch:
     """The muls input of a chunk: one echo per sub-ray hit (return i is hit i), the column cut where the
-    beam's energy stops.
+    beam's energy stops, and the background light.
 
     Echo weight (Eq. 7 per sub-ray): w_j (rho_j / pi) cos(theta_j) x receiver weight. The column of the
     footprint is cut at the energy-weighted mean hit range for the share of the beam that hits, and runs to
-    the record's end for the share that misses (two cuts per pulse).
+    the record's end for the share that misses (two cuts per pulse). The background (Eqs. 8-10) of artificial
+    light of spectral radiance ``background_radiance`` [W/(m^2 sr nm)] sees the footprint's mean range and
+    reflectance.
     """
     n = slots.shape[0]
     echo_range = hit_echo_range_m(hits)
@@ -185,9 +188,14 @@ def pulse_batch(hits: Hits, slots: np.ndarray, model: OpticalModel) -> PulseBatc
     mean_range = np.divide(mean_range, hit_share, out=np.full(n, np.inf), where=hit_share > 0)
     cuts = np.stack([mean_range, np.full(n, np.inf)], axis=1)
     shares = np.stack([hit_share, 1.0 - hit_share], axis=1)
+    background = np.zeros(n)
+    if background_radiance > 0.0:
+        rho = np.bincount(hits.pulse_index, weights=hits.weight * hits.reflectance, minlength=n)
+        rho = np.divide(rho, hit_share, out=np.zeros(n), where=hit_share > 0)
+        background = background_power_w(model.instrument, model.water, background_radiance, mean_range, rho)
     return PulseBatch(pulse_id=slots, return_pulse=hits.pulse_index, return_range_m=echo_range,
                       return_weight_per_sr=weight, column_cut_m=cuts, column_cut_weight=np.clip(shares, 0.0, 1.0),
-                      background_w=np.zeros(n))
+                      background_w=background)
 
 
 @dataclass(frozen=True)

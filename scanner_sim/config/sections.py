@@ -40,7 +40,7 @@ class WaterConfig(StrictModel):
     scattering and attenuation). ``water: turbid_harbor`` is short for ``water: {preset: turbid_harbor}``."""
 
     preset: WaterPreset | None = None
-    """A muls water preset; takes only attenuation_model and backscatter_model beside it."""
+    """A muls water preset; takes only attenuation_model, backscatter_model and the background beside it."""
     absorption_per_m: NonNegative | None = None
     """Absorption coefficient a [1/m]."""
     scattering_per_m: NonNegative | None = None
@@ -55,6 +55,9 @@ class WaterConfig(StrictModel):
     """Attenuation the echo sees (muls.water)."""
     backscatter_model: Choice(*BACKSCATTER_MODELS) | None = None
     """Water-column backscatter model (muls.water)."""
+    background_radiance_w_m2_sr_nm: NonNegative = 0.0
+    """Spectral radiance L_b of artificial light in the water [W/(m^2 sr nm)] (MULS Eqs. 8-10), allowed beside a
+    preset; 0 (the default) is deep, dark water."""
 
     @model_validator(mode="after")
     def _one_description(self):
@@ -62,7 +65,7 @@ class WaterConfig(StrictModel):
         if self.preset is not None:
             if any(v is not None for v in (a, b, c, self.group_index, self.beta_pi_per_m_sr)):
                 raise invalid("give a preset or optical properties, not both (a preset takes only "
-                              "attenuation_model and backscatter_model)")
+                              "attenuation_model, backscatter_model and background_radiance_w_m2_sr_nm)")
         elif a is None or (b is None) == (c is None):
             raise invalid("give a preset name, or absorption_per_m with exactly one of scattering_per_m and "
                           "attenuation_per_m",
