@@ -1,0 +1,50 @@
+"""Studies of the MULS paper's questions, each a function that returns a plain, JSON-ready dict.
+
+- :func:`waveform_study`: CH0-CH3 of one pulse, noisy over noise-free (paper Figures 7, 8, 10, 12);
+- :func:`maxrange_study`: maximum detectable range, single channel vs the MUL's near and far fields
+  (paper section 5, Figure 14 and Table 3);
+- :func:`precision_study`: range precision and mean deviation per channel (paper Table 2, Figure 11);
+- :func:`coaxial_study`: water-column backscatter of coaxial vs non-coaxial optics (paper Figure 13);
+- :func:`bench_study`: pulses per second of :func:`muls.simulate.simulate` on this machine.
+
+Every study goes through the instrument's own digitiser and ranging (:func:`muls.simulate.simulate`);
+randomness comes only from the ``seed`` given to it, and each shot has its own pulse id. Units are SI
+inside; JSON keys carry the unit (``_m``, ``_ns``, ``_w``). The decisions behind each study (gate
+placement, detection criterion, shots) are written down in docs/studies.md.
+"""
+
+from .bench import bench_study
+from .coaxial import coaxial_study
+from .common import (
+                     COARSE_START_M,
+                     COARSE_STEP_M,
+                     DETECTION_FRACTION,
+                     DETECTION_TOLERANCE_BINS,
+                     FINE_STEP_M,
+                     MAXRANGE_WATERS,
+                     experiment_gate_s,
+                     far_gate_delay_s,
+                     nearest_to_truth,
+                     range_tolerance_m,
+)
+from .maxrange import maxrange_study
+from .precision import precision_study
+from .waveform import waveform_study
+
+__all__ = [
+    "COARSE_START_M",
+    "COARSE_STEP_M",
+    "DETECTION_FRACTION",
+    "DETECTION_TOLERANCE_BINS",
+    "FINE_STEP_M",
+    "MAXRANGE_WATERS",
+    "experiment_gate_s",
+    "far_gate_delay_s",
+    "nearest_to_truth",
+    "range_tolerance_m",
+    "waveform_study",
+    "maxrange_study",
+    "precision_study",
+    "coaxial_study",
+    "bench_study",
+]
