@@ -2,7 +2,6 @@
 
 import math
 
-import numpy as np
 import pytest
 
 from scanner_sim.config import ConfigError, load_scene
