@@ -1,7 +1,7 @@
 """Instrument description: transmitter, receiver, detection channels, digitiser, processing.
 
 Values come from the paper's Table 1 and section 3 unless marked ``# assumption:``; every assumption is
-listed with its reason in docs/assumptions.md. Angles are full angles (DESIGN.md section 4: Table 1's
+listed with its reason in docs/assumptions.md. Angles are full angles (docs/design.md#angles: Table 1's
 2 mrad and 50 mrad are read as half-angles, so the full angles are 4 and 100 mrad).
 """
 
@@ -23,7 +23,7 @@ class Transmitter:
     pulse_energy_j: float = 500e-6  # Table 1
     pulse_width_s: float = 10e-9  # Table 1 (read as FWHM)
     repetition_rate_hz: float = 5e3  # Table 1
-    beam_divergence_full_rad: float = 4e-3  # Table 1's 2 mrad read as a half-angle (DESIGN.md section 4)
+    beam_divergence_full_rad: float = 4e-3  # Table 1's 2 mrad read as a half-angle (docs/design.md#angles)
     beam_diameter_m: float = 0.010  # Table 1
     efficiency: float = 0.9  # assumption: eta_t, not given in the paper
 
@@ -40,7 +40,7 @@ class Receiver:
 
     area_m2: float = 4.4e-3  # Table 1
     offset_m: float = 0.130  # Table 1
-    fov_full_rad: float = 0.100  # Table 1's 50 mrad read as a half-angle (DESIGN.md section 4)
+    fov_full_rad: float = 0.100  # Table 1's 50 mrad read as a half-angle (docs/design.md#angles)
     filter_bandwidth_m: float = 1e-9  # Table 1
     efficiency: float = 0.60  # Table 1, eta_o
     window_reflectance: float = 0.0039  # assumption: T_s, Fresnel glass (n 1.52) to water (n 1.34)
@@ -78,7 +78,7 @@ class Channel:
     gain: float
     sensitivity_a_per_w: float = 0.077  # Table 1, S_k
     load_ohm: float = 50.0  # section 2.2.2, R_L
-    excess_noise: float = 1.2  # DESIGN.md section 4: PMT excess noise factor F about 1.2
+    excess_noise: float = 1.2  # assumption: F, a typical excess noise factor of a PMT (not given in the paper)
     gate_delay_s: float | None = None
     gate_width_s: float | None = None
     dark_mean_lsb: float = 8.0  # assumption: offset that keeps the dark baseline off code 0
@@ -131,7 +131,7 @@ class Digitizer:
 
     bits: int = 10  # Table 1
     sample_rate_hz: float = 1e9  # Table 1
-    full_scale_v: float = 1.0  # assumption: V_d, not given in the paper (DESIGN.md section 4)
+    full_scale_v: float = 1.0  # assumption: V_d, not given in the paper; 1 V is a common digitiser input range
     bandwidth_hz: float = 200e6  # Table 1
     record_length_s: float = 1e-6  # assumption: 1 us record (150 m of water), longer than any echo used
     pretrigger_s: float = 16e-9  # assumption: samples kept before the laser fires (CH0 baseline)
@@ -166,7 +166,7 @@ SATURATION_POLICIES = ("drop", "keep")
 
 @dataclass(frozen=True)
 class Processing:
-    """How the instrument turns records into ranges (DESIGN.md section 4, Ranging)."""
+    """How the instrument turns records into ranges (docs/design.md#ranging)."""
 
     threshold_sigma: float = 5.0  # assumption: k of the k-sigma threshold (false alarms < 3e-7 per sample)
     peak_fit: str = "pulse"  # three-point fit to the known pulse shape (unbiased), or gaussian / parabolic

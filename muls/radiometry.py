@@ -1,7 +1,7 @@
 """Received power terms of the lidar equation: window (Eq. 3), column (Eq. 4), target (Eq. 7), background
 (Eqs. 8-10). Functions are vectorised over their array arguments.
 
-Energy form: the pulse shape is normalised to unit area (DESIGN.md section 4), so each echo is
+Energy form: the pulse shape is normalised to unit area (docs/design.md#pulse), so each echo is
 E_t * F * w(t - delay) with F the dimensionless factor of its equation and P_t = E_t / dt replaced by
 E_t * w(t). The peak-power forms of the paper follow by replacing E_t * w by P_t.
 """

@@ -2,7 +2,7 @@
 
 A water type is (a, b, group index, optional measured beta(pi) and K_d). The lidar sees it through two
 numbers: the two-way attenuation coefficient k [1/m] (MULS Eq. 6 by default) and the volume scattering
-function at 180 degrees, beta_pi [1/(m sr)] (measured where known, DESIGN.md section 4).
+function at 180 degrees, beta_pi [1/(m sr)] (measured where known, docs/design.md#backscatter).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ HG_ASYMMETRY = 0.924
 #: section 3.8); used only by the diffuse K_d estimate when a preset has no measured K_d.
 PETZOLD_BACKSCATTER_RATIO = 0.0183
 
-#: Group index of sea water (35 PSU, 20 degC) and fresh water at 532 nm (DESIGN.md section 4, from the
+#: Group index of sea water (35 PSU, 20 degC) and fresh water at 532 nm (docs/design.md#speed-of-light, from the
 #: Quan & Fry phase-index fit plus dispersion). Using the phase index ~1.34 instead biases ranges by ~1.7 %.
 GROUP_INDEX_SEAWATER = 1.364
 GROUP_INDEX_FRESHWATER = 1.357

@@ -1,4 +1,4 @@
-"""Mapping coverage against the truth meshes (DESIGN.md section 7).
+"""Mapping coverage against the truth meshes (docs/coverage.md).
 
 One arithmetic (:class:`BinTally`) serves three kinds of bin: plan cells of the seabed, stretches of cable
 length and whole objects. Per bin it counts

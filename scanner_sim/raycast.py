@@ -3,7 +3,7 @@
 :class:`RayCaster` is the backend: first hits and occlusion queries of float32 rays in the scene's local
 frame. ``embree`` (embreex, Embree 4) is the fast one; ``numpy`` (trimesh's pure-python triangle test) is a
 slow fallback for machines without embreex. ``auto`` picks embree when it imports and otherwise warns once
-and falls back; asking for ``embree`` explicitly when embreex is missing raises at once (STYLE.md rule 6).
+and falls back; asking for ``embree`` explicitly when embreex is missing raises at once.
 
 :func:`cast_beams` is the geometry stage of the pipeline: beam sub-rays of a chunk of pulses -> first hits
 -> per-hit range, point, normal, incidence, material -> receiver check (FOV cone, then a shadow ray from the

@@ -3,7 +3,7 @@
 A :class:`Scene` is one triangle mesh (world coordinates, float64) with per-triangle object id, class label
 and reflectance, the seabed's height field for fast height queries, and a local origin: the mesh is shifted
 by ``local_origin`` before it reaches Embree in float32, and rays are shifted the same way, so a scene in
-UTM coordinates ranges as accurately as one at the origin (DESIGN.md section 3, STYLE.md rule 7).
+UTM coordinates ranges as accurately as one at the origin (docs/design.md#frames).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Coverage arithmetic (DESIGN.md section 7) on constructed cases counted by hand, then on real passes."""
+"""Coverage arithmetic (docs/coverage.md) on constructed cases counted by hand, then on real passes."""
 
 import numpy as np
 import pytest

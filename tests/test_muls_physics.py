@@ -81,7 +81,7 @@ def test_overlap_blind_zone_and_full_overlap_from_closed_form():
     g = mul2023().geometry
     r10, r20, t1, t2, d = 0.005, g.receiver_diameter_m / 2, math.tan(2e-3), math.tan(50e-3), 0.13
     assert g.blind_zone_m == pytest.approx((d - r10 - r20) / (t1 + t2))
-    assert g.blind_zone_m == pytest.approx(1.683, abs=1e-3)  # DESIGN.md section 4: 1.68 m (half-angle reading)
+    assert g.blind_zone_m == pytest.approx(1.683, abs=1e-3)  # docs/design.md#angles: 1.68 m (half-angle reading)
     assert g.full_overlap_m == pytest.approx((d - r20 + r10) / (t2 - t1))
     z = np.linspace(0.0, 10.0, 20001)
     o = g.overlap(z)
