@@ -17,12 +17,19 @@ class Material:
     source: str
 
 
-_BRIEF = "sourced value of the project brief (primary citation to be attached)"
+# The project's design gives these four reflectances at 532 nm without the measurements behind them. For
+# comparison only: the bottom spectra of Maritorena, Morel & Gentili (1994, Limnol. Oceanogr. 39(7), Fig. 6)
+# read 0.42 for coral sand, 0.23 for a green alga (Boodlea) and 0.041 for brown algae at 525 nm, rising
+# towards 532 nm.
 MATERIALS: dict[str, Material] = {
-    "carbonate_sand": Material(0.43, _BRIEF),
-    "terrigenous_sand": Material(0.14, _BRIEF),
-    "green_algae": Material(0.25, _BRIEF),
-    "brown_algae": Material(0.045, _BRIEF),
+    "carbonate_sand": Material(0.43, "design value for carbonate sand at 532 nm; primary measurement not recorded in "
+                                     "this project"),
+    "terrigenous_sand": Material(0.14, "design value for terrigenous sand at 532 nm; primary measurement not recorded "
+                                       "in this project"),
+    "green_algae": Material(0.25, "design value for green algae at 532 nm; primary measurement not recorded in this "
+                                  "project"),
+    "brown_algae": Material(0.045, "design value for brown algae at 532 nm; primary measurement not recorded in this "
+                                   "project"),
     "black_painted_aluminium": Material(0.10, "MULS paper sections 4.2 and 4.3: the target panel, reflectance 0.1"),
     # Named assumptions (docs/scene-format.md gives the reason for each):
     "mud": Material(0.08, "assumption: dark fine silt, darker than terrigenous sand"),
