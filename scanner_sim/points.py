@@ -29,7 +29,7 @@ class LinesOfSight(NamedTuple):
 
     origin_m (n, 3), direction (n, 3) unit: the estimated beam in the world frame; true_range_m (n,): range to
     the first truth surface along it (nan where it meets none); scan_angle_deg (n,); time_s (n,) [s from the
-    pass start]; slot (n,) int64: the pulse's number in the pass.
+    pass start]; slot (n,) int64: the pulse's number in the pass; leg (n,) uint16: the survey leg, 1-based.
     """
 
     origin_m: np.ndarray
@@ -38,6 +38,7 @@ class LinesOfSight(NamedTuple):
     scan_angle_deg: np.ndarray
     time_s: np.ndarray
     slot: np.ndarray
+    leg: np.ndarray
 
 
 def intensity_from_power(peak_power_w: np.ndarray) -> np.ndarray:
@@ -81,4 +82,4 @@ def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight) -> PointReco
         scan_angle_deg=sight.scan_angle_deg[pulse], channel=r.channel.astype(np.uint8), amplitude_lsb=r.amplitude_lsb,
         snr=r.snr, saturated=r.saturated, true_range_m=true_range, range_error_m=r.range_m - true_range,
         incidence_deg=np.degrees(of_hit(hits.incidence_rad, np.nan)), object_id=of_hit(hits.object_id, NO_OBJECT),
-        pulse_index=sight.slot[pulse])
+        leg=sight.leg[pulse], pulse_index=sight.slot[pulse])

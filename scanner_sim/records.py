@@ -81,7 +81,8 @@ class Column:
     """One record field: a (n,) or (n, ``width``) array of ``dtype``, declared on its record class as
     ``name: Annotated[np.ndarray, Column(...)]``.
 
-    ``las`` says where it goes in LAS (None: not stored); ``unknown`` is the value that stands for
+    ``las`` says where it goes in LAS (None: not stored); ``also`` a standard dimension that carries a copy
+    where it fits its range (written only, 0 where it does not fit); ``unknown`` is the value that stands for
     "not known", given to the field when a file does not carry it.
     """
 
@@ -89,6 +90,7 @@ class Column:
     width: int | None = None
     las: LasStandard | LasExtra | None = None
     unknown: float = 0
+    also: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dtype", np.dtype(self.dtype))
@@ -260,8 +262,9 @@ class PointRecords(_Records):
     classification: Annotated[np.ndarray, Column(np.uint8, las=_las("classification"))]
     #: [deg] mirror angle of the pulse, 0 at nadir.
     scan_angle_deg: Annotated[np.ndarray, Column(np.float32, las=_las("scan_angle", conversion="scan_angle"))]
-    #: Detection channel that ranged the point (1..3 for the MUL preset).
-    channel: Annotated[np.ndarray, Column(np.uint8, las=_extra(np.uint8, "detection channel (1..3)"))]
+    #: Detection channel that ranged the point (1..3 for the MUL preset); also LAS ``scanner_channel`` (2 bits).
+    channel: Annotated[np.ndarray, Column(np.uint8, las=_extra(np.uint8, "detection channel (1..3)"),
+                                          also="scanner_channel")]
     #: [LSB] peak amplitude above the baseline in the chosen channel.
     amplitude_lsb: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "peak amplitude [ADC LSB]"))]
     #: [1] peak amplitude over the channel's noise standard deviation.
@@ -276,6 +279,9 @@ class PointRecords(_Records):
     incidence_deg: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "incidence angle [deg]"))]
     #: Scene object hit (index in the scene's object list), -1 if none or unknown.
     object_id: Annotated[np.ndarray, Column(np.int32, las=_extra(np.int32, "scene object id (-1 none)"), unknown=-1)]
+    #: Survey leg of the pulse, 1-based: the stretch of path from one waypoint to the next (on a lawnmower,
+    #: legs 1, 3, 5... are the survey lines and 2, 4... the turns); LAS ``point_source_id``.
+    leg: Annotated[np.ndarray, Column(np.uint16, las=_las("point_source_id"))]
     #: Index of the pulse in the pass (back-reference); not stored in LAS, -1 when read back.
     pulse_index: Annotated[np.ndarray, Column(np.int64, unknown=-1)]
 

@@ -162,7 +162,7 @@ class PassSetup:
                                               direction[ranged].astype(np.float32))
         true_range[ranged[ray]] = dist
         return LinesOfSight(origin, direction, true_range, np.degrees(self.scanner.scan_angle_rad(times)), times,
-                            slots)
+                            slots, self.trajectory.leg(times))
 
 
 def hit_echo_range_m(hits: Hits) -> np.ndarray:

@@ -132,6 +132,8 @@ class Trajectory:
             d = np.gradient(xy, ds, axis=0)
             yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
         self._s, self._xy, self._yaw = s, xy, yaw
+        # Where each leg ends along the path [m]: a leg runs from one waypoint to the next.
+        self._leg_end_m = chord[1:-1] if not self.static else np.zeros(0)
         self._z, self._terrain_pitch = self._profile(s, xy)
         self.duration_s = float(duration_s) if duration_s is not None else self.length_m / self.speed_m_s
         self._noise = self._make_noise(noise)
@@ -167,6 +169,11 @@ class Trajectory:
     def distance_m(self, times_s) -> np.ndarray:
         """(n,) distance along the path [m] at ``times_s`` (held at the ends)."""
         return np.clip(np.asarray(times_s, float) * self.speed_m_s, 0.0, self.length_m)
+
+    def leg(self, times_s) -> np.ndarray:
+        """(n,) uint16 leg of the path (1-based) the platform is on at ``times_s`` (n,) [s]: leg k runs from
+        waypoint k to waypoint k + 1 (1 for a static platform)."""
+        return (np.searchsorted(self._leg_end_m, self.distance_m(times_s), side="right") + 1).astype(np.uint16)
 
     def poses(self, times_s, estimated: bool = False) -> Poses:
         """Poses at ``times_s`` (n,) [s]: the truth, or with ``estimated`` the navigation's estimate."""

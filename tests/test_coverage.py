@@ -45,7 +45,7 @@ def _points(pulse, error_m, object_id=0):
                         number_of_returns=one, classification=40 * one, scan_angle_deg=z,
                         channel=one, amplitude_lsb=z, snr=z, saturated=np.zeros(n, bool),
                         true_range_m=np.full(n, 5.0), range_error_m=error_m, incidence_deg=z,
-                        object_id=np.broadcast_to(object_id, (n,)), pulse_index=pulse)
+                        object_id=np.broadcast_to(object_id, (n,)), leg=one, pulse_index=pulse)
 
 
 def _dropouts(pulse, causes):

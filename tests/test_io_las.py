@@ -41,6 +41,7 @@ def make_points(n: int = 500, seed: int = 0, first_pulse: int = 0) -> PointRecor
         range_error_m=rng.normal(0, 0.02, n),
         incidence_deg=rng.uniform(0, 89, n),
         object_id=rng.integers(-1, 20, n),
+        leg=rng.integers(1, 9, n),
         pulse_index=pulse,
     )
 
@@ -87,7 +88,7 @@ def test_las_layout_is_derived_from_the_point_declarations():
     assert all(len(desc) <= 32 for _, desc in io.EXTRA_DIMENSIONS.values())
     standard = {name for name, col in columns.items() if isinstance(col.las, LasStandard)}
     assert standard == {"gps_time_s", "xyz", "intensity", "return_number", "number_of_returns",
-                        "classification", "scan_angle_deg"}
+                        "classification", "scan_angle_deg", "leg"}
     assert [name for name, col in columns.items() if col.las is None] == ["pulse_index"]
     header = laspy.LasHeader(version="1.4", point_format=6)
     dims = {d for col in columns.values() if isinstance(col.las, LasStandard) for d in col.las.dimensions}
@@ -111,9 +112,27 @@ def test_las_round_trip_preserves_every_field(tmp_path):
     assert np.abs(back.scan_angle_deg - recs.scan_angle_deg).max() <= io.SCAN_ANGLE_UNIT_DEG / 2 + 1e-5
     for name in ("intensity", "return_number", "number_of_returns", "classification", "channel",
                  "amplitude_lsb", "snr", "saturated", "true_range_m", "range_error_m",
-                 "incidence_deg", "object_id"):
+                 "incidence_deg", "object_id", "leg"):
         np.testing.assert_array_equal(getattr(back, name), getattr(recs, name), err_msg=name)
     assert io.read_las_metadata(path)["pass_metadata"] == {"seed": 7}
+
+
+def test_las_carries_the_lidar_conventions(tmp_path):
+    """point_source_id is the point's leg, scanner_channel its detection channel (2 bits: channels above 3
+    read 0 there and stay whole in the `channel` extra dimension), every point is flagged synthetic, and the
+    CRS is a WKT VLR with the global-encoding WKT bit set (what PDAL-style readers look for)."""
+    recs = make_points()
+    recs = PointRecords(**{**recs.as_dict(), "channel": np.where(np.arange(len(recs)) == 0, 5, recs.channel)})
+    path = tmp_path / "points.las"
+    io.write_las(path, recs, offset_m=OFFSET)
+    las = laspy.read(path)
+    np.testing.assert_array_equal(las.point_source_id, recs.leg)
+    np.testing.assert_array_equal(las.scanner_channel[1:], recs.channel[1:])
+    assert las.scanner_channel[0] == 0 and las.channel[0] == 5
+    assert np.all(las.synthetic == 1)
+    assert las.header.global_encoding.wkt
+    wkt = [v for v in las.header.vlrs if v.record_id == 2112]
+    assert len(wkt) == 1 and wkt[0].user_id == "LASF_Projection"
 
 
 def test_las_extra_dimensions_have_declared_types(tmp_path):

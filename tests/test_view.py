@@ -43,6 +43,7 @@ def _records(n: int = 4000, seed: int = 0) -> PointRecords:
         range_error_m=0.01 * xy[:, 0] + rng.normal(0, 0.002, n),
         incidence_deg=rng.uniform(0, 89, n),
         object_id=np.where(cable, 1, 0),
+        leg=np.ones(n, int),
         pulse_index=pulse,
     )
 

@@ -55,6 +55,8 @@ LOCAL_ENGINEERING_WKT = (
 _COLUMNS = PointRecords.columns()
 #: PointRecords fields in standard dimensions: field -> :class:`LasStandard`.
 _STANDARD: dict[str, LasStandard] = {n: c.las for n, c in _COLUMNS.items() if isinstance(c.las, LasStandard)}
+#: Standard dimensions that also carry a copy of a field (where it fits): field -> dimension.
+_ALSO: dict[str, str] = {n: c.also for n, c in _COLUMNS.items() if c.also is not None}
 #: Extra dimensions, in file order: PointRecords field -> (numpy dtype in the file, description <= 32 chars).
 EXTRA_DIMENSIONS: dict[str, tuple[np.dtype, str]] = {
     n: (c.las.dtype, c.las.description) for n, c in _COLUMNS.items() if isinstance(c.las, LasExtra)
@@ -199,8 +201,8 @@ class LasWriter(StreamingWriter):
         :data:`LOCAL_ENGINEERING_WKT`. Written as the LASF_Projection/2112 VLR, with the global
         encoding WKT bit set (LAS 1.4 R15 requires WKT for formats 6-10).
     file_source_id : int
-        Header file source id (0..65535), e.g. the survey line number; also written into every
-        point's ``point_source_id``.
+        Header file source id (0..65535), e.g. the survey leg of a file that holds one leg; each point's
+        ``point_source_id`` is its own leg (``PointRecords.leg``).
     metadata : Mapping or None
         JSON-serialisable pass metadata (scene, water, seed...) stored in a ``muls-scanner``/1 VLR
         alongside the time offset, so :func:`read_las` can restore seconds from pass start.
@@ -348,7 +350,11 @@ class LasWriter(StreamingWriter):
         for name, std in _STANDARD.items():
             for dimension, values in zip(std.dimensions, _TO_LAS[std.conversion](getattr(r, name), self)):
                 pts[dimension] = values
-        pts.point_source_id = np.full(len(r), self.file_source_id, dtype=np.uint16)
+        for name, dimension in _ALSO.items():
+            values = getattr(r, name)
+            top = np.iinfo(pts[dimension].dtype).max if dimension != "scanner_channel" else 3  # a 2-bit field
+            pts[dimension] = np.where(values <= top, values, 0)
+        pts.synthetic = np.ones(len(r), np.uint8)  # simulated, not measured
         for name, (dtype, _) in EXTRA_DIMENSIONS.items():
             values = getattr(r, name).astype(dtype, copy=False)
             pts[name] = values
