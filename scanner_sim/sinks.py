@@ -17,6 +17,8 @@ from muls.ranging import DROPOUT_CAUSES
 
 from . import io, viz
 from .coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
+from .records import DropoutRecords, PointRecords
+from .version import __version__
 
 #: Resolution and extent of the streaming |range error| histogram behind the summary's quantiles [m].
 ERROR_BIN_M = 5e-4
@@ -27,13 +29,44 @@ TRAJECTORY_RATE_HZ = 10.0
 
 
 class LasSink(io.LasWriter):
-    """points.las, streamed chunk by chunk."""
+    """points.las or points.laz (by the suffix), streamed chunk by chunk."""
 
-    def __init__(self, path: Path, local_origin: np.ndarray):
-        super().__init__(path, offset_m=local_origin)
+    def __init__(self, path: Path, local_origin: np.ndarray, metadata: dict | None = None, file_source_id: int = 0):
+        super().__init__(path, offset_m=local_origin, metadata=metadata, file_source_id=file_source_id)
 
     def add(self, chunk) -> None:
         self.write(chunk.points)
+
+
+class LegLasSink:
+    """One LAS/LAZ file per survey leg (``leg007_points.laz``...), like a HELIOS++ leg, each opened when its
+    leg's first point arrives and carrying the leg as its file source id."""
+
+    def __init__(self, out: Path, suffix: str, local_origin: np.ndarray, metadata: dict | None = None):
+        self.out, self.suffix, self.local_origin, self.metadata = out, suffix, local_origin, metadata
+        self.writers: dict[int, LasSink] = {}
+
+    def path(self, leg: int) -> Path:
+        return self.out / f"leg{leg:03d}_points{self.suffix}"
+
+    def add(self, chunk) -> None:
+        points = chunk.points
+        for leg in np.unique(points.leg):
+            if leg not in self.writers:
+                self.writers[leg] = LasSink(self.path(int(leg)), self.local_origin, self.metadata, int(leg))
+                self.writers[leg].open()
+            self.writers[leg].write(points.select(points.leg == leg))
+
+    @property
+    def point_count(self) -> int:
+        return sum(w.point_count for w in self.writers.values())
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        for writer in self.writers.values():
+            writer.__exit__(exc_type, exc, tb)
 
 
 class DropoutSink(io.DropoutWriter):
@@ -41,6 +74,23 @@ class DropoutSink(io.DropoutWriter):
 
     def add(self, chunk) -> None:
         self.write(chunk.dropouts)
+
+
+class MemorySink:
+    """Keeps every chunk's points and dropouts in memory (the Python API's pass without files)."""
+
+    def __init__(self):
+        self._points, self._dropouts = [], []
+
+    def add(self, chunk) -> None:
+        self._points.append(chunk.points)
+        self._dropouts.append(chunk.dropouts)
+
+    def points(self) -> PointRecords:
+        return PointRecords.concatenate(self._points)
+
+    def dropouts(self) -> DropoutRecords:
+        return DropoutRecords.concatenate(self._dropouts)
 
 
 class CoverageSink(CoverageAccumulator):
@@ -59,11 +109,13 @@ class PassStats:
 
     def __init__(self, n_channels: int):
         self.pulses = 0
+        self.points = 0
         self.channels = np.zeros(n_channels + 1, np.int64)
         self.error_counts = np.zeros(int(ERROR_MAX_M / ERROR_BIN_M) + 1, np.int64)
 
     def add(self, chunk) -> None:
         self.pulses += chunk.slots.size
+        self.points += len(chunk.points)
         self.channels += np.bincount(chunk.points.channel, minlength=self.channels.size)
         e = np.abs(chunk.points.range_error_m)
         e = e[np.isfinite(e)]
@@ -105,36 +157,63 @@ def pass_summary(setup, stats: PassStats, n_points: int, dropout_counts: dict, w
     }
 
 
+def pass_metadata(setup) -> dict:
+    """What made a pass, for the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version."""
+    return {"scene": setup.config.name, "water": setup.water_name, "instrument": setup.model.instrument.name,
+            "fidelity": setup.level.name, "seed": setup.seed, "muls_scanner_version": __version__,
+            "scene_file": str(setup.config.source_path) if setup.config.source_path else None}
+
+
 def write_pass_files(setup, out: Path, options) -> None:
-    """trajectory.csv, scene.ply (unless ``options.write_scene`` is False) and waveforms.npz (when
-    ``options.waveforms`` asks for some)."""
-    write_truth_and_trajectory(setup, out, options.write_scene)
-    if options.waveforms:
-        write_waveforms(setup, out / "waveforms.npz", options.waveforms)
-
-
-def write_truth_and_trajectory(setup, out: Path, write_scene: bool = True) -> None:
-    """scene.ply (labelled truth meshes; unless ``write_scene`` is False) and trajectory.csv (true and
-    estimated poses at 10 Hz)."""
-    scene = setup.scene
-    if write_scene:
+    """scene.ply (unless ``options.write_scene`` is False), the trajectory (per the scene's
+    ``output.trajectory_csv``, one file per leg under ``output.split_legs``) and waveforms.npz (the
+    ``options.waveforms`` pulses spread over the pass and every ``output.waveform_every_n_pulses``-th)."""
+    scene, output = setup.scene, setup.config.output
+    if options.write_scene:
         io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
+    if output.trajectory_csv:
+        table = trajectory_table(setup)
+        legs = np.unique(table["leg"]) if output.split_legs else [None]
+        for leg in legs:
+            rows = slice(None) if leg is None else table["leg"] == leg
+            name = "trajectory.csv" if leg is None else f"leg{leg:03d}_trajectory.csv"
+            io.write_trajectory_csv(out / name, table["time_s"][rows], table["position_m"][rows],
+                                    table["attitude_deg"][rows], estimated_position_m=table["est_position_m"][rows],
+                                    estimated_attitude=table["est_attitude_deg"][rows])
+    pick = waveform_slots(setup, options.waveforms, output.waveform_every_n_pulses)
+    if pick.size:
+        write_waveforms(setup, out / "waveforms.npz", pick)
+
+
+def trajectory_table(setup, rate_hz: float = TRAJECTORY_RATE_HZ) -> dict[str, np.ndarray]:
+    """True and estimated poses over the pass at ``rate_hz``: time_s (n,), position_m (n, 3), attitude_deg
+    (n, 3) roll, pitch, yaw, est_position_m, est_attitude_deg, leg (n,)."""
     t0 = setup.first_slot / setup.scanner.pulse_rate_hz
     t1 = setup.end_slot / setup.scanner.pulse_rate_hz
-    t = np.arange(t0, t1, 1.0 / TRAJECTORY_RATE_HZ)
+    t = np.arange(t0, t1, 1.0 / rate_hz)
     true, est = setup.trajectory.poses(t), setup.trajectory.poses(t, estimated=True)
 
     def rpy(p):
         return np.degrees(np.c_[p.roll_rad, p.pitch_rad, p.yaw_rad])
 
-    io.write_trajectory_csv(out / "trajectory.csv", t, true.position, rpy(true),
-                            estimated_position_m=est.position, estimated_attitude=rpy(est))
+    return {"time_s": t, "position_m": true.position, "attitude_deg": rpy(true), "est_position_m": est.position,
+            "est_attitude_deg": rpy(est), "leg": setup.trajectory.leg(t)}
 
 
-def write_waveforms(setup, path: Path, count: int) -> None:
-    """Full records of ``count`` pulses spread evenly over the pass (same noise as in the pass itself)."""
+def waveform_slots(setup, count: int, every_n: int) -> np.ndarray:
+    """Slots of the pulses whose full records to keep: ``count`` spread evenly over the pass, and every
+    ``every_n``-th fired pulse (0: none of either)."""
+    if not count and not every_n:
+        return np.zeros(0, np.int64)
     slots = np.concatenate(list(setup.slot_chunks()))
-    pick = slots[np.unique(np.linspace(0, slots.size - 1, min(count, slots.size)).astype(np.int64))]
+    picks = [slots[::every_n]] if every_n else []
+    if count:
+        picks.append(slots[np.unique(np.linspace(0, slots.size - 1, min(count, slots.size)).astype(np.int64))])
+    return np.unique(np.concatenate(picks))
+
+
+def write_waveforms(setup, path: Path, pick: np.ndarray) -> None:
+    """Full records of the pulses in slots ``pick`` (same noise as in the pass itself)."""
     records = setup.simulate_chunk(pick, record_mode="full").records
     time_ns = records.reference_times_s(setup.model) * 1e9  # full mode: the reference spans the record
     channels = {"ch0": records.reference}
@@ -142,16 +221,23 @@ def write_waveforms(setup, path: Path, count: int) -> None:
     io.write_waveforms_npz(path, pick, time_ns, channels)
 
 
-def render_pass(setup, out: Path, window_size=(1600, 1000), max_points: int = 1_500_000) -> None:
-    """render.png: the point cloud coloured by class over the faded truth mesh (decimated read-back)."""
+def render_pass(setup, cloud, out: Path, window_size=(1600, 1000), max_points: int = 1_500_000) -> None:
+    """render.png: the point cloud coloured by class over the faded truth mesh (decimated read-back of the
+    ``cloud`` sink's file or files)."""
     import laspy
 
-    with laspy.open(out / "points.las") as reader:
-        stride = max(1, math.ceil(reader.header.point_count / max_points))
-        xyz, cls = [], []
-        for part in reader.chunk_iterator(1_000_000):
-            xyz.append(np.c_[part.x, part.y, part.z][::stride])
-            cls.append(np.asarray(part.classification)[::stride])
+    paths = [w.path for w in cloud.writers.values()] if isinstance(cloud, LegLasSink) else [cloud.path]
+    total = 0
+    for path in paths:
+        with laspy.open(path) as reader:
+            total += reader.header.point_count
+    stride = max(1, math.ceil(total / max_points))
+    xyz, cls = [], []
+    for path in paths:
+        with laspy.open(path) as reader:
+            for part in reader.chunk_iterator(1_000_000):
+                xyz.append(np.c_[part.x, part.y, part.z][::stride])
+                cls.append(np.asarray(part.classification)[::stride])
     xyz = np.concatenate(xyz) if xyz else np.zeros((0, 3))
     cls = np.concatenate(cls) if cls else np.zeros(0, np.uint8)
     scene = setup.scene

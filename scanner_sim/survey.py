@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -23,7 +24,7 @@ from muls.ranging import Ranging
 from muls.simulate import simulate
 from muls.waveform import OpticalModel, PulseBatch
 
-from . import io, sinks
+from . import io, sinks, viz
 from .beams import BeamPattern, beam_pattern
 from .config import SceneConfig
 from .coverage import CoverageSettings, Footprint, nominal_footprint
@@ -200,47 +201,102 @@ def pulse_batch(hits: Hits, slots: np.ndarray, model: OpticalModel, background_r
 
 @dataclass(frozen=True)
 class PassResult:
-    """What a pass returns: its summary (also written as summary.json) and the folder of its outputs."""
+    """What a pass returns: its summary (also written as summary.json by :func:`run_pass`), the folder of its
+    outputs (None in memory), and, from :func:`simulate_pass`, the points, dropouts and trajectory."""
 
     summary: dict
-    out_dir: Path
+    out_dir: Path | None = None
+    points: PointRecords | None = None
+    dropouts: DropoutRecords | None = None
+    trajectory: dict | None = None
+
+    def points_dataframe(self):
+        """The points as a pandas DataFrame, one column per field (x_m, y_m, z_m for ``xyz``); needs the
+        ``pandas`` extra."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("points_dataframe needs pandas: pip install 'muls-scanner[pandas]'") from None
+
+        columns = {k: v for k, v in self.points.as_dict().items() if k != "xyz"}
+        return pd.DataFrame({"x_m": self.points.xyz[:, 0], "y_m": self.points.xyz[:, 1],
+                             "z_m": self.points.xyz[:, 2], **columns})
+
+    def points_polydata(self):
+        """The points as a pyvista ``PolyData`` with every field as point data."""
+        return viz.points_polydata(self.points)
 
 
 def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: PassOptions = PassOptions(),
              scene: Scene | None = None) -> PassResult:
     """Simulate the scene's pass and write its outputs in ``out_dir`` (default: the scene's output dir).
 
-    The summary's ``wall_s`` and ``pulses_per_s`` time the pass itself (chunks and sinks), ``setup_s`` the
-    scene, BVH and tables built before it. A scene with a seabed also gets its coverage: the summary's
-    ``coverage``, coverage_grid.npz and, when rendering, coverage_map.png. ``scene`` reuses a built scene.
+    The scene's ``output`` section says what is written (points.las and/or points.laz, or one per leg;
+    trajectory.csv; waveforms.npz); dropouts.npz and summary.json always are, the summary last. The summary's
+    ``wall_s`` and ``pulses_per_s`` time the pass itself (chunks and sinks), ``setup_s`` the scene, BVH and
+    tables built before it. A scene with a seabed also gets its coverage: the summary's ``coverage``,
+    coverage_grid.npz and, when rendering, coverage_map.png. ``scene`` reuses a built scene.
     """
     t_setup = time.perf_counter()
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
     out = Path(out_dir or setup.config.output_dir)
     out.mkdir(parents=True, exist_ok=True)
-    coverage = sinks.CoverageSink(setup.scene, options.coverage) if setup.scene.heightfield is not None else None
-    stats = sinks.PassStats(len(setup.model.instrument.channels))
-    bar = tqdm(total=setup.expected_pulses(), unit="pulse", unit_scale=True, disable=not options.progress,
-               desc=setup.config.name)
-    started = time.perf_counter()
-    with sinks.LasSink(out / "points.las", setup.scene.local_origin) as las, \
-            sinks.DropoutSink(out / "dropouts.npz") as dropouts:
-        for chunk in (setup.simulate_chunk(slots, footprint=coverage is not None) for slots in setup.slot_chunks()):
-            for sink in (las, dropouts, stats, coverage):
-                if sink is not None:
-                    sink.add(chunk)
-            bar.update(chunk.slots.size)
-    bar.close()
-    wall_s = time.perf_counter() - started
-
-    summary = sinks.pass_summary(setup, stats, las.point_count, dropouts.counts_by_cause(), wall_s, setup_s)
+    with ExitStack() as stack:
+        clouds = [stack.enter_context(sink) for sink in point_cloud_sinks(setup, out)]
+        dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
+        stats, coverage, wall_s = stream_pass(setup, [*clouds, dropouts], options)
+    summary = sinks.pass_summary(setup, stats, stats.points, dropouts.counts_by_cause(), wall_s, setup_s)
     if coverage is not None:
         summary["coverage"] = coverage.write(out / "coverage_grid.npz")
     sinks.write_pass_files(setup, out, options)
-    if options.render:
-        sinks.render_pass(setup, out, options.render_size)
+    if options.render and clouds:
+        sinks.render_pass(setup, clouds[0], out, options.render_size)
         if coverage is not None:
             sinks.render_coverage_map(setup, coverage, out / "coverage_map.png", summary)
     io.write_summary_json(out / "summary.json", summary)  # last: a complete pass is one with a summary
     return PassResult(summary, out)
+
+
+def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), scene: Scene | None = None
+                  ) -> PassResult:
+    """Simulate the scene's pass in memory, writing no file: the result holds the points, the dropouts, the
+    trajectory (:func:`scanner_sim.sinks.trajectory_table`) and the summary (with coverage over a seabed)."""
+    t_setup = time.perf_counter()
+    setup = PassSetup.build(config, options, scene)
+    setup_s = time.perf_counter() - t_setup
+    memory = sinks.MemorySink()
+    stats, coverage, wall_s = stream_pass(setup, [memory], options)
+    dropouts = memory.dropouts()
+    summary = sinks.pass_summary(setup, stats, stats.points, dropouts.counts_by_cause(), wall_s, setup_s)
+    if coverage is not None:
+        summary["coverage"] = coverage.figures()
+    return PassResult(summary, None, memory.points(), dropouts, sinks.trajectory_table(setup))
+
+
+def point_cloud_sinks(setup: PassSetup, out: Path) -> list:
+    """The point-cloud writers the scene's ``output`` asks for: points.las and/or points.laz, or one file per
+    leg of each, every one carrying the pass's metadata."""
+    output, origin, metadata = setup.config.output, setup.scene.local_origin, sinks.pass_metadata(setup)
+    suffixes = [s for s, on in ((".las", output.las), (".laz", output.laz)) if on]
+    if output.split_legs:
+        return [sinks.LegLasSink(out, s, origin, metadata) for s in suffixes]
+    return [sinks.LasSink(out / f"points{s}", origin, metadata) for s in suffixes]
+
+
+def stream_pass(setup: PassSetup, chunk_sinks: list, options: PassOptions):
+    """Every chunk of the pass through the flow and into ``chunk_sinks`` (plus the running figures and, over a
+    seabed, coverage). Returns (stats, coverage sink or None, wall seconds)."""
+    coverage = sinks.CoverageSink(setup.scene, options.coverage) if setup.scene.heightfield is not None else None
+    stats = sinks.PassStats(len(setup.model.instrument.channels))
+    every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
+    bar = tqdm(total=setup.expected_pulses(), unit="pulse", unit_scale=True, disable=not options.progress,
+               desc=setup.config.name)
+    started = time.perf_counter()
+    for slots in setup.slot_chunks():
+        chunk = setup.simulate_chunk(slots, footprint=coverage is not None)
+        for sink in every:
+            sink.add(chunk)
+        bar.update(slots.size)
+    bar.close()
+    return stats, coverage, time.perf_counter() - started

@@ -134,6 +134,18 @@ def _prefer_headless_vtk() -> None:
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 
+def points_polydata(points):
+    """A pyvista ``PolyData`` of :class:`scanner_sim.records.PointRecords`: one vertex per point, every other
+    field as point data (by its field name)."""
+    import pyvista as pv
+
+    cloud = pv.PolyData(np.asarray(points.xyz, float))
+    for name, values in points.as_dict().items():
+        if name != "xyz":
+            cloud.point_data[name] = values
+    return cloud
+
+
 def render_point_cloud(
     path_png,
     xyz,

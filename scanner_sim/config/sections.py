@@ -298,8 +298,12 @@ class OutputConfig(StrictModel):
     dir: str | None = None
     """Output folder; default out/<name>."""
     las: bool = True
+    """Write the points as points.las."""
     laz: bool = False
+    """Write the points as points.laz (compressed by lazrs); with las, both files."""
     trajectory_csv: bool = True
+    """Write the true and estimated poses at 10 Hz as trajectory.csv."""
     waveform_every_n_pulses: Integer(ge=0) = 0
-    """Write the full records of every n-th pulse; 0 = none."""
-    waveform_sample_rate_hz: Positive | None = None
+    """Write the full records of every n-th fired pulse to waveforms.npz; 0 = none."""
+    split_legs: bool = False
+    """One point cloud and one trajectory per survey leg (leg001_points.las, leg001_trajectory.csv...)."""
