@@ -187,9 +187,54 @@ def _add_run(sub):
     p.add_argument("--max-pulses", type=int, help="stop after this many pulses")
     p.add_argument("--chunk-pulses", type=int, help="pulse slots per chunk (memory vs overhead)")
     p.add_argument("--waveforms", type=int, default=0, help="also write the full records of N sampled pulses")
+    p.add_argument("--altitude-m", type=float, help="fly at this altitude over the seabed (platform.altitude_m)")
+    p.add_argument("--gate-delay-ns", type=float,
+                   help="open the far channel's gate this long after the pulse (instrument.gate_delay_ns)")
+    p.add_argument("--gate-width-ns", type=float, help="gate width (default: the scene's or the preset's)")
+    p.add_argument("--split-lines", action="store_true",
+                   help="one point cloud and one trajectory per survey leg (output.split_legs)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="set any scene key by its dotted name (YAML value), validated like the scene file; "
+                        "repeatable, e.g. --set survey.subrays=37 --set output.laz=true")
     p.add_argument("--no-render", action="store_true", help="skip render.png")
     p.add_argument("--quiet", action="store_true", help="no progress bar; print only the summary path")
     p.set_defaults(func=_cmd_run)
+
+
+def scene_overrides(args, config) -> dict:
+    """The scene keys that ``run``'s options set, by dotted name (validated later with the scene)."""
+    import yaml
+
+    changes = {}
+    for item in args.set:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"--set {item!r}: must be KEY=VALUE with a dotted scene key, e.g. platform.altitude_m=5")
+        changes[key.strip()] = yaml.safe_load(text)
+    if args.altitude_m is not None:
+        changes["platform.altitude_m"] = args.altitude_m
+    if args.gate_delay_ns is not None or args.gate_width_ns is not None:
+        gated = [ch for ch in config.instrument_model().channels if ch.gated]
+        if not gated:
+            raise ValueError(f"--gate-delay-ns: instrument '{config.instrument.preset}' has no gated channel")
+        changes["instrument.gate_delay_ns"] = (args.gate_delay_ns if args.gate_delay_ns is not None
+                                               else gated[0].gate_delay_s * 1e9)
+        changes["instrument.gate_width_ns"] = (args.gate_width_ns if args.gate_width_ns is not None
+                                               else gated[0].gate_width_s * 1e9)
+    if args.split_lines:
+        changes["output.split_legs"] = True
+    return changes
+
+
+def _first_run_notice() -> None:
+    """Say so when numba has no cached kernels yet: the first run compiles them for about a minute."""
+    from pathlib import Path
+
+    import muls
+
+    if not any((Path(muls.__file__).parent / "__pycache__").glob("detection._digitise*.nbi")):
+        print("first run: compiling the simulation kernels (about a minute; later runs load them from the cache)",
+              file=sys.stderr, flush=True)
 
 
 def _cmd_run(args) -> int:
@@ -199,16 +244,22 @@ def _cmd_run(args) -> int:
     from .survey import PassOptions, run_pass
 
     config = load_scene(args.scene)
+    config = config.with_overrides(scene_overrides(args, config))
     options = PassOptions(water=args.water, seed=args.seed, fidelity=args.fidelity, max_pulses=args.max_pulses,
                           chunk_pulses=args.chunk_pulses, waveforms=args.waveforms, progress=not args.quiet,
                           render=not args.no_render)
     out = Path(args.out or config.output_dir)
+    _first_run_notice()
     summary = run_pass(config, out, options).summary
     if not args.quiet:
-        dropped = ", ".join(f"{k} {v}" for k, v in summary["dropouts"].items() if v) or "none"
+        dropped = ", ".join(f"{k} {v:,}" for k, v in summary["dropouts"].items() if v) or "none"
         print(f"{summary['pulses']:,} pulses -> {summary['points']:,} points in {summary['wall_s']:.1f} s "
               f"({summary['pulses_per_s']:,.0f} pulses/s); dropouts: {dropped}")
-        print(f"range error |median| {summary['range_error_m']['median']} m, p95 {summary['range_error_m']['p95']} m")
+        error = summary["range_error_m"]
+        if error["median"] is None:
+            print("range error: no point has a truth surface along its line of sight")
+        else:
+            print(f"range error |median| {100 * error['median']:.1f} cm, p95 {100 * error['p95']:.1f} cm")
         cov = summary.get("coverage")
         if cov and cov["covered_fraction"] is not None:
             gaps = ", ".join(f"{k} {v:.2f} m²" for k, v in cov["gaps_m2"].items() if v) or "none"
@@ -326,6 +377,7 @@ def _add_coverage(sub):
     p.add_argument("--max-pulses", type=int, help="stop each pass after this many pulses")
     p.add_argument("--no-render", action="store_true", help="tables and coverage.json only: no pictures, no report")
     p.add_argument("--quiet", action="store_true", help="no progress; print only the path of coverage.json")
+    _add_dask_arguments(p)
     p.set_defaults(func=_cmd_coverage)
 
 
@@ -343,12 +395,60 @@ def _cmd_coverage(args) -> int:
     settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m)
     out = Path(args.out or Path(config.output_dir) / "coverage")
     study = run_study(config, plan, out, settings=settings, fidelity=args.fidelity, seed=args.seed,
-                      max_pulses=args.max_pulses, render=not args.no_render, progress=not args.quiet)
+                      max_pulses=args.max_pulses, render=not args.no_render, progress=not args.quiet,
+                      workers=_workers(args), scheduler=args.scheduler, redo=args.redo)
     if not args.quiet:
         print(markdown_table(*main_table(study)))
         print(f"{len(study['records'])} passes in {study['wall_s']:.0f} s")
     print(out / "coverage.json")
     return 0
+
+
+# -- campaign -------------------------------------------------------------------------------------------
+def _add_dask_arguments(p) -> None:
+    """--scheduler, --workers and --redo, shared by the commands that run passes on Dask."""
+    p.add_argument("--scheduler", metavar="tcp://HOST:8786",
+                   help="address of a running Dask scheduler (default: a local cluster on this machine)")
+    p.add_argument("--workers", type=int, metavar="N", help="workers of the local cluster, one thread each "
+                   "(default: one per core; 0: every pass in this process, without Dask)")
+    p.add_argument("--redo", action="store_true", help="run every pass again, even those already complete in --out")
+
+
+def _workers(args) -> int:
+    """--workers, by default one per core."""
+    from .pass_runner import default_workers
+
+    return default_workers() if args.workers is None else args.workers
+
+
+@subcommand("campaign")
+def _add_campaign(sub):
+    p = sub.add_parser("campaign", help="one pass per combination of the swept scene keys, on Dask "
+                       "(docs/campaigns.md)")
+    p.add_argument("campaign", metavar="CAMPAIGN.yaml", help="campaign file (e.g. scenes/campaigns/example_campaign.yaml)")
+    p.add_argument("--out", help="output directory (default: out/campaigns/NAME)")
+    p.add_argument("--quiet", action="store_true", help="no progress; print only the path of campaign.json")
+    _add_dask_arguments(p)
+    p.set_defaults(func=_cmd_campaign)
+
+
+def _cmd_campaign(args) -> int:
+    from pathlib import Path
+
+    from .campaign import load_campaign, run_campaign
+    from .pass_runner import maybe_client
+
+    campaign = load_campaign(args.campaign)
+    out = Path(args.out or Path("out") / "campaigns" / campaign.name)
+    with maybe_client(scheduler=args.scheduler, workers=_workers(args), announce=not args.quiet) as client:
+        result = run_campaign(campaign, out, client, redo=args.redo, progress=not args.quiet)
+    if not args.quiet:
+        print(f"{len(result['passes'])} passes in {result['wall_s']:.0f} s: {result['ran']} ran, "
+              f"{result['skipped']} already complete, {result['failed']} failed")
+        for failed in (p for p in result["passes"] if p["status"] == "failed"):
+            print(f"failed: {failed['dir']}: {failed['error']} (run the campaign again to redo it)")
+    print(out / "campaign.json")
+    return 1 if result["failed"] else 0
 
 
 # -- main -----------------------------------------------------------------------------------------------
