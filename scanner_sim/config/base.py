@@ -78,7 +78,8 @@ Fraction = Number(ge=0.0, le=1.0)
 
 def Integer(ge: int | None = None, le: int | None = None):
     """An integer within the bounds; a float with an integer value (``3.0``) is taken."""
-    allowed = "must be an integer" + (f" >= {ge}" if ge is not None else "") + (f" <= {le}" if le is not None else "")
+    allowed = " ".join(["must be an integer", " and ".join(f"{op} {b}" for op, b in ((">=", ge), ("<=", le))
+                                                         if b is not None)]).rstrip()
 
     def check(value: Any) -> int:
         if isinstance(value, float) and value.is_integer():

@@ -5,6 +5,7 @@ turns the first error of a pydantic ``ValidationError`` into one :class:`ConfigE
 dotted as in the file (``objects[2].radius_m``); :func:`build` validates a mapping with that conversion.
 """
 
+import reprlib
 from collections.abc import Mapping
 from typing import Any
 
@@ -16,6 +17,22 @@ from muls.errors import ParameterError
 
 class ConfigError(ParameterError):
     """A scene file is wrong; the one-line message names the dotted key, the value and what is allowed."""
+
+
+class SetupWarning(UserWarning):
+    """A scene that runs but likely not as meant (a track partly off the seabed, a speed in the wrong unit);
+    the message names the key. ``scanner-sim`` prints it as one line."""
+
+
+#: Values in messages are cut to about this many characters, so that a message stays one readable line.
+_SHOWN = reprlib.Repr()
+_SHOWN.maxstring = _SHOWN.maxother = 80
+_SHOWN.maxlist = _SHOWN.maxtuple = 8
+
+
+def shown(value: Any) -> str:
+    """``repr(value)``, shortened (``[1, 2, 3, ...]``) when long or deeply nested."""
+    return _SHOWN.repr(value)
 
 
 _HIDDEN = object()
@@ -62,7 +79,7 @@ def config_error(exc: ValidationError, data: Any, path: str = "") -> ConfigError
         return ConfigError(f"{where}: missing required key")
     else:
         value, allowed = error["input"], _MESSAGES.get(error["type"], error["msg"])
-    return ConfigError(f"{where or 'scene'} = {value!r}: {allowed}")
+    return ConfigError(f"{where or 'scene'} = {shown(value)}: {allowed}")
 
 
 def _join(path: str, key: str) -> str:

@@ -33,6 +33,7 @@ from .base import (
     choice_check,
 )
 from .errors import checked_at, invalid
+from .sections import MAX_SEED, check_depth_m
 
 MAX_SEABED_TRIANGLES = 2_000_000
 
@@ -111,13 +112,14 @@ class SeabedConfig(surface("terrigenous_sand", "seabed")):
     """Node spacing [m]; at most 2,000,000 triangles."""
     depth_m: NonNegative = 20.0
     """Mean level z = -depth_m [m]."""
-    seed: Integer(ge=0) = 0
+    seed: Integer(ge=0, le=MAX_SEED) = 0
     relief: ReliefConfig = ReliefConfig()
     ripples: RipplesConfig = RipplesConfig()
     rocks: RocksConfig = RocksConfig()
 
     @model_validator(mode="after")
     def _triangle_budget(self):
+        check_depth_m(self.depth_m, "depth_m")
         nx, ny = (s / self.resolution_m + 1 for s in self.size_m)
         if nx < 2 or ny < 2:
             raise invalid(f"must be at most the seabed size {list(self.size_m)}", key="resolution_m",
@@ -174,6 +176,9 @@ class CableObject(scene_object("cable", "polyethylene", "cable")):
 
     @model_validator(mode="after")
     def _burial_per_point(self):
+        if len({tuple(p[:2]) for p in self.points_m}) < 2:
+            raise invalid("the points coincide in plan; a cable needs two distinct [x, y] points", key="points_m",
+                          value=[list(p) for p in self.points_m])
         if isinstance(self.burial_fraction, tuple) and len(self.burial_fraction) != len(self.points_m):
             raise invalid(f"must be one number or one per point ({len(self.points_m)})", key="burial_fraction",
                           value=list(self.burial_fraction))

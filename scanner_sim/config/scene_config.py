@@ -62,6 +62,11 @@ class SceneConfig(StrictModel):
         if self.seabed is None and (self.platform.altitude_m is not None
                                     or any(o.rests_on_seabed for o in self.objects)):
             raise invalid("missing; altitude_m and objects placed on the bottom need a seabed section", key="seabed")
+        altitude = self.platform.altitude_m
+        if altitude is not None and altitude >= self.seabed.depth_m:
+            raise invalid(f"puts the vehicle above the water surface: the seabed lies {self.seabed.depth_m:g} m deep "
+                          "(seabed.depth_m) and altitude_m is metres above it", key="platform.altitude_m",
+                          value=altitude)
         return self
 
     @property

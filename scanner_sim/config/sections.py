@@ -34,6 +34,17 @@ from .errors import invalid
 
 WaterPreset = Choice(*sorted(WATER_PRESETS))
 
+#: Largest seed: numpy's generators and muls's noise keys take 0 .. 2**63 - 1 without wrapping.
+MAX_SEED = 2**63 - 1
+#: Deeper than any ocean (the Challenger Deep is about 10,935 m) [m]: a larger depth is a unit slip.
+MAX_DEPTH_M = 11_000.0
+
+
+def check_depth_m(value: float, key: str) -> None:
+    """Reject a depth [m] deeper than any ocean (:data:`MAX_DEPTH_M`): it is in another unit."""
+    if value > MAX_DEPTH_M:
+        raise invalid(f"deeper than any ocean ({MAX_DEPTH_M:,.0f} m); depths are in metres", key=key, value=value)
+
 
 class WaterConfig(StrictModel):
     """The water: a preset name, or its optical properties at 532 nm (absorption with exactly one of
@@ -187,7 +198,7 @@ class NavigationNoiseConfig(StrictModel):
     correlation_time_s: Positive = 10.0
     rate_hz: Positive = 100.0
     """Rate of the noise grid [Hz]."""
-    seed: Integer(ge=0) = 0
+    seed: Integer(ge=0, le=MAX_SEED) = 0
 
 
 class PlatformConfig(StrictModel):
@@ -232,6 +243,14 @@ class PlatformConfig(StrictModel):
                           f"got {given or 'neither'}")
         if not needs_vertical and given:
             raise invalid("not allowed with a 3-D static position_m", key=given[0])
+        if self.mode == "waypoints" and len(set(self.waypoints_m)) < 2:
+            raise invalid("the points coincide; a track needs two distinct points (or mode 'static')",
+                          key="waypoints_m", value=[list(p) for p in self.waypoints_m])
+        if self.mode == "static" and len(self.position_m) == 3 and self.position_m[2] > 0.0:
+            raise invalid(f"z = {self.position_m[2]:g} m is above the water surface (z = 0 in scene files); "
+                          "give z <= 0", key="position_m", value=list(self.position_m))
+        if self.depth_m is not None:
+            check_depth_m(self.depth_m, "depth_m")
         return self
 
 
@@ -266,7 +285,7 @@ class ScannerConfig(StrictModel):
 class SurveyConfig(StrictModel):
     """How much to simulate and how faithfully."""
 
-    seed: Integer(ge=0) = 0
+    seed: Integer(ge=0, le=MAX_SEED) = 0
     fidelity: Choice(*FIDELITY_LEVELS) = "balanced"
     """A fidelity level (scanner_sim.fidelity): sub-rays, shadow rays, record mode."""
     subrays: Choice(*SUBRAY_COUNTS) | None = None
