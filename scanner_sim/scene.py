@@ -18,6 +18,7 @@ from muls.errors import ParameterError
 from .config import (
     CableObject,
     ConeMineObject,
+    ConfigError,
     CylinderMineObject,
     MeshObject,
     MooredMineObject,
@@ -284,7 +285,7 @@ def build_scene(config) -> Scene:
             f = np.concatenate([r[1] + o for r, o in zip(rocks, offsets)])
             parts.append(Part("rocks", "rocks", v, f, LABELS[rk.label], reflectance_of(rk)))
 
-    for obj in config.objects:
+    for index, obj in enumerate(config.objects):
         refl, label = reflectance_of(obj), LABELS[obj.label]
         centreline = None
         if isinstance(obj, CableObject):
@@ -317,10 +318,9 @@ def build_scene(config) -> Scene:
         elif isinstance(obj, PanelObject):
             v, f = panel_mesh(obj.center_m, obj.size_m, obj.normal, obj.up)
         elif isinstance(obj, MeshObject):
-            mesh = trimesh.load(obj.resolved_path, force="mesh")
+            v, f = load_mesh_file(obj, index)
             rot = rotation_matrix(*np.radians(obj.rotate_deg))
-            v = np.asarray(mesh.vertices, float) * obj.scale @ rot.T
-            f = np.asarray(mesh.faces, np.int64)
+            v = v * obj.scale @ rot.T
             if len(obj.translate_m) == 2:
                 ground = _ground_z(obj.translate_m, hf)
                 v = v + [obj.translate_m[0], obj.translate_m[1], ground - v[:, 2].min()]
@@ -328,8 +328,48 @@ def build_scene(config) -> Scene:
                 v = v + np.asarray(obj.translate_m)
         else:  # pragma: no cover - config only produces the types above
             raise ParameterError(f"object type {type(obj).__name__} is not supported")
+        if not np.isfinite(v).all():
+            raise ConfigError(f"objects[{index}] ({obj.name!r}): its sizes and position give coordinates that are not "
+                              "finite numbers; check them (metres)")
         parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline))
     return Scene(parts, hf)
+
+
+def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (n, 3) float64 and faces (m, 3) int64 of a ``mesh`` object's file, as the file gives them
+    (trimesh's usual processing applied: duplicate vertices merged).
+
+    Raises :class:`ConfigError` naming the object (``objects[index]`` and its name) and the file when trimesh
+    cannot read it, or it holds no triangles, vertices that are not finite, faces that refer to missing
+    vertices, or only degenerate (zero-area) triangles. trimesh's own loading would silently drop the
+    triangles with NaN corners, and the first three errors would otherwise surface as a traceback.
+    """
+    import trimesh
+
+    where = f"objects[{index}].file = {obj.file!r} (object {obj.name!r})"
+    try:
+        mesh = trimesh.load(obj.resolved_path, force="mesh", process=False)
+        v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), float)
+        f = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))))
+    except Exception as exc:  # trimesh raises whatever its parser meets: ValueError, IndexError, KeyError...
+        detail = " ".join(str(exc).split())[:120]
+        raise ConfigError(f"{where}: not a mesh file trimesh can read ({type(exc).__name__}: {detail})") from None
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or v.ndim != 2 or v.shape[1] != 3:
+        raise ConfigError(f"{where}: no triangles (an empty file, or not a mesh format trimesh recognises by its "
+                          "suffix)")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        raise ConfigError(f"{where}: {int(bad.sum()):,} of {len(v):,} vertices are not finite (NaN or infinite), "
+                          f"the first is vertex {int(np.flatnonzero(bad)[0])}")
+    if not np.issubdtype(f.dtype, np.integer) or f.min() < 0 or f.max() >= len(v):
+        i = int(np.flatnonzero(((f < 0) | (f >= len(v))).any(axis=1))[0]) if np.issubdtype(f.dtype, np.integer) else 0
+        raise ConfigError(f"{where}: face {i} refers to vertex {f[i].tolist()}, but the file has {len(v):,} vertices "
+                          f"(0 to {len(v) - 1})")
+    f = f.astype(np.int64)
+    if not _nondegenerate(v, f).any():
+        raise ConfigError(f"{where}: all {len(f):,} triangles are degenerate (zero area)")
+    mesh = trimesh.Trimesh(v, f, process=True)
+    return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
 
 
 def plate_scene(distance_m: float, size_m: float = 20.0, center_xy_m=(0.0, 0.0), origin_m=(0.0, 0.0, 0.0),
