@@ -31,25 +31,31 @@ def _save(fig, path):
 
 
 def plot_waveform(result: dict, path):
-    """One panel per channel (CH0-CH3): noisy codes [LSB] over the noise-free curve vs time [ns]."""
+    """One panel per channel (CH0-CH3): noisy codes [LSB] drawn over the dashed noise-free curve vs time
+    [ns], the full-scale code and the far channel's gate labelled, the time axis cut to where the echoes are."""
     plt = _pyplot()
     names = list(result["channels"])
     s = result["settings"]
     fig, axes = plt.subplots(len(names), 1, figsize=(8, 2.1 * len(names)), sharex=True)
     t = result["time_ns"]
+    echo_ns = 2e9 * s["range_m"] / s["speed_m_s"]
     for ax, name in zip(axes, names):
         colour = CHANNEL_COLOURS.get(name, "tab:purple")
-        ax.plot(t, result["channels"][name], color=colour, lw=0.7, label=f"{name} (noisy)")
-        ax.plot(t, result["noise_free"][name], color="k", lw=0.9, ls="--", label="noise-free")
-        ax.axhline(s["max_code"], color="0.6", lw=0.6, ls=":")
+        ax.plot(t, result["noise_free"][name], color="0.35", lw=1.0, ls="--", label="noise-free", zorder=1)
+        ax.plot(t, result["channels"][name], color=colour, lw=0.9, label=f"{name} (noisy)", zorder=2)
+        ax.axhline(s["max_code"], color="0.5", lw=0.7, ls=":", label=f"full scale ({s['max_code']} LSB)")
         for r in result["returns"]:  # the chosen return's range, back to time of flight
             if r["channel"] == name:
                 ax.axvline(2e9 * r["range_m"] / s["speed_m_s"], color="tab:green", lw=0.8, label="chosen return")
-        ax.set_ylabel("LSB")
-        ax.legend(loc="upper right", fontsize=7)
         if name == "ch3":
             d, w = s["gate_delay_ns"], s["gate_width_ns"]
-            ax.axvspan(d, d + w, color="tab:red", alpha=0.06, lw=0)
+            ax.axvspan(d, d + w, color="tab:red", alpha=0.08, lw=0, label=f"gate {d:g}-{d + w:g} ns")
+        ax.set_ylabel("LSB")
+        ax.set_ylim(top=1.12 * s["max_code"])
+        ax.legend(loc="upper right", fontsize=7)
+    # The echoes and the column lie in the first tens of ns; show them, and the gate's opening.
+    right = max(echo_ns + 80.0, s["gate_delay_ns"] + 40.0 if "ch3" in names else 0.0)
+    axes[-1].set_xlim(t[0], min(t[-1], right))
     axes[-1].set_xlabel("time after emission [ns]")
     axes[0].set_title(f"{s['water']}: panel at {s['range_m']:g} m, reflectance {s['reflectance']:g}, seed {s['seed']}")
     return _save(fig, path)

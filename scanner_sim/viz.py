@@ -33,6 +33,7 @@ Other names take a colour from a fixed qualitative cycle indexed by their code.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -85,12 +86,15 @@ _CYCLE = [(31, 119, 180), (44, 160, 44), (148, 103, 189), (23, 190, 207), (188, 
 #: ``color_by`` value -> (matplotlib colour map, scalar bar title, symmetric limits?).
 SCALAR_COLOUR_MAPS: dict[str, tuple[str, str, bool]] = {
     "intensity": ("viridis", "intensity", False),
-    "channel": ("Set1", "channel", False),
     "range_error": ("coolwarm", "range error [m]", True),
     "snr": ("magma", "SNR", False),
     "amplitude": ("viridis", "amplitude [LSB]", False),
     "incidence": ("plasma", "incidence [deg]", False),
 }
+
+#: Detection channels 1, 2, 3... (RGB), the colours of the waveform plots: blue, orange, red, then green, purple.
+CHANNEL_COLOURS: tuple[tuple[int, int, int], ...] = ((31, 119, 180), (255, 127, 14), (214, 39, 40), (44, 160, 44),
+                                                     (148, 103, 189))
 
 _BACKGROUND = "#0b1a2a"  # deep-water navy: white panels and the grey truth mesh stay visible
 
@@ -123,7 +127,7 @@ def _figure_to_png(fig, path_png) -> None:
     FigureCanvasAgg(fig)
     with atomic_path(path_png) as tmp:
         with open(tmp, "wb") as fh:
-            fig.savefig(fh, format="png", dpi=fig.dpi)
+            fig.savefig(fh, format="png", dpi=fig.dpi, bbox_inches="tight", pad_inches=0.15)  # no label cut off
 
 
 def _prefer_headless_vtk() -> None:
@@ -310,20 +314,26 @@ def _point_cloud_plotter(
                                  smooth_shading=False, show_edges=False)
         if len(pts):
             cloud = pv.PolyData(pts - centre)
-            if color_by == "class":
-                table = class_table(class_names)
+            if color_by in ("class", "channel"):  # categories: one colour each, named in a legend
                 codes = values.astype(np.int64)
-                present = np.unique(codes)
-                lut = {int(c): _class_colour(int(c), table.get(int(c))) for c in present}
+                if color_by == "class":
+                    table = class_table(class_names)
+                    lut = {int(c): (_class_colour(int(c), table.get(int(c))), f"{table.get(int(c), 'class')}, class {c}")
+                           for c in np.unique(codes)}
+                else:
+                    lut = {int(c): (CHANNEL_COLOURS[(int(c) - 1) % len(CHANNEL_COLOURS)], f"CH{c}")
+                           for c in np.unique(codes)}
                 rgb = np.zeros((len(codes), 3), dtype=np.uint8)
-                for c, col in lut.items():
+                for c, (col, _) in lut.items():
                     rgb[codes == c] = col
                 cloud["rgb"] = rgb
                 plotter.add_mesh(cloud, scalars="rgb", rgb=True, point_size=point_size,
                                  render_points_as_spheres=False)
-                legend = [[f"{table.get(c, 'class')} ({c})", np.array(col) / 255.0] for c, col in lut.items()]
-                plotter.add_legend(labels=legend, bcolor=(0.1, 0.1, 0.1), size=(0.18, 0.04 * len(legend) + 0.02),
-                                   loc="upper right", face="circle")
+                # One coloured line per category at the upper right (VTK's legend box clips long labels).
+                w, h = int(window_size[0]), int(window_size[1])
+                for i, (col, label) in enumerate(lut.values()):
+                    plotter.add_text(label, position=(int(0.79 * w), int(h - 40 - 30 * i)), font_size=13,
+                                     color=tuple(np.array(col) / 255.0))
             else:
                 cmap, bar_title, symmetric = SCALAR_COLOUR_MAPS.get(color_by, ("viridis", color_by, False))
                 good = values[np.isfinite(values)]
@@ -332,15 +342,12 @@ def _point_cloud_plotter(
                 elif symmetric:
                     m = float(np.percentile(np.abs(good), 99)) or 1.0
                     clim = (-m, m)
-                elif color_by == "channel":
-                    clim = (float(good.min()), float(good.max()) if good.max() > good.min() else float(good.min()) + 1)
                 else:
                     a, b = np.percentile(good, [1, 99])
                     clim = (float(a), float(b) if b > a else float(a) + 1.0)
                 cloud[bar_title] = values
                 plotter.add_mesh(cloud, scalars=bar_title, cmap=cmap, clim=clim, point_size=point_size,
                                  render_points_as_spheres=False, nan_color="magenta",
-                                 n_colors=int(clim[1] - clim[0]) + 1 if color_by == "channel" else 256,
                                  scalar_bar_args={"title": bar_title, "vertical": True, "color": "white"})
         if title:
             plotter.add_text(title, position="upper_left", font_size=14, color="white")
@@ -552,7 +559,9 @@ def plot_coverage_vs_altitude(path_png, records: Sequence[Mapping], *, title: st
     """Covered fraction [%] against altitude [m], one curve per water type and instrument.
 
     records: mappings with ``water``, ``instrument``, ``altitude_m`` and ``covered_fraction`` (0..1 or None).
-    Colour tells the water, line style and marker the instrument.
+    Colour tells the water, line style and marker the instrument. Where waters give equal coverage (clean and
+    coastal at 100 %), their curves stay visible: each water is drawn a little apart along the altitude axis
+    and thinner than the one before, on top of it.
     """
     from matplotlib.figure import Figure
 
@@ -564,17 +573,71 @@ def plot_coverage_vs_altitude(path_png, records: Sequence[Mapping], *, title: st
     ax = fig.add_subplot()
     cycle = iter(f"C{i}" for i in range(3, 100))
     colours: dict[str, str] = {}
+    waters = list(dict.fromkeys(water for water, _ in curves))
+    altitudes = [a for pts in curves.values() for a, _ in pts]
+    dodge = 0.02 * max(max(altitudes) - min(altitudes), 1.0) if altitudes else 0.0
     for (water, instrument), pts in curves.items():
         colour = colours.setdefault(water, WATER_COLOURS.get(water) or next(cycle))
         line, marker = _INSTRUMENT_STYLES.get(instrument, ("-.", "D"))
         alt, frac = np.array(sorted(pts)).T
-        ax.plot(alt, frac, line, marker=marker, color=colour, label=f"{water}, {instrument}")
+        k = waters.index(water)
+        ax.plot(alt + (k - 0.5 * (len(waters) - 1)) * dodge, frac, line, marker=marker, color=colour,
+                lw=max(3.6 - 1.2 * k, 1.0), ms=max(9.0 - 2.0 * k, 4.0), zorder=2 + k, label=f"{water}, {instrument}")
     ax.set_xlabel("altitude [m]")
     ax.set_ylabel("covered fraction of the reached area [%]")
     ax.set_ylim(-2, 102)
     ax.grid(alpha=0.3)
     if curves:
         ax.legend(fontsize=8, loc="lower left")
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    _figure_to_png(fig, path_png)
+
+
+def plot_sweep(path_png, records: Sequence[Mapping], x: str, y: str, *, lines: Sequence[str] = (),
+               title: str | None = None, y_label: str | None = None) -> None:
+    """A figure ``y`` against sweep axis ``x``, one curve per combination of the ``lines`` axes' values.
+
+    records: mappings with keys ``x``, ``y`` and every name in ``lines`` (a campaign's passes); a record
+    whose ``y`` is None is left out. Numeric ``x`` values are placed by value, others in first-seen order.
+    Colour tells the value of ``lines[0]`` (a water preset's own colour when it is one), line style and
+    marker the values of the other ``lines`` axes (an instrument's own style when it is one).
+    """
+    from matplotlib.figure import Figure
+
+    def label(value):
+        return f"{value:g}" if isinstance(value, float) else str(value)
+
+    xs = [r[x] for r in records if r[y] is not None]
+    numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in xs)
+    places = {v: float(v) for v in xs} if numeric else {v: float(i) for i, v in enumerate(dict.fromkeys(map(str, xs)))}
+    curves: dict[tuple, list[tuple[float, float]]] = {}
+    for r in records:
+        if r[y] is not None:
+            key = tuple(r[name] for name in lines)
+            curves.setdefault(key, []).append((places[r[x] if numeric else str(r[x])], float(r[y])))
+    fig = Figure(figsize=(8.0, 5.0), dpi=110)
+    ax = fig.add_subplot()
+    colour_cycle, style_cycle = iter(f"C{i}" for i in range(100)), itertools.cycle(
+        [("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"), ("-", "v"), ("--", "P")])
+    colours: dict[tuple, str] = {}
+    styles: dict[tuple, tuple[str, str]] = {}
+    for key, pts in curves.items():
+        if key[:1] not in colours:
+            colours[key[:1]] = (WATER_COLOURS.get(str(key[0])) if key else None) or next(colour_cycle)
+        if key[1:] not in styles:
+            styles[key[1:]] = (_INSTRUMENT_STYLES.get(str(key[1])) if len(key) > 1 else None) or next(style_cycle)
+        (line, marker), px_py = styles[key[1:]], np.array(sorted(pts)).T
+        ax.plot(*px_py, line, marker=marker, color=colours[key[:1]],
+                label=", ".join(f"{name}={label(v)}" for name, v in zip(lines, key)) or None)
+    if not numeric:
+        ax.set_xticks(list(places.values()), list(places))
+    ax.set_xlabel(x)
+    ax.set_ylabel(y_label or y)
+    ax.grid(alpha=0.3)
+    if lines and curves:
+        ax.legend(fontsize=8, loc="best")
     if title:
         ax.set_title(title, fontsize=10)
     fig.tight_layout()
