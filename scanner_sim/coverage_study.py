@@ -21,7 +21,8 @@ from muls.presets import instrument_preset, water_preset
 
 from .config import SceneConfig
 from .coverage import CoverageSettings
-from .survey import PassOptions, run_pass
+from .pass_runner import PassJob, cached_scene, maybe_client, run_jobs
+from .survey import PassOptions
 
 INSTRUMENTS = ("mul2023", "single_channel", "coaxial")
 GATE_MODES = ("follow", "fixed")
@@ -95,37 +96,44 @@ def combination_name(water: str, altitude_m: float | None, instrument: str) -> s
 
 def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
               settings: CoverageSettings = CoverageSettings(), fidelity: str | None = None, seed: int | None = None,
-              max_pulses: int | None = None, render: bool = True, progress: bool = True) -> dict:
+              max_pulses: int | None = None, render: bool = True, progress: bool = True, client=None,
+              workers: int | None = None, scheduler: str | None = None, redo: bool = False) -> dict:
     """Run every combination of ``plan`` and write the study's files into ``out_dir``.
 
     Per combination, a sub-directory with the pass's outputs (points.las, summary.json, coverage_map.png,
     render.png...); at the top, scene.ply, coverage.json, coverage.md, coverage_vs_altitude.png and
     report.html. Returns the content of coverage.json.
+
+    The study is a campaign (docs/campaigns.md): its passes run as Dask tasks on ``client``, or on the
+    scheduler at ``scheduler``, or on a local cluster of ``workers`` processes; with none of them (or
+    ``workers=0``), one after another in this process. The results are the same bits either way. Passes
+    already complete in ``out_dir`` are kept, unless ``redo``.
     """
     from . import io, report
-    from .scene import build_scene
 
     if config.seabed is None:
         raise ParameterError(f"scene '{config.name}': coverage is measured over the seabed's plan area; the "
                              "scene has no seabed section")
     combos = list(plan.combinations(config))
     # every combination is built (and so checked) before any pass runs
-    configs = [combination_config(config, water, altitude, instrument, plan.gate)
-               for water, altitude, instrument in combos]
+    jobs = [PassJob(combination_name(water, altitude, instrument),
+                    combination_config(config, water, altitude, instrument, plan.gate),
+                    PassOptions(water=water, seed=seed, fidelity=fidelity, max_pulses=max_pulses, progress=False,
+                                render=render, render_size=STUDY_RENDER_SIZE, write_scene=False, coverage=settings))
+            for water, altitude, instrument in combos]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    scene = build_scene(config)
+    scene = cached_scene(config)
     io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
-    records = []
-    for k, ((water, altitude, instrument), cfg) in enumerate(zip(combos, configs)):
-        name = combination_name(water, altitude, instrument)
-        if progress:
-            print(f"[{k + 1}/{len(combos)}] {name}", flush=True)
-        options = PassOptions(water=water, seed=seed, fidelity=fidelity, max_pulses=max_pulses, progress=progress,
-                              render=render, render_size=STUDY_RENDER_SIZE, write_scene=False, coverage=settings)
-        summary = run_pass(cfg, out / name, options, scene=scene).summary
-        records.append(study_record(cfg, summary, water, altitude, instrument, name))
+    with maybe_client(client, scheduler, workers, announce=progress) as dask:
+        outcomes = run_jobs(jobs, out, dask, redo=redo, progress=progress)
+    failed = [o for o in outcomes if o.status == "failed"]
+    if failed:
+        raise RuntimeError(f"{len(failed)} of {len(jobs)} passes failed ({failed[0].job.name}: {failed[0].error}); "
+                           "the others are complete in the output folder: run the study again to redo only these")
+    records = [study_record(job.config, o.summary, water, altitude, instrument, job.name)
+               for (water, altitude, instrument), job, o in zip(combos, jobs, outcomes)]
     study = {
         "scene": config.name,
         "study": {"waters": list(plan.waters),
