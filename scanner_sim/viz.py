@@ -150,6 +150,61 @@ def points_polydata(points):
     return cloud
 
 
+def categorical_rgb(values, color_by: str, class_names: Mapping[int, str] | None = None):
+    """Colours of categories: ``color_by`` "class" (the class table's colours) or "channel" (CH1 blue, CH2
+    orange, CH3 red...). Returns ((n, 3) uint8 RGB, {code: (RGB, legend label)})."""
+    codes = np.asarray(values).astype(np.int64)
+    if color_by == "class":
+        table = class_table(class_names)
+        lut = {int(c): (_class_colour(int(c), table.get(int(c))), f"{table.get(int(c), 'class')}, class {c}")
+               for c in np.unique(codes)}
+    else:
+        lut = {int(c): (CHANNEL_COLOURS[(int(c) - 1) % len(CHANNEL_COLOURS)], f"CH{c}") for c in np.unique(codes)}
+    rgb = np.zeros((len(codes), 3), dtype=np.uint8)
+    for c, (col, _) in lut.items():
+        rgb[codes == c] = col
+    return rgb, lut
+
+
+def point_rgb(values, color_by: str, class_names: Mapping[int, str] | None = None) -> np.ndarray:
+    """(n, 3) float RGB in [0, 1] of points coloured by ``color_by``: categories as :func:`categorical_rgb`,
+    other fields through their colour map (:data:`SCALAR_COLOUR_MAPS`) between their 1st and 99th
+    percentiles (symmetric about 0 for the range error)."""
+    if color_by in ("class", "channel"):
+        return categorical_rgb(values, color_by, class_names)[0] / 255.0
+    from matplotlib import colormaps
+
+    cmap, _, symmetric = SCALAR_COLOUR_MAPS.get(color_by, ("viridis", color_by, False))
+    v = np.asarray(values, float)
+    good = v[np.isfinite(v)]
+    if symmetric:
+        m = float(np.percentile(np.abs(good), 99)) if good.size else 1.0
+        lo, hi = -m, m
+    else:
+        lo, hi = np.percentile(good, [1, 99]) if good.size else (0.0, 1.0)
+    level = np.clip((v - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+    return np.where(np.isfinite(v)[:, None], colormaps[cmap](level)[:, :3], [1.0, 0.0, 1.0])
+
+
+def show_open3d(xyz, rgb, *, truth_vertices=None, truth_faces=None, title: str = "muls-scanner") -> None:
+    """An interactive open3d window (the ``open3d`` extra): the points (n, 3) [m] in colours ``rgb`` (n, 3)
+    in [0, 1], over the grey truth mesh."""
+    from .swath import open3d
+
+    o3d = open3d()
+    centre = np.asarray(xyz, float).mean(axis=0) if len(xyz) else np.zeros(3)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(xyz, float) - centre))
+    cloud.colors = o3d.utility.Vector3dVector(np.asarray(rgb, float))
+    shown = [cloud]
+    if truth_vertices is not None and len(truth_faces):
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(truth_vertices, float) - centre),
+                                         o3d.utility.Vector3iVector(np.asarray(truth_faces, np.int32)))
+        mesh.compute_vertex_normals()
+        mesh.paint_uniform_color([0.55, 0.58, 0.62])
+        shown.append(mesh)
+    o3d.visualization.draw_geometries(shown, window_name=title)
+
+
 def render_point_cloud(
     path_png,
     xyz,
@@ -315,17 +370,7 @@ def _point_cloud_plotter(
         if len(pts):
             cloud = pv.PolyData(pts - centre)
             if color_by in ("class", "channel"):  # categories: one colour each, named in a legend
-                codes = values.astype(np.int64)
-                if color_by == "class":
-                    table = class_table(class_names)
-                    lut = {int(c): (_class_colour(int(c), table.get(int(c))), f"{table.get(int(c), 'class')}, class {c}")
-                           for c in np.unique(codes)}
-                else:
-                    lut = {int(c): (CHANNEL_COLOURS[(int(c) - 1) % len(CHANNEL_COLOURS)], f"CH{c}")
-                           for c in np.unique(codes)}
-                rgb = np.zeros((len(codes), 3), dtype=np.uint8)
-                for c, (col, _) in lut.items():
-                    rgb[codes == c] = col
+                rgb, lut = categorical_rgb(values, color_by, class_names)
                 cloud["rgb"] = rgb
                 plotter.add_mesh(cloud, scalars="rgb", rgb=True, point_size=point_size,
                                  render_points_as_spheres=False)
