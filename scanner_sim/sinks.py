@@ -126,7 +126,7 @@ class PassStats:
         if total == 0:
             return None
         k = int(np.searchsorted(np.cumsum(self.error_counts), q * total))
-        return (k + 0.5) * ERROR_BIN_M
+        return round((k + 0.5) * ERROR_BIN_M, 7)  # the bin's centre, without float noise in summary.json
 
 
 def pass_summary(setup, stats: PassStats, n_points: int, dropout_counts: dict, wall_s: float, setup_s: float) -> dict:
