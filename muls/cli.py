@@ -1,4 +1,5 @@
-"""``muls``: the MULS studies from the command line (waveform, maxrange, precision, coaxial, bench).
+"""``muls``: the MULS studies from the command line (waveform, maxrange, precision, coaxial, bench), and the
+multiple-scattering Monte Carlo beside MULS (multiscatter, multiscatter-study).
 
 Each command runs one function of :mod:`muls.studies`, prints its result as JSON with ``--json`` (otherwise
 a short table), and, except ``bench``, writes a picture (``--out``, a default name otherwise; ``--no-plot``
@@ -10,9 +11,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 
-from . import studies
+from . import montecarlo, studies
 from .presets import WATER_PRESETS
 
 EXIT_USAGE = 2
@@ -157,8 +159,87 @@ def _cmd_bench(args):
     return result, "\n".join(lines), None
 
 
+def _geometry(name: str) -> str:
+    if name not in ("mul2023", "coaxial"):
+        raise ValueError(f"--geometry {name!r}: must be one of coaxial, mul2023")
+    return name
+
+
+#: The keys ``muls multiscatter --json`` prints (the study returns more, for the picture and the table).
+MULTISCATTER_KEYS = ("time_ns", "mc_w", "mc_rel_err", "muls_w", "target", "column_peak_ratio",
+                     "effective_attenuation_per_m", "packets", "seconds")
+
+
+def _cmd_multiscatter(args):
+    full = montecarlo.multiscatter_study(_water_name(args.water), _positive("--range-m", args.range_m),
+                                         geometry=_geometry(args.geometry), packets=_count("--packets", args.packets),
+                                         seed=args.seed, reflectance=args.reflectance)
+    d = full["details"]
+    tg = full["target"]
+    rules = d["attenuation_rules_per_m"]
+    lines = [f"multiple scattering: {d['water']}, {d['geometry']}, plate at {d['range_m']:g} m (reflectance "
+             f"{d['reflectance']:g}), {d['phase']} phase function, {full['packets']:,} packets, seed {d['seed']} "
+             f"({full['seconds']:.1f} s)",
+             f"target echo energy: Monte Carlo {tg['mc_energy_j']:.4g} J "
+             f"(+-{d['mc_target_energy_err_j'] / tg['mc_energy_j']:.1%}), MULS {tg['muls_energy_j']:.4g} J, "
+             f"ratio {_fmt(tg['ratio'], 4)}",
+             f"effective attenuation of the echo: {_fmt(full['effective_attenuation_per_m'], 4)} /m (MULS k_lidar "
+             f"{rules['muls_k_lidar']:.4f}, c {rules['muls_c']:.4f}, kd {rules['muls_kd']:.4f}; the water uses "
+             f"{rules['muls_model']})",
+             f"column peak: Monte Carlo / MULS {_fmt(full['column_peak_ratio'], 3)} (at {d['mc_column_peak_time_ns']:.1f}"
+             f" vs {d['muls_column_peak_time_ns']:.1f} ns; first scattering alone {_fmt(d['column_first_peak_ratio'], 4)};"
+             f" beta_pi of the phase function / MULS's {_fmt(d['beta_pi_ratio'], 3)})",
+             f"{'time ns':>8s} {'MC W':>11s} {'rel err':>8s} {'MULS W':>11s} {'MC/MULS':>8s}"]
+    step = max(1, len(full["time_ns"]) // 24)
+    for t, mc, err, mu in list(zip(full["time_ns"], full["mc_w"], full["mc_rel_err"], full["muls_w"]))[::step]:
+        ratio = f"{mc / mu:8.3g}" if mu > 0 else "       -"
+        lines.append(f"{t:8.1f} {mc:11.4g} {_fmt(err, 3):>8s} {mu:11.4g} {ratio}")
+    from .plots import plot_multiscatter
+
+    result = {k: full[k] for k in MULTISCATTER_KEYS}
+    return result, "\n".join(lines), lambda res, path: plot_multiscatter(full, path)
+
+
+def _cmd_multiscatter_study(args):
+    waters = [_water_name(w) for w in args.waters]
+    result = montecarlo.multiscatter_waters_study(waters, packets=_count("--packets", args.packets), seed=args.seed,
+                                                  geometry=_geometry(args.geometry))
+    s = result["settings"]
+    lines = [f"Monte Carlo / MULS, {s['geometry']}, flat 0.1 plate, {s['phase']} phase function, "
+             f"{s['packets']:,} packets per water, seed {s['seed']} ({s['seconds']:.0f} s)",
+             "target echo energy, MC / MULS with each attenuation rule, and the MC's effective attenuation:",
+             f"{'water':14s} {'range m':>7s} {'k_lidar':>9s} {'c':>9s} {'kd':>9s} {'closest':>8s} {'k_eff /m':>8s} {'err':>6s}"]
+    for w in s["waters"]:
+        for row in result[w]["ranges"]:
+            r = row["ratio"]
+            lines.append(f"{w:14s} {row['range_m']:7.1f} {r['k_lidar']:9.3g} {r['c']:9.3g} {r['kd']:9.3g} "
+                         f"{row['closest_rule']:>8s} {row['effective_attenuation_per_m']:8.3f} {row['mc_rel_err']:6.1%}")
+    lines.append("water column peak, MC / MULS (MULS's beta_pi; with the phase function's beta_pi), first-order "
+                 "share, and the detection range MULS needs vs the MC implies:")
+    lines.append(f"{'water':14s} {'k_lidar':>15s} {'c':>17s} {'kd':>15s} {'1st order':>9s} {'err':>6s} "
+                 f"{'R_det MULS':>10s} {'R_det MC':>9s} {'interp err':>10s}")
+    for w in s["waters"]:
+        c, det = result[w]["column"], result[w]["detection"]
+        rules = " ".join(f"{c['rules'][q]['peak_ratio']:7.3g} ({c['rules'][q]['peak_ratio_same_beta_pi']:6.3g})"
+                         for q in montecarlo.ATTENUATION_RULES)
+        worst = max(abs(q["error"]) for q in result[w]["correction_check"])
+        r_mc = "-" if det is None or det["mc_implied_m"] is None else f"{det['mc_implied_m']:.1f}"
+        r_mu = "-" if det is None else f"{det['muls_m']:.1f}"
+        lines.append(f"{w:14s} {rules} {c['mc_first_order_peak_w'] / c['mc_peak_w']:9.3g} {c['mc_peak_rel_err']:6.1%} "
+                     f"{r_mu:>10s} {r_mc:>9s} {worst:10.1%}")
+    from .plots import plot_multiscatter_study
+
+    def write(res, out_dir):  # the study's directory: its chart and its JSON
+        os.makedirs(out_dir, exist_ok=True)
+        with open(os.path.join(out_dir, "multiscatter_study.json"), "w") as f:
+            json.dump(res, f, indent=1, allow_nan=False)
+        return plot_multiscatter_study(res, os.path.join(out_dir, "multiscatter_study.png"))
+
+    return result, "\n".join(lines), write
+
+
 DEFAULT_OUT = {"waveform": "waveform.png", "maxrange": "maxrange.png", "precision": "precision.png",
-               "coaxial": "coaxial.png"}
+               "coaxial": "coaxial.png", "multiscatter": "multiscatter.png", "multiscatter-study": "multiscatter_study"}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -213,6 +294,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repeats", type=int, default=3)
     common(p, plot=False)
     p.set_defaults(run=_cmd_bench)
+
+    p = sub.add_parser("multiscatter", help="Monte Carlo with multiple scattering beside MULS, one plate")
+    p.add_argument("--water", required=True, help=f"water preset ({waters})")
+    p.add_argument("--range-m", type=float, required=True, help="plate range [m]")
+    p.add_argument("--geometry", default="mul2023", help="mul2023 (receiver 130 mm beside the beam) or coaxial")
+    p.add_argument("--packets", type=int, default=montecarlo.DEFAULT_PACKETS, help="beam packets")
+    p.add_argument("--reflectance", type=float, default=0.1)
+    p.add_argument("--seed", type=int, default=0)
+    common(p)
+    p.set_defaults(run=_cmd_multiscatter)
+
+    p = sub.add_parser("multiscatter-study", help="where single scattering fails: MC / MULS per water and range")
+    p.add_argument("--waters", nargs="+", default=list(montecarlo.STUDY_WATERS), help=f"water presets ({waters})")
+    p.add_argument("--geometry", default="mul2023", help="mul2023 or coaxial")
+    p.add_argument("--packets", type=int, default=montecarlo.STUDY_PACKETS, help="beam packets per water")
+    p.add_argument("--seed", type=int, default=0)
+    common(p)
+    p.set_defaults(run=_cmd_multiscatter_study)
     return parser
 
 

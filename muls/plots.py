@@ -129,3 +129,89 @@ def plot_coaxial(results: dict, path):
     ax.set_title("Water-column backscatter, both receivers non-gated (paper Fig. 13)")
     ax.legend(fontsize=7)
     return _save(fig, path)
+
+
+def plot_multiscatter(result: dict, path):
+    """Monte Carlo and MULS power [W] vs time [ns] on a log axis (column and target apart), and their ratio.
+
+    result: the dict of :func:`muls.montecarlo.multiscatter_study` (with its ``details``).
+    """
+    import numpy as np
+
+    plt = _pyplot()
+    d = result["details"]
+    t = np.asarray(result["time_ns"])
+    mc, muls = np.asarray(result["mc_w"]), np.asarray(result["muls_w"])
+    err = np.asarray([np.nan if e is None else e for e in result["mc_rel_err"]])
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(9, 7), sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
+    ax.semilogy(t, mc, color="tab:red", lw=1.4, label="Monte Carlo, column + target")
+    ax.fill_between(t, mc * (1 - 2 * np.nan_to_num(err)), mc * (1 + 2 * np.nan_to_num(err)), color="tab:red",
+                    alpha=0.2, lw=0, label="Monte Carlo, 2 standard errors")
+    ax.semilogy(t, d["mc_column_w"], color="tab:red", lw=0.8, ls="--", label="Monte Carlo, column")
+    ax.semilogy(t, d["mc_column_first_w"], color="tab:orange", lw=0.8, ls=":",
+                label="Monte Carlo, column, first scattering only")
+    ax.semilogy(t, d["mc_target_w"], color="tab:red", lw=0.8, ls="-.", label="Monte Carlo, target")
+    ax.semilogy(t, muls, color="k", lw=1.4, label=f"MULS ({d['attenuation_rules_per_m']['muls_model']}), column + target")
+    ax.semilogy(t, d["muls_column_w"], color="k", lw=0.8, ls="--", label="MULS, column")
+    ax.semilogy(t, d["muls_target_w"], color="k", lw=0.8, ls="-.", label="MULS, target")
+    top = max(mc.max(), muls.max())
+    floor = min(v for v in (np.max(d["mc_target_w"]), np.max(d["muls_target_w"]), top) if v > 0) * 1e-3
+    ax.set_ylim(floor, top * 3)
+    ax.set_ylabel("received optical power [W]")
+    tg = result["target"]
+    ax.set_title(f"{d['water']}, {d['geometry']}, plate at {d['range_m']:g} m: echo energy MC/MULS "
+                 f"{tg['ratio']:.3g}, k_eff {result['effective_attenuation_per_m']:.3f}/m "
+                 f"({result['packets']:,} packets)", fontsize=9)
+    ax.legend(fontsize=7, loc="upper right")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where((muls > top * 1e-9) & (mc > 0), mc / muls, np.nan)
+    ax2.semilogy(t, ratio, color="tab:purple", lw=1.0)
+    ax2.axhline(1.0, color="0.5", lw=0.6)
+    ax2.set_ylabel("MC / MULS")
+    ax2.set_xlabel("time after emission [ns]")
+    return _save(fig, path)
+
+
+def plot_multiscatter_study(result: dict, path):
+    """The study's chart: MC / MULS echo energy vs range per water for each attenuation rule, the effective
+    attenuation vs range, and the column peak ratios (result: :func:`muls.montecarlo.multiscatter_waters_study`).
+    """
+    import numpy as np
+
+    plt = _pyplot()
+    waters = result["settings"]["waters"]
+    colours = dict(zip(waters, ["tab:brown", "tab:blue", "tab:cyan", "tab:green", "tab:purple"]))
+    styles = {"k_lidar": "-", "c": ":", "kd": "--"}
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(15, 4.8))
+    for w in waters:
+        rows = result[w]["ranges"]
+        r = np.array([q["range_m"] for q in rows])
+        for rule, ls in styles.items():
+            a1.semilogy(r, [q["ratio"][rule] for q in rows], color=colours[w], ls=ls, lw=1.2,
+                        label=f"{w}, {rule}" if rule == "k_lidar" else None)
+        a2.plot(r, [q["effective_attenuation_per_m"] for q in rows], color=colours[w], marker="o", ms=3, label=w)
+        for rule, value in result[w]["attenuation_per_m"].items():
+            a2.axhline(value, color=colours[w], ls=styles[rule], lw=0.6, alpha=0.6)
+    a1.axhline(1.0, color="0.4", lw=0.6)
+    a1.set_xlabel("plate range [m]")
+    a1.set_ylabel("echo energy, Monte Carlo / MULS")
+    a1.set_title("target echo (solid k_lidar, dotted c, dashed kd)", fontsize=9)
+    a1.set_ylim(1e-4, 1e3)
+    a1.legend(fontsize=7)
+    a2.set_xlabel("plate range [m]")
+    a2.set_ylabel("effective two-way attenuation [1/m]")
+    a2.set_yscale("log")
+    a2.set_title("Monte Carlo k_eff (markers); MULS rules (lines)", fontsize=9)
+    a2.legend(fontsize=7)
+    x = np.arange(len(waters))
+    for i, (rule, hatch) in enumerate((("k_lidar", ""), ("c", "//"), ("kd", ".."))):
+        a3.bar(x + (i - 1) * 0.27, [result[w]["column"]["rules"][rule]["peak_ratio"] for w in waters], width=0.27,
+               color=[colours[w] for w in waters], hatch=hatch, edgecolor="k", lw=0.4, label=rule)
+    a3.set_yscale("log")
+    a3.axhline(1.0, color="0.4", lw=0.6)
+    a3.set_xticks(x, waters, rotation=20, fontsize=8)
+    a3.set_ylabel("column peak, Monte Carlo / MULS")
+    a3.set_title("water-column peak (bars: k_lidar, c hatched //, kd dotted)", fontsize=9)
+    fig.suptitle(f"Where single scattering fails: {result['settings']['geometry']}, "
+                 f"{result['settings']['packets']:,} packets per water", fontsize=10)
+    return _save(fig, path)
