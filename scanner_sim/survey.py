@@ -29,6 +29,7 @@ from .beams import BeamPattern, beam_pattern
 from .config import SceneConfig
 from .coverage import CoverageSettings, Footprint, nominal_footprint
 from .fidelity import FidelityLevel
+from .io.run_dir import RunDirectory, abort_on_error
 from .points import LinesOfSight, georeference
 from .raycast import Hits, RayCaster, cast_beams
 from .records import DropoutRecords, PointRecords
@@ -227,6 +228,7 @@ class PassResult:
         return viz.points_polydata(self.points)
 
 
+@abort_on_error  # an unfinished run (an error, Ctrl-C, SIGTERM) leaves the output folder as it was
 def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: PassOptions = PassOptions(),
              scene: Scene | None = None) -> PassResult:
     """Simulate the scene's pass and write its outputs in ``out_dir`` (default: the scene's output dir).
@@ -240,8 +242,8 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     t_setup = time.perf_counter()
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
-    out = Path(out_dir or setup.config.output_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    run_dir = RunDirectory(out_dir or setup.config.output_dir).open()  # locked; written in a hidden sibling
+    out = run_dir.path
     with ExitStack() as stack:
         clouds = [stack.enter_context(sink) for sink in point_cloud_sinks(setup, out)]
         dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
@@ -255,7 +257,7 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
         if coverage is not None:
             sinks.render_coverage_map(setup, coverage, out / "coverage_map.png", summary)
     io.write_summary_json(out / "summary.json", summary)  # last: a complete pass is one with a summary
-    return PassResult(summary, out)
+    return PassResult(summary, run_dir.commit())  # swapped in whole for the output folder (io/run_dir.py)
 
 
 def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), scene: Scene | None = None
