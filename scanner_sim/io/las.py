@@ -11,8 +11,9 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 from collections.abc import Mapping
-from datetime import date
+from datetime import date, datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +68,27 @@ _METADATA_RECORD_ID = 1
 _GENERATING_SOFTWARE = "muls-scanner scanner_sim"
 _SYSTEM_IDENTIFIER = "SIMULATION: MULS lidar"
 _VLR_MAX_BYTES = 65535
+
+
+#: The GPS time origin, and the GPS second that Adjusted Standard GPS time 0 stands for.
+_GPS_EPOCH = datetime(1980, 1, 6, tzinfo=timezone.utc)
+_ADJUSTED_GPS_ORIGIN_S = 1e9
+
+
+def creation_date(gps_time_offset_s: float = 0.0) -> date:
+    """The LAS header's creation date: a stamp from the pass, never the clock, so a seed gives the same
+    bytes on any day. ``SOURCE_DATE_EPOCH`` (seconds since 1970-01-01 UTC, the reproducible-builds
+    convention) when set; otherwise the UTC date the pass starts at, Adjusted Standard GPS time
+    ``gps_time_offset_s`` (2011-09-14 for the default 0)."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    try:
+        if epoch is not None and epoch.strip():
+            return datetime.fromtimestamp(int(epoch), timezone.utc).date()
+        return (_GPS_EPOCH + timedelta(seconds=_ADJUSTED_GPS_ORIGIN_S + gps_time_offset_s)).date()
+    except (ValueError, OverflowError, OSError):
+        what = (f"SOURCE_DATE_EPOCH = {epoch!r}: must be whole seconds since 1970-01-01 UTC" if epoch is not None
+                else f"gps_time_offset_s = {gps_time_offset_s!r}: puts the pass start outside the years 1 to 9999")
+        raise ValueError(what) from None
 
 
 def scan_angle_to_las(scan_angle_deg: np.ndarray) -> np.ndarray:
@@ -259,7 +281,7 @@ class LasWriter(StreamingWriter):
         header.file_source_id = self.file_source_id
         header.system_identifier = _SYSTEM_IDENTIFIER
         header.generating_software = _GENERATING_SOFTWARE
-        header.creation_date = date.today()
+        header.creation_date = creation_date(self.gps_time_offset_s)
         header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
         header.global_encoding.wkt = True
         header.vlrs.append(laspy.vlrs.known.WktCoordinateSystemVlr(wkt))
