@@ -159,12 +159,13 @@ class PassSetup:
         """Each pulse's estimated beam, with the first truth surface along it for the pulses that have points."""
         origin, direction, _, _, _ = self.scanner.world_rays(self.trajectory.poses(times, estimated=True))
         ranged = np.unique(ranging.returns.pulse)
-        true_range = np.full(slots.size, np.nan)
-        ray, _, dist = self.caster.first_hits((origin[ranged] - self.scene.local_origin).astype(np.float32),
-                                              direction[ranged].astype(np.float32))
+        true_range, first_object = np.full(slots.size, np.nan), np.full(slots.size, -1)
+        ray, tri, dist = self.caster.first_hits((origin[ranged] - self.scene.local_origin).astype(np.float32),
+                                                direction[ranged].astype(np.float32))
         true_range[ranged[ray]] = dist
-        return LinesOfSight(origin, direction, true_range, np.degrees(self.scanner.scan_angle_rad(times)), times,
-                            slots, self.trajectory.leg(times))
+        first_object[ranged[ray]] = self.scene.face_object[tri]
+        return LinesOfSight(origin, direction, true_range, first_object,
+                            np.degrees(self.scanner.scan_angle_rad(times)), times, slots, self.trajectory.leg(times))
 
 
 def hit_echo_range_m(hits: Hits) -> np.ndarray:

@@ -86,3 +86,25 @@ def test_back_references_do_not_depend_on_the_chunking(chunk):
     b = a.concatenate([split.simulate_chunk(s).points for s in split.slot_chunks()])
     for name in ("classification", "object_id", "xyz", "true_range_m", "intensity"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_regression_a_second_return_is_judged_against_the_second_surface():
+    """Root cause: true_range_m was the first truth surface along the point's line of sight, so a correct
+    second return (the lower panel behind an edge) read as an error of the step's height (2 m here). The
+    truth is now the surface of the echo the instrument ranged, along the same line."""
+    upper_m, step_m = 10.0, 2.0  # far enough that the low-gain channel sees both echoes unclipped
+    config = parse_scene({
+        "format_version": 1, "name": "edge", "water": "pool",
+        "objects": [_panel("upper", [-2.0, 0.0, LIDAR_Z - upper_m], [4.0, 4.0], "panel"),
+                    _panel("lower", [0.0, 0.0, LIDAR_Z - upper_m - step_m], [8.0, 8.0], "debris")],
+        "platform": {"mode": "static", "position_m": [0.0, 0.0, LIDAR_Z]},  # the beam straddles the edge
+        "scanner": {"mode": "static", "aim_deg": 0},
+        "survey": {"max_pulses": 300, "fidelity": "balanced", "seed": 5},
+    })
+    setup = PassSetup.build(config)
+    points = setup.simulate_chunk(next(setup.slot_chunks())).points
+    second = points.return_number == 2
+    assert np.count_nonzero(second) > 250  # both surfaces ranged on (almost) every pulse
+    assert np.all(points.classification[second] == LABELS["debris"])
+    assert np.all(np.abs(points.true_range_m[second] - (upper_m + step_m)) < 0.02)
+    assert np.median(np.abs(points.range_error_m[second])) < 0.1
