@@ -182,7 +182,7 @@ def _angle(ax, ay, az, bx, by, bz):
     return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _aperture_point(state, px, py, pz, ap_x, ap_r, fov_tan):
     """A point q of the aperture that sees (px, py, pz) within its field of view, and the area it stands for.
 
@@ -211,7 +211,7 @@ def _aperture_point(state, px, py, pz, ap_x, ap_r, fov_tan):
     return state, math.pi * ap_r * ap_r, qx, qy
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _grid_cell(k, x, y, z, origin, e1, e2, edges, n_phi):
     """Index of the receiver-field cell of plane k holding the point (x, y, z) of that plane, or -1."""
     rx, ry, rz = x - origin[k, 0], y - origin[k, 1], z - origin[k, 2]
@@ -257,7 +257,7 @@ def _cones(x, y, z, geo):
     return ex / d, ey / d, ez / d, alpha, theta_c
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _column_estimate(state, batch, world, first_order, x, y, z, dx, dy, dz, w, t, theta_c, geo, c, speed,
                      ln_p, ln_theta0, inv_step, dt, n_t, column, column1):
     """Local estimate of a scattering event towards the aperture, for directions beyond theta_c."""
@@ -277,7 +277,7 @@ def _column_estimate(state, batch, world, first_order, x, y, z, dx, dy, dz, w, t
     return state
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _target_hit(state, batch, k, x, y, z, t, w, direct, geo, c, speed, n, e1, e2, origin, edges, n_phi,
                 grid_start, reflectance, dt, n_t, gdt, n_g, target, target_direct, hits):
     """Estimates at a packet's hit of plane k: unscattered return, and the hit binned for reciprocity."""
