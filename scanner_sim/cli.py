@@ -3,7 +3,9 @@
 Subcommands live in :data:`SUBCOMMANDS`, a registry of builder functions: adding one (``run``, ``bench``,
 ``coverage``, ``view``...) is a small, separate edit: write ``def _add_name(sub)`` that adds its parser and
 sets ``func``, and decorate it with ``@subcommand("name")``. A ``ValueError`` (bad scene file, bad
-parameter) becomes one line on stderr and exit code 2, without a traceback.
+parameter) becomes one line on stderr and exit code 2, without a traceback; every option is range-checked by
+argparse through the typed helpers of :mod:`muls.cli`, and any other ending is one line too (a full disk 1,
+Ctrl-C 130, SIGTERM 143; ``docs/errors.md``).
 """
 
 from __future__ import annotations
@@ -13,6 +15,23 @@ import json
 import sys
 from collections.abc import Callable
 
+from muls.cli import (
+    OneLineParser,
+    checked_types,
+    non_negative_float,
+    non_negative_int,
+    nonempty,
+    output_dir,
+    output_file,
+    package_version,
+    parse_guarded,
+    positive_float,
+    positive_int,
+    run_guarded,
+    seed,
+)
+
+from .beams import SUBRAY_COUNTS
 from .fidelity import FIDELITY_LEVELS
 
 SUBCOMMANDS: dict[str, Callable] = {}
@@ -49,7 +68,7 @@ def _cmd_scenes(args) -> int:
 @subcommand("validate")
 def _add_validate(sub):
     p = sub.add_parser("validate", help="check a scene file (shipped name or path); exit 2 when it is wrong")
-    p.add_argument("scene", help="shipped scene name (see `scanner-sim scenes`) or path to a YAML file")
+    p.add_argument("scene", type=nonempty(), help="shipped scene name (see `scanner-sim scenes`) or path to a YAML file")
     p.add_argument("--build", action="store_true", help="also build the meshes and the trajectory")
     p.set_defaults(func=_cmd_validate)
 
@@ -77,12 +96,14 @@ def _cmd_validate(args) -> int:
 @subcommand("overlap")
 def _add_overlap(sub):
     p = sub.add_parser("overlap", help="ray-cast overlap on a perpendicular plate vs MULS Eq. 11")
-    p.add_argument("--distances-m", type=float, nargs="+", default=[1, 1.5, 2, 2.5, 3, 4, 5, 6, 7, 8])
-    p.add_argument("--subrays", type=int, default=61, help="beam sub-rays: 1, 7, 19, 37, 61, 91, 127, ...")
+    p.add_argument("--distances-m", type=positive_float(), nargs="+", default=[1, 1.5, 2, 2.5, 3, 4, 5, 6, 7, 8],
+                   help="plate distances [m]")
+    p.add_argument("--subrays", type=positive_int(), choices=SUBRAY_COUNTS, default=61, metavar="N",
+                   help=f"beam sub-rays, one of {', '.join(map(str, SUBRAY_COUNTS))}")
     p.add_argument("--profile", default="top_hat", choices=["top_hat", "gaussian"])
-    p.add_argument("--instrument", default="mul2023", help="muls instrument preset (geometry only)")
+    p.add_argument("--instrument", default="mul2023", type=nonempty(), help="muls instrument preset (geometry only)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.add_argument("--out", help="write a PNG plot here")
+    p.add_argument("--out", type=output_file(), help="write a PNG plot here")
     p.set_defaults(func=_cmd_overlap)
 
 
@@ -133,10 +154,11 @@ def _cmd_overlap(args) -> int:
 @subcommand("bench-rays")
 def _add_bench_rays(sub):
     p = sub.add_parser("bench-rays", help="ray throughput: the pipeline's ray stage vs raw embreex, same rays")
-    p.add_argument("scene", nargs="?", default="cable_survey")
-    p.add_argument("--pulses", type=int, default=20000, help="scan-ordered pulses in the chunk")
-    p.add_argument("--subrays", type=int, default=19)
-    p.add_argument("--repeat", type=int, default=3, help="best of this many timings")
+    p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
+    p.add_argument("--pulses", type=positive_int(), default=20000, help="scan-ordered pulses in the chunk")
+    p.add_argument("--subrays", type=positive_int(), choices=SUBRAY_COUNTS, default=19, metavar="N",
+                   help=f"beam sub-rays, one of {', '.join(map(str, SUBRAY_COUNTS))}")
+    p.add_argument("--repeat", type=positive_int(), default=3, help="best of this many timings")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_rays)
 
@@ -157,7 +179,8 @@ def _cmd_bench_rays(args) -> int:
 @subcommand("schema")
 def _add_schema(sub):
     p = sub.add_parser("schema", help="print the JSON Schema of scene files (editors validate and complete with it)")
-    p.add_argument("--out", metavar="FILE", help="write the schema to FILE (atomically) instead of printing it")
+    p.add_argument("--out", metavar="FILE", type=output_file(),
+                   help="write the schema to FILE (atomically) instead of printing it")
     p.set_defaults(func=_cmd_schema)
 
 
@@ -179,18 +202,20 @@ def _cmd_schema(args) -> int:
 @subcommand("run")
 def _add_run(sub):
     p = sub.add_parser("run", help="simulate a survey pass: points.las, dropouts, summary, trajectory, render")
-    p.add_argument("scene", nargs="?", default="cable_survey", help="shipped scene name or YAML path")
-    p.add_argument("--out", help="output directory (default: the scene's output.dir)")
-    p.add_argument("--water", help="water preset instead of the scene's (clean_ocean, coastal_ocean, ...)")
-    p.add_argument("--seed", type=int, help="seed of the pass (default: the scene's survey.seed)")
-    p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS))
-    p.add_argument("--max-pulses", type=int, help="stop after this many pulses")
-    p.add_argument("--chunk-pulses", type=int, help="pulse slots per chunk (memory vs overhead)")
-    p.add_argument("--waveforms", type=int, default=0, help="also write the full records of N sampled pulses")
-    p.add_argument("--altitude-m", type=float, help="fly at this altitude over the seabed (platform.altitude_m)")
-    p.add_argument("--gate-delay-ns", type=float,
+    p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
+    p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir); an earlier "
+                   "run there is replaced whole once this one is complete")
+    p.add_argument("--water", type=nonempty(), help="water preset instead of the scene's (clean_ocean, coastal_ocean, ...)")
+    p.add_argument("--seed", type=seed(), help="seed of the pass (default: the scene's survey.seed)")
+    p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), help="fidelity level (default: the scene's)")
+    p.add_argument("--max-pulses", type=positive_int(), help="stop after this many pulses")
+    p.add_argument("--chunk-pulses", type=positive_int(), help="pulse slots per chunk (memory vs overhead)")
+    p.add_argument("--waveforms", type=non_negative_int(), default=0,
+                   help="also write the full records of N sampled pulses")
+    p.add_argument("--altitude-m", type=positive_float(), help="fly at this altitude over the seabed (platform.altitude_m)")
+    p.add_argument("--gate-delay-ns", type=non_negative_float(),
                    help="open the far channel's gate this long after the pulse (instrument.gate_delay_ns)")
-    p.add_argument("--gate-width-ns", type=float, help="gate width (default: the scene's or the preset's)")
+    p.add_argument("--gate-width-ns", type=positive_float(), help="gate width (default: the scene's or the preset's)")
     p.add_argument("--split-lines", action="store_true",
                    help="one point cloud and one trajectory per survey leg (output.split_legs)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -273,8 +298,8 @@ def _cmd_run(args) -> int:
 @subcommand("bench")
 def _add_bench(sub):
     p = sub.add_parser("bench", help="end-to-end pulses/s per fidelity beside raw embreex on the same rays")
-    p.add_argument("scene", nargs="?", default="cable_survey")
-    p.add_argument("--pulses", type=int, default=60000)
+    p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
+    p.add_argument("--pulses", type=positive_int(), default=60000, help="pulses per fidelity level")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench)
 
@@ -302,14 +327,16 @@ _VIEW_FIELDS = {"class": "classification", "intensity": "intensity", "channel": 
 @subcommand("view")
 def _add_view(sub):
     p = sub.add_parser("view", help="look at a points.las over its scene.ply: a window, or a PNG without a display")
-    p.add_argument("las", metavar="POINTS.las", help="a LAS file, e.g. out/cable_survey/points.las")
+    p.add_argument("las", metavar="POINTS.las", type=nonempty(), help="a LAS file, e.g. out/cable_survey/points.las")
     p.add_argument("--color", default="class", choices=list(_VIEW_FIELDS), help="point colouring (default: class)")
-    p.add_argument("--screenshot", metavar="PNG", help="render off-screen to this PNG instead of opening a window "
+    p.add_argument("--screenshot", metavar="PNG", type=output_file(),
+                   help="render off-screen to this PNG instead of opening a window "
                    "(without a display the default is POINTS.<color>.png beside the LAS)")
     p.add_argument("--no-mesh", action="store_true", help="do not draw the scene.ply beside the LAS (or one directory up)")
-    p.add_argument("--point-size", type=float, default=3.0, help="pixels (default 3)")
-    p.add_argument("--max-points", type=int, default=2_000_000, help="thin larger clouds by a fixed stride")
-    p.add_argument("--window-size", type=int, nargs=2, default=[1600, 1000], metavar=("WIDTH", "HEIGHT"))
+    p.add_argument("--point-size", type=positive_float(), default=3.0, help="pixels")
+    p.add_argument("--max-points", type=positive_int(), default=2_000_000, help="thin larger clouds by a fixed stride")
+    p.add_argument("--window-size", type=positive_int(), nargs=2, default=[1600, 1000], metavar=("WIDTH", "HEIGHT"),
+                   help="pixels")
     p.add_argument("--open3d", action="store_true",
                    help="an interactive open3d window instead of pyvista (needs a display and the open3d extra)")
     p.set_defaults(func=_cmd_view)
@@ -363,8 +390,8 @@ def _cmd_view(args) -> int:
 @subcommand("swath")
 def _add_swath(sub):
     p = sub.add_parser("swath", help="swath-to-swath consistency of overlapping survey lines (open3d extra)")
-    p.add_argument("path", help="a pass folder (points.las/laz or leg*_points.*) or one LAS/LAZ file")
-    p.add_argument("--overlap-m", type=float, default=0.5,
+    p.add_argument("path", type=nonempty(), help="a pass folder (points.las/laz or leg*_points.*) or one LAS/LAZ file")
+    p.add_argument("--overlap-m", type=positive_float(), default=0.5,
                    help="largest nearest-neighbour distance [m] of a point in the overlap")
     p.add_argument("--json", action="store_true", help="print the pairs as JSON")
     p.set_defaults(func=_cmd_swath)
@@ -407,24 +434,25 @@ def _add_coverage(sub):
     from .coverage_study import DEFAULT_INSTRUMENTS, DEFAULT_WATERS, GATE_MODES, INSTRUMENTS
 
     p = sub.add_parser("coverage", help="mapping coverage per water type x altitude x instrument, with its report")
-    p.add_argument("scene", nargs="?", default="cable_survey", help="shipped scene name or YAML path")
-    p.add_argument("--waters", nargs="+", default=list(DEFAULT_WATERS), metavar="WATER",
+    p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
+    p.add_argument("--waters", nargs="+", default=list(DEFAULT_WATERS), metavar="WATER", type=nonempty(),
                    help="water presets (default: %(default)s)")
-    p.add_argument("--altitudes-m", nargs="+", type=float, metavar="M", help="altitudes [m] (default: the scene's)")
+    p.add_argument("--altitudes-m", nargs="+", type=positive_float("altitudes_m"), metavar="M",
+                   help="altitudes [m] (default: the scene's)")
     p.add_argument("--instruments", nargs="+", default=list(DEFAULT_INSTRUMENTS), choices=INSTRUMENTS,
                    metavar="INSTRUMENT", help=f"instrument presets, of {', '.join(INSTRUMENTS)} (default: %(default)s)")
     p.add_argument("--gate", default="follow", choices=GATE_MODES,
                    help="far gate at other altitudes: follow the nadir echo (default) or keep the scene's delay")
-    p.add_argument("--cell-m", type=float, default=CoverageSettings.cell_m,
+    p.add_argument("--cell-m", type=positive_float("cell_m"), default=CoverageSettings.cell_m,
                    help="plan cell and cable stretch [m] (default: %(default)s)")
-    p.add_argument("--min-points", type=int, default=CoverageSettings.min_points,
+    p.add_argument("--min-points", type=positive_int("min_points"), default=CoverageSettings.min_points,
                    help="valid points a cell needs (default: %(default)s)")
-    p.add_argument("--tolerance-m", type=float, default=CoverageSettings.tolerance_m,
+    p.add_argument("--tolerance-m", type=positive_float("tolerance_m"), default=CoverageSettings.tolerance_m,
                    help="largest |range error| of a valid point [m] (default: %(default)s, IHO S-44 Exclusive Order)")
-    p.add_argument("--out", help="output directory (default: the scene's output.dir + /coverage)")
-    p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS))
-    p.add_argument("--seed", type=int, help="seed of every pass (default: the scene's survey.seed)")
-    p.add_argument("--max-pulses", type=int, help="stop each pass after this many pulses")
+    p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /coverage)")
+    p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), help="fidelity level (default: the scene's)")
+    p.add_argument("--seed", type=seed(), help="seed of every pass (default: the scene's survey.seed)")
+    p.add_argument("--max-pulses", type=positive_int(), help="stop each pass after this many pulses")
     p.add_argument("--no-render", action="store_true", help="tables and coverage.json only: no pictures, no report")
     p.add_argument("--quiet", action="store_true", help="no progress; print only the path of coverage.json")
     _add_dask_arguments(p)
@@ -457,9 +485,9 @@ def _cmd_coverage(args) -> int:
 # -- campaign -------------------------------------------------------------------------------------------
 def _add_dask_arguments(p) -> None:
     """--scheduler, --workers and --redo, shared by the commands that run passes on Dask."""
-    p.add_argument("--scheduler", metavar="tcp://HOST:8786",
+    p.add_argument("--scheduler", metavar="tcp://HOST:8786", type=nonempty(),
                    help="address of a running Dask scheduler (default: a local cluster on this machine)")
-    p.add_argument("--workers", type=int, metavar="N", help="workers of the local cluster, one thread each "
+    p.add_argument("--workers", type=non_negative_int(), metavar="N", help="workers of the local cluster, one thread each "
                    "(default: one per core; 0: every pass in this process, without Dask)")
     p.add_argument("--redo", action="store_true", help="run every pass again, even those already complete in --out")
 
@@ -475,8 +503,9 @@ def _workers(args) -> int:
 def _add_campaign(sub):
     p = sub.add_parser("campaign", help="one pass per combination of the swept scene keys, on Dask "
                        "(docs/campaigns.md)")
-    p.add_argument("campaign", metavar="CAMPAIGN.yaml", help="campaign file (e.g. scenes/campaigns/example_campaign.yaml)")
-    p.add_argument("--out", help="output directory (default: out/campaigns/NAME)")
+    p.add_argument("campaign", metavar="CAMPAIGN.yaml", type=nonempty(),
+                   help="campaign file (e.g. scenes/campaigns/example_campaign.yaml)")
+    p.add_argument("--out", type=output_dir(), help="output directory (default: out/campaigns/NAME)")
     p.add_argument("--quiet", action="store_true", help="no progress; print only the path of campaign.json")
     _add_dask_arguments(p)
     p.set_defaults(func=_cmd_campaign)
@@ -503,25 +532,26 @@ def _cmd_campaign(args) -> int:
 
 # -- main -----------------------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="scanner-sim", description="Underwater lidar survey simulator (MULS)")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser = OneLineParser(prog="scanner-sim", description="Underwater lidar survey simulator (MULS)")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     sub.required = True
     for builder in SUBCOMMANDS.values():
         builder(sub)
+    checked_types(parser)  # an option a builder left with a plain type still rejects empty text and nan
     return parser
 
 
 def main(argv=None) -> int:
+    """Entry point of ``scanner-sim``; returns the exit code: 0, 1 (a failure such as a full disk), 2 (bad
+    input), 130 (Ctrl-C) or 143 (SIGTERM), with one line on stderr for anything but 0 (``docs/errors.md``)."""
     from .raycast import tune_memory
 
     tune_memory()  # reuse chunk-sized arrays instead of page-faulting them anew (measured, see raycast)
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except ValueError as exc:  # ConfigError / ParameterError: one line, no traceback
-        print(f"scanner-sim {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+    args, code = parse_guarded(build_parser(), argv)
+    if args is None:  # --help, --version (0) or a bad argument (2, one line printed)
+        return code
+    return run_guarded(f"scanner-sim {args.command}", lambda: args.func(args))
 
 
 if __name__ == "__main__":  # pragma: no cover
