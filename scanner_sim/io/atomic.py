@@ -1,8 +1,9 @@
 """Atomic files: write a hidden temporary file beside the destination, fsync it, rename it into place.
 
-On any exception (KeyboardInterrupt included) the temporary file is removed and the final name keeps
-what it held: nothing, or the previous complete file. A run killed outright can leave a ``.*.tmp``
-file behind, never a half-written file under a final name (``docs/outputs.md``).
+On any exception (KeyboardInterrupt, SIGTERM under the command line and a full disk included) the
+temporary file is removed and the final name keeps what it held: nothing, or the previous complete file.
+A run killed outright can leave a ``.*.tmp`` file behind, never a half-written file under a final name
+(``docs/outputs.md``, ``docs/errors.md``).
 """
 
 from __future__ import annotations
@@ -76,9 +77,11 @@ def atomic_path(final_path: PathLike) -> Iterator[Path]:
             raise FileNotFoundError(f"atomic_path: nothing was written to {tmp} for {final}")
         _fsync_path(tmp)
         os.replace(tmp, final)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.filename is None:
+            exc.filename = str(final)  # a failed write (ENOSPC) names no file; say which
         raise
     _fsync_dir(parent)
 
