@@ -28,6 +28,10 @@ from .config import (
 from .materials import LABELS
 from .terrain import HeightField, generate_heightfield, rock_meshes
 
+#: Largest world coordinate [m]: beyond any place on Earth in a projected CRS (UTM northings reach 1e7 m);
+#: larger values are a unit slip, and overflow the float arithmetic of normals and ray casting.
+MAX_COORDINATE_M = 1e8
+
 
 @dataclass(frozen=True)
 class SceneObject:
@@ -328,9 +332,9 @@ def build_scene(config) -> Scene:
                 v = v + np.asarray(obj.translate_m)
         else:  # pragma: no cover - config only produces the types above
             raise ParameterError(f"object type {type(obj).__name__} is not supported")
-        if not np.isfinite(v).all():
+        if not (np.abs(v) <= MAX_COORDINATE_M).all():  # NaN included
             raise ConfigError(f"objects[{index}] ({obj.name!r}): its sizes and position give coordinates that are not "
-                              "finite numbers; check them (metres)")
+                              f"finite or beyond +-{MAX_COORDINATE_M:.0e} m; check them (metres)")
         parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline))
     return Scene(parts, hf)
 
@@ -366,7 +370,9 @@ def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]
         raise ConfigError(f"{where}: face {i} refers to vertex {f[i].tolist()}, but the file has {len(v):,} vertices "
                           f"(0 to {len(v) - 1})")
     f = f.astype(np.int64)
-    if not _nondegenerate(v, f).any():
+    with np.errstate(over="ignore", invalid="ignore"):  # huge coordinates are judged once placed (build_scene)
+        some_area = _nondegenerate(v, f).any()
+    if not some_area:
         raise ConfigError(f"{where}: all {len(f):,} triangles are degenerate (zero area)")
     mesh = trimesh.Trimesh(v, f, process=True)
     return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
