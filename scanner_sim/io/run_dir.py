@@ -142,7 +142,14 @@ class RunDirectory:
         if exc_type is None:
             self.commit()
         else:
+            self.name_final(exc)
             self.abort()
+
+    def name_final(self, exc: BaseException) -> None:
+        """Make an OS error about a file of the hidden folder (a full disk) name it as the user knows it."""
+        if self.path is not None and isinstance(exc, OSError) and exc.filename:
+            with contextlib.suppress(ValueError, TypeError):
+                exc.filename = str(self.final / Path(os.fsdecode(exc.filename)).relative_to(self.path))
 
     # -- checks ------------------------------------------------------------------------------------------
     def _check_target(self) -> None:
@@ -292,6 +299,10 @@ def abort_on_error(func):
         depth = len(runs)
         try:
             return func(*args, **kwargs)
+        except BaseException as exc:
+            for run in runs[depth:]:
+                run.name_final(exc)
+            raise
         finally:
             while len(runs) > depth:
                 runs[-1].abort()
