@@ -185,12 +185,14 @@ def test_a_seed_gives_byte_identical_files_on_any_day(tmp_path, monkeypatch):
     """Two passes of one seed, the second on a faked other day: every file but the summary's timings is the same
     byte for byte."""
     monkeypatch.delenv("SOURCE_DATE_EPOCH", raising=False)
-    options = PassOptions(max_pulses=300, progress=False, render=False)
-    run_pass(load_scene("pool_panel"), tmp_path / "a", options)
+    options = PassOptions(max_pulses=400, waveforms=2, progress=False, render=False)
+    config = load_scene("mine_field")
+    run_pass(config, tmp_path / "a", options)
     monkeypatch.setattr(las_module, "date", _OtherDay)
-    run_pass(load_scene("pool_panel"), tmp_path / "b", options)
+    run_pass(config, tmp_path / "b", options)
     names = _listing(tmp_path / "a")
-    assert names == _listing(tmp_path / "b") and "points.las" in names
+    assert names == _listing(tmp_path / "b")
+    assert {"points.las", "dropouts.npz", "coverage_grid.npz", "waveforms.npz", "scene.ply"} <= set(names), names
     for name in names:
         a, b = (tmp_path / "a" / name).read_bytes(), (tmp_path / "b" / name).read_bytes()
         if name == "summary.json":
