@@ -32,7 +32,14 @@ _BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 class _StrictLoader(_BaseLoader):
     """SafeLoader whose mappings refuse duplicate keys (PyYAML silently keeps the last one) and keys that are
-    not text. The hazards of the document's shape are refused before it is composed, by :func:`_check_events`."""
+    not text, and which refuses the hazards of the document's shape (:func:`_check_events`) before composing
+    it, whoever loads with it (scene and campaign files)."""
+
+    def __init__(self, stream):
+        if hasattr(stream, "read"):
+            stream = stream.read()
+        _check_events(stream)
+        super().__init__(stream)
 
 
 class _Refused(yaml.YAMLError):
@@ -153,7 +160,6 @@ def read_scene_text(path: Path) -> str:
 def parse_yaml_text(text: str, path: Path) -> dict:
     """The mapping a scene file's text holds; raises a one-line ConfigError naming ``path`` for anything else."""
     try:
-        _check_events(text)
         data = yaml.load(text, Loader=_StrictLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
