@@ -495,11 +495,11 @@ def _cmd_multiscatter_study(args):
                      f"{r_mu:>10s} {r_mc:>9s} {worst:10.1%}")
     from .plots import plot_multiscatter_study
 
-    def write(res, out_dir):  # the study's directory: its chart and its JSON
+    def write(res, out_dir):  # the study's directory: its chart and its JSON, each written whole
         os.makedirs(out_dir, exist_ok=True)
-        with open(os.path.join(out_dir, "multiscatter_study.json"), "w") as f:
-            json.dump(res, f, indent=1, allow_nan=False)
-        return plot_multiscatter_study(res, os.path.join(out_dir, "multiscatter_study.png"))
+        write_atomically(lambda tmp: Path(tmp).write_text(json.dumps(res, indent=1, allow_nan=False)),
+                         os.path.join(out_dir, "multiscatter_study.json"))
+        write_atomically(lambda tmp: plot_multiscatter_study(res, tmp), os.path.join(out_dir, "multiscatter_study.png"))
 
     return result, "\n".join(lines), write
 
