@@ -223,17 +223,20 @@ def _show_warning(prog: str):
     return show
 
 
-def run_guarded(prog: str, func) -> int:
+def run_guarded(prog: str, func, bad_input: tuple[type[BaseException], ...] = ()) -> int:
     """``func()``'s exit code, with every way it can end as one line on stderr and no traceback: a bad value
-    (ValueError) exit 2; a full disk, a permission or another OS error, or too little memory exit 1; Ctrl-C
-    130 and SIGTERM 143 (the ``finally`` blocks and atomic writers have removed the temporary files by then);
-    anything else exit 1 as an internal error (``MULS_TRACEBACK=1`` shows its traceback). Warnings print as
-    one line each."""
+    (ValueError, or one of the ``bad_input`` types, such as a reader's error on a corrupt file) exit 2; a full
+    disk, a permission or another OS error, or too little memory exit 1; Ctrl-C 130 and SIGTERM 143 (the
+    ``finally`` blocks and atomic writers have removed the temporary files by then); anything else exit 1 as
+    an internal error (``MULS_TRACEBACK=1`` shows its traceback). Warnings print as one line each."""
     try:
         with _signals_as_exceptions(), warnings.catch_warnings():
             warnings.simplefilter("default")
             warnings.showwarning = _show_warning(prog)
-            return int(func() or 0)
+            try:
+                return int(func() or 0)
+            except bad_input as exc:
+                raise ValueError(_one_line(exc)) from None
     except KeyboardInterrupt:
         print(f"{prog}: interrupted (Ctrl-C); temporary files removed, earlier outputs kept", file=sys.stderr)
         return EXIT_SIGINT
@@ -395,6 +398,71 @@ def _cmd_precision(args):
     return result, "\n".join(lines), plot_precision
 
 
+def _experiment_name(name: str) -> str:
+    from .experiments import EXPERIMENTS
+
+    if name not in EXPERIMENTS:
+        raise ValueError(f"experiment {name!r}: must be one of {', '.join(EXPERIMENTS)}")
+    return name
+
+
+def _ranging(name: str) -> str:
+    from .experiments import RANGING
+
+    if name not in RANGING:
+        raise ValueError(f"--ranging {name!r}: must be one of {', '.join(RANGING)}")
+    return name
+
+
+def _attenuation(name: str) -> str:
+    from .water import ATTENUATION_MODELS
+
+    if name not in ATTENUATION_MODELS:
+        raise ValueError(f"--attenuation {name!r}: must be one of {', '.join(ATTENUATION_MODELS)}")
+    return name
+
+
+#: The keys ``muls experiment --json`` prints (the study also returns the waveforms, for the picture).
+EXPERIMENT_KEYS = ("distances", "settings")
+
+
+def _cmd_experiment(args):
+    from .experiments import experiment_preset
+
+    exp = experiment_preset(_experiment_name(args.experiment), _attenuation(args.attenuation))
+    full = studies.experiment_study(exp, shots=_count("--shots", args.shots), seed=args.seed,
+                                    ranging=_ranging(args.ranging), waveforms=not args.no_plot)
+    s = full["settings"]
+    lines = [f"experiment {s['experiment']}: panel {s['reflectance']:g} at {', '.join(f'{d:g}' for d in s['distances_m'])} m"
+             f", {s['shots']} shots each, M1 {s['gain_pmt1']:.0f}, M2 {s['gain_pmt2']:.0f}, CH3 gate "
+             f"{s['gate_delay_ns']:g}/{s['gate_width_ns']:g} ns, {s['ranging']} ranging, {s['attenuation_model']} "
+             f"attenuation, seed {s['seed']} ({s['elapsed_s']:.1f} s)",
+             f"gains: {s['gain_rule']}",
+             f"{'dist m':>6s} {'ch':4s} {'detected':>8s} {'std m':>8s} {'mad m':>8s} {'bias m':>8s} {'clipped':>8s}"]
+    for key, chans in full["distances"].items():
+        for ch, st in chans.items():
+            lines.append(f"{key:>6s} {ch:4s} {_fmt(st['detected_fraction'], 3):>8s} {_fmt(st['precision_m'], 4):>8s} "
+                         f"{_fmt(st['mean_abs_deviation_m'], 4):>8s} {_fmt(st['bias_m'], 4):>8s} "
+                         f"{_fmt(st['clipped_fraction'], 3):>8s}")
+    from .plots import plot_experiment
+
+    result = {k: full[k] for k in EXPERIMENT_KEYS}
+
+    def write(res, out_dir):  # the experiment's directory: its JSON and its picture
+        os.makedirs(out_dir, exist_ok=True)
+        write_atomically(lambda tmp: _dump_json(res, tmp), os.path.join(out_dir, "experiment.json"))
+        write_atomically(lambda tmp: plot_experiment(full, tmp), os.path.join(out_dir, "experiment.png"))
+        return out_dir
+
+    return result, "\n".join(lines), write
+
+
+def _dump_json(result, path):
+    with open(path, "w") as f:
+        json.dump(result, f, indent=1, allow_nan=False)
+    return path
+
+
 def _cmd_coaxial(args):
     result = studies.coaxial_study(_water_name(args.water))
     s = result["settings"]
@@ -505,7 +573,10 @@ def _cmd_multiscatter_study(args):
 
 
 DEFAULT_OUT = {"waveform": "waveform.png", "maxrange": "maxrange.png", "precision": "precision.png",
-               "coaxial": "coaxial.png", "multiscatter": "multiscatter.png", "multiscatter-study": "multiscatter_study"}
+               "coaxial": "coaxial.png", "multiscatter": "multiscatter.png", "multiscatter-study": "multiscatter_study",
+               "experiment": "experiment_{experiment}", "budget": "budget.png"}
+#: Commands whose --out is a folder of files, each written whole by the command itself.
+FOLDER_OUTPUTS = ("multiscatter-study", "experiment")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -552,6 +623,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gate-width-ns", type=positive_float(), default=None)
     common(p)
     p.set_defaults(run=_cmd_precision)
+
+    p = sub.add_parser("experiment", help="the paper's pond or pool test predicted (Table 2, Figs. 7, 8, 10, 11)")
+    p.add_argument("experiment", type=nonempty(), help="pond or pool")
+    p.add_argument("--shots", type=positive_int(), default=1000, help="static shots at each distance")
+    p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--ranging", default="prototype", type=nonempty(),
+                   help="prototype (plain peak detection on the 1 GS/s record) or template (pulse-shape fit)")
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="attenuation rule (k_lidar, c, kd, small_angle)")
+    common(p, out_type=output_dir)  # a folder: experiment.json and experiment.png
+    p.set_defaults(run=_cmd_experiment)
 
     p = sub.add_parser("coaxial", help="column backscatter, coaxial vs non-coaxial (paper Fig. 13)")
     p.add_argument("--water", default="turbid_harbor", type=nonempty(), help=f"water preset ({waters})")
@@ -600,8 +682,8 @@ def _run(args) -> int:
     result, text, plot = args.run(args)
     out = None
     if plot is not None and not args.no_plot:
-        out = args.out or DEFAULT_OUT[args.command]
-        if args.command in ("multiscatter-study",):  # a folder of files, each written whole
+        out = args.out or DEFAULT_OUT[args.command].format(**vars(args))
+        if args.command in FOLDER_OUTPUTS:  # a folder of files, each written whole
             plot(result, out)
         else:
             write_atomically(lambda tmp: plot(result, tmp), out)

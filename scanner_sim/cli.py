@@ -551,7 +551,10 @@ def main(argv=None) -> int:
     args, code = parse_guarded(build_parser(), argv)
     if args is None:  # --help, --version (0) or a bad argument (2, one line printed)
         return code
-    return run_guarded(f"scanner-sim {args.command}", lambda: args.func(args))
+    import laspy
+
+    # a corrupt LAS is bad input like a corrupt scene: exit 2
+    return run_guarded(f"scanner-sim {args.command}", lambda: args.func(args), bad_input=(laspy.LaspyException,))
 
 
 if __name__ == "__main__":  # pragma: no cover
