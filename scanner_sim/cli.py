@@ -230,12 +230,19 @@ def scene_overrides(args, config) -> dict:
     """The scene keys that ``run``'s options set, by dotted name (validated later with the scene)."""
     import yaml
 
+    from .config.errors import shown
+    from .config.loading import _StrictLoader
+
     changes = {}
     for item in args.set:
         key, sep, text = item.partition("=")
         if not sep or not key.strip():
             raise ValueError(f"--set {item!r}: must be KEY=VALUE with a dotted scene key, e.g. platform.altitude_m=5")
-        changes[key.strip()] = yaml.safe_load(text)
+        try:  # the scene loader's bounds (depth, aliases, tags) hold for a value given here too
+            changes[key.strip()] = yaml.load(text, Loader=_StrictLoader)
+        except yaml.YAMLError as exc:
+            problem = getattr(exc, "problem", None) or str(exc)
+            raise ValueError(f"--set {shown(item)}: not a YAML value ({' '.join(str(problem).split())})") from None
     if args.altitude_m is not None:
         changes["platform.altitude_m"] = args.altitude_m
     if args.gate_delay_ns is not None or args.gate_width_ns is not None:
@@ -552,9 +559,11 @@ def main(argv=None) -> int:
     if args is None:  # --help, --version (0) or a bad argument (2, one line printed)
         return code
     import laspy
+    import yaml
 
-    # a corrupt LAS is bad input like a corrupt scene: exit 2
-    return run_guarded(f"scanner-sim {args.command}", lambda: args.func(args), bad_input=(laspy.LaspyException,))
+    # a corrupt LAS or YAML file is bad input like a wrong scene key: exit 2
+    return run_guarded(f"scanner-sim {args.command}", lambda: args.func(args),
+                       bad_input=(laspy.LaspyException, yaml.YAMLError))
 
 
 if __name__ == "__main__":  # pragma: no cover
