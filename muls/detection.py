@@ -192,6 +192,10 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
 def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, echoes, chans, max_code, noise_scale):
     n_windows, n_chan, n_samples = codes.shape
     n_pairs = (n_chan + 1) // 2
+    n_detectors = 0
+    for c in range(n_chan):
+        n_detectors = max(n_detectors, chans.detector[c] + 1)
+    n_shot_pairs = (n_detectors + 1) // 2
     keep = clean.shape[0] > 0
     basis, dt = col.basis, sampling.dt_s
     offsets, delay, energy = echoes.offsets, echoes.delay_s, echoes.energy_j
@@ -199,10 +203,16 @@ def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, ech
     ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
     for w in numba.prange(n_windows):
         p = window_pulse[w]
+        # Dark noise: one normal per channel (streams of channel pairs); shot noise: one normal per detector
+        # (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's current).
         bases = np.empty(n_pairs, np.uint64)
         for j in range(n_pairs):
             bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + j)
+        shot_bases = np.empty(n_shot_pairs, np.uint64)
+        for j in range(n_shot_pairs):
+            shot_bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + n_pairs + j)
         normals = np.empty(2 * n_pairs)
+        shot_normals = np.empty(2 * n_shot_pairs)
         # Echoes of pulse p (by delay) as three running sums over those started by time t:
         # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
         # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
@@ -228,11 +238,13 @@ def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, ech
                     power += cut_w[p, c] * column_value(t, cut_tau[p, c], col)
             for j in range(n_pairs):
                 normals[2 * j], normals[2 * j + 1] = normal_pair_at(bases[j], index)
+            for j in range(n_shot_pairs):
+                shot_normals[2 * j], shot_normals[2 * j + 1] = normal_pair_at(shot_bases[j], index)
             for c in range(n_chan):
                 gated = power if chans.gate_open_s[c] <= t < chans.gate_close_s[c] else 0.0
                 level = chans.lsb_per_w[c] * gated  # MULS Eq. 12 in LSB (Eq. 13 without noise)
-                var = chans.dark_std_lsb[c] * chans.dark_std_lsb[c] + chans.shot_lsb2_per_w[c] * gated
+                noise = (chans.dark_std_lsb[c] * normals[c]
+                         + math.sqrt(chans.shot_lsb2_per_w[c] * gated) * shot_normals[chans.detector[c]])
                 if keep:
                     clean[w, c, k] = level + chans.dark_mean_lsb[c]
-                codes[w, c, k] = _quantise(level + chans.dark_mean_lsb[c] + noise_scale * math.sqrt(var) * normals[c],
-                                           max_code)  # MULS Eq. 13
+                codes[w, c, k] = _quantise(level + chans.dark_mean_lsb[c] + noise_scale * noise, max_code)  # MULS Eq. 13
