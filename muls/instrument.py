@@ -160,7 +160,7 @@ class Digitizer:
         return int(round((self.record_length_s + self.pretrigger_s) * self.sample_rate_hz))
 
 
-PEAK_FITS = ("pulse", "gaussian", "parabolic")
+PEAK_FITS = ("pulse", "gaussian", "parabolic", "sample_maximum")
 SATURATION_POLICIES = ("drop", "keep")
 
 
@@ -169,7 +169,9 @@ class Processing:
     """How the instrument turns records into ranges (docs/design.md#ranging)."""
 
     threshold_sigma: float = 5.0  # assumption: k of the k-sigma threshold (false alarms < 3e-7 per sample)
-    peak_fit: str = "pulse"  # three-point fit to the known pulse shape (unbiased), or gaussian / parabolic
+    # three-point fit to the known pulse shape (unbiased), gaussian / parabolic, or "sample_maximum": the
+    # prototype's plain peak detection on the 1 GS/s record (the highest sample, no sub-sample refinement)
+    peak_fit: str = "pulse"
     saturation_policy: str = "keep"  # clipped returns are kept, flagged; "drop" makes them dropouts
     merge_window_s: float = 4e-9  # peaks of different channels closer than this are one echo
     tail_tolerance: float = 0.05  # assumption: a later peak must also clear 5 % of the earlier echoes' model

@@ -54,7 +54,9 @@ class Peaks:
         return Peaks(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
 
 
-FIT_CODES = {"pulse": 0, "gaussian": 1, "parabolic": 2}
+FIT_CODES = {"pulse": 0, "gaussian": 1, "parabolic": 2, "sample_maximum": 3}
+#: The fit code of plain peak detection: the highest sample (the first of a clipped plateau), no refinement.
+SAMPLE_MAXIMUM = FIT_CODES["sample_maximum"]
 
 
 class PeakSettings(NamedTuple):
@@ -163,6 +165,8 @@ def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent):
 @numba.njit(cache=True, inline="always")
 def _refine(y0, y1, y2, fit, table):
     """(offset of the peak from the middle sample [samples], middle sample over peak) from three samples."""
+    if fit == SAMPLE_MAXIMUM:
+        return 0.0, 1.0
     den = y0 - 2.0 * y1 + y2
     if den >= 0.0:
         return 0.0, 1.0
@@ -282,10 +286,14 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
                         continue
                     idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_table)
                     idx += window_start[w]
+                    # Plain peak detection reports the first sample at the top code; the plateau's model
+                    # still places the echo that is taken off before the search goes on.
+                    found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
                 else:
                     d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
                                        settings.fit, fit_table)
                     idx = float(window_start[w] + top) + d
+                    found = idx
                     amp = height / ratio
                     k = top + 1  # look again behind this echo once its modelled shape is taken off
                 u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
@@ -293,7 +301,7 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
                 j = slot * cap + counts[slot]
                 out_w[j] = w
                 out_c[j] = c
-                out_idx[j] = idx
+                out_idx[j] = found
                 out_amp[j] = amp
                 out_snr[j] = amp / sigma[top]
                 out_sat[j] = clipped_first >= 0
