@@ -8,10 +8,28 @@ E_t * w(t). The peak-power forms of the paper follow by replacing E_t * w by P_t
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from . import smallangle
 from .instrument import Instrument
 from .water import Water
+
+
+def attenuation_per_m(instrument: Instrument, water: Water, range_m):
+    """The k of exp(-2 k z) in Eqs. 4, 7, 9, 10 for light scattered back at ``range_m`` [m] (any shape) [1/m].
+
+    The water's ``attenuation_model`` decides: Eq. 6's k_lidar, c or K_d are constants; ``small_angle``
+    keeps the forward scattering that stays inside the receiver's footprint r2(z) of Eq. 11, so it depends
+    on the range and the field of view (:mod:`muls.smallangle`, docs/design.md#attenuation).
+    """
+    r = np.asarray(range_m, dtype=float)
+    if water.attenuation_model != "small_angle":
+        return np.full(r.shape, water.two_way_attenuation_per_m)
+    g = instrument.geometry
+    return smallangle.attenuation_per_m(water.attenuation_per_m, water.scattering_per_m, 0.5 * g.receiver_diameter_m,
+                                        math.tan(0.5 * g.fov_full_rad), r)
 
 
 def two_way_transmission(instrument: Instrument) -> float:
@@ -27,7 +45,7 @@ def target_factor(instrument: Instrument, water: Water, range_m, weight_per_sr):
     which for a flat Lambertian plate at normal incidence is (rho / pi) O(Z), giving exactly Eq. 7.
     """
     r = np.asarray(range_m, dtype=float)
-    k = water.two_way_attenuation_per_m
+    k = attenuation_per_m(instrument, water, r)
     with np.errstate(divide="ignore", invalid="ignore"):
         f = (instrument.receiver.area_m2 * np.asarray(weight_per_sr, float) * two_way_transmission(instrument)
              * np.exp(-2.0 * k * r) / r**2)  # MULS Eq. 7
@@ -48,7 +66,7 @@ def column_density_per_m(instrument: Instrument, water: Water, z_m):
     """
     z = np.asarray(z_m, dtype=float)
     geometry = instrument.geometry
-    k = water.two_way_attenuation_per_m
+    k = attenuation_per_m(instrument, water, z)
     with np.errstate(divide="ignore", invalid="ignore"):
         density = (instrument.receiver.area_m2 * geometry.overlap(z) * geometry.collection_limit(z)
                    * water.beta_pi_per_m_sr * two_way_transmission(instrument) * np.exp(-2.0 * k * z) / z**2)  # MULS Eq. 4
@@ -82,7 +100,7 @@ def background_power_w(instrument: Instrument, water: Water, spectral_radiance_w
     far = water.speed_m_s * instrument.digitizer.record_length_s / 2.0
     r = np.where(np.isfinite(r), r, far)
     rho = np.where(np.isfinite(np.asarray(range_m, float)), reflectance, 0.0)
-    attenuation = np.exp(-2.0 * water.two_way_attenuation_per_m * r)
+    attenuation = np.exp(-2.0 * attenuation_per_m(instrument, water, r) * r)
     common = spectral_radiance_w_m2_sr_nm * rx.area_m2 * rx.efficiency * band_nm * attenuation
     p_target = common * rho * theta_r**2 / 4.0  # MULS Eq. 9
     p_scatter = common * water.beta_pi_per_m_sr * np.pi * theta_r**2 / 4.0  # MULS Eq. 10

@@ -26,7 +26,10 @@ PETZOLD_BACKSCATTER_RATIO = 0.0183
 GROUP_INDEX_SEAWATER = 1.364
 GROUP_INDEX_FRESHWATER = 1.357
 
-ATTENUATION_MODELS = ("k_lidar", "c", "kd")
+#: ``small_angle``: forward scattering kept by the receiver's field of view, from the small-angle
+#: approximation (muls.smallangle, docs/design.md#attenuation); it depends on the range and the receiver.
+ATTENUATION_MODELS = ("k_lidar", "c", "kd", "small_angle")
+
 BACKSCATTER_MODELS = ("measured", "hg", "eq5")
 
 
@@ -110,7 +113,11 @@ class Water:
 
     @property
     def two_way_attenuation_per_m(self) -> float:
-        """The k used in exp(-2 k z) of Eqs. 4, 7, 9, 10, per ``attenuation_model``."""
+        """The k used in exp(-2 k z) of Eqs. 4, 7, 9, 10, per ``attenuation_model`` [1/m].
+
+        The ``small_angle`` rule depends on the range and the receiver (:func:`muls.radiometry.attenuation_per_m`
+        gives it); here it gives K_d, about its value for a footprint many free paths wide.
+        """
         if self.attenuation_model == "k_lidar":
             return self.k_lidar_per_m
         if self.attenuation_model == "c":
