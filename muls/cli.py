@@ -341,7 +341,8 @@ def _fmt(v, digits: int = 3) -> str:
 def _cmd_waveform(args):
     delay, width = _gate_s(args)
     result = studies.waveform_study(_water_name(args.water), _positive("--range-m", args.range_m), seed=args.seed,
-                                    reflectance=args.reflectance, gate_delay_s=delay, gate_width_s=width)
+                                    reflectance=args.reflectance, gate_delay_s=delay, gate_width_s=width,
+                                    attenuation_model=_attenuation(args.attenuation))
     s = result["settings"]
     lines = [f"waveform: {s['water']}, panel at {s['range_m']:g} m (reflectance {s['reflectance']:g}), "
              f"CH3 gate {s['gate_delay_ns']:g}/{s['gate_width_ns']:g} ns, seed {s['seed']}, full record"]
@@ -364,16 +365,26 @@ def _cmd_waveform(args):
 def _cmd_maxrange(args):
     waters = [_water_name(w) for w in args.waters]
     result = studies.maxrange_study(waters, shots=_count("--shots", args.shots), seed=args.seed,
-                                    reflectance=args.reflectance)
+                                    reflectance=args.reflectance, attenuation_model=_attenuation(args.attenuation))
     s = result["settings"]
     lines = [f"maximum detectable range [m]: reflectance {s['reflectance']:g}, >= {s['detection_fraction']:.0%} "
-             f"of {s['shots']} pulses within {s['tolerance_bins']} range bins, seed {s['seed']} "
-             f"({s['elapsed_s']:.1f} s)",
-             f"{'water':15s} {'single':>7s} {'near':>7s} {'far':>7s} {'total':>7s} {'improvement':>12s}"]
+             f"of {s['shots']} pulses within {s['tolerance_bins']} range bins, {s['attenuation_model']} attenuation, "
+             f"seed {s['seed']} ({s['elapsed_s']:.1f} s)",
+             f"{'water':15s} {'single':>7s} {'near':>7s} {'far':>7s} {'total':>7s} {'improvement':>12s}  "
+             f"{'gains single/PMT1/PMT2':>22s}"]
     for w in s["waters"]:
         r = result[w]
+        g = r["gains"]
         lines.append(f"{w:15s} {_fmt(r['single_channel_m'], 1):>7s} {_fmt(r['near_field_m'], 1):>7s} "
-                     f"{_fmt(r['far_field_m'], 1):>7s} {_fmt(r['total_m'], 1):>7s} {_fmt(r['improvement'], 2):>12s}")
+                     f"{_fmt(r['far_field_m'], 1):>7s} {_fmt(r['total_m'], 1):>7s} {_fmt(r['improvement'], 2):>12s}  "
+                     f"{g['single']:>6.1f}/{g['pmt1']:>6.0f}/{g['pmt2']:>6.0f}")
+    lines.append("limited by (the best channel one step beyond each edge: its SNR, and the cause):")
+    for w in s["waters"]:
+        cells = []
+        for group, lim in result[w]["limits"].items():
+            cells.append(f"{group} -" if lim is None else
+                         f"{group} {lim['channel']} {lim['cause']} (SNR {_fmt(lim['snr'], 1)})")
+        lines.append(f"{w:15s} " + "; ".join(cells))
     from .plots import plot_maxrange
 
     return result, "\n".join(lines), plot_maxrange
@@ -384,7 +395,7 @@ def _cmd_precision(args):
     ranges = [_positive("--ranges-m", r) for r in args.ranges_m]
     result = studies.precision_study(_water_name(args.water), ranges, shots=_count("--shots", args.shots),
                                      seed=args.seed, reflectance=args.reflectance, gate_delay_s=delay,
-                                     gate_width_s=width)
+                                     gate_width_s=width, attenuation_model=_attenuation(args.attenuation))
     s = result["settings"]
     lines = [f"range precision: {s['water']}, {s['shots']} shots per range, CH3 gate {s['gate_delay_ns']:g}/"
              f"{s['gate_width_ns']:g} ns, detection within {s['tolerance_m']:.3f} m, seed {s['seed']}",
@@ -461,6 +472,15 @@ def _dump_json(result, path):
     with open(path, "w") as f:
         json.dump(result, f, indent=1, allow_nan=False)
     return path
+
+
+def _cmd_budget(args):
+    from .studies.budget import budget_table
+
+    result = studies.budget_study(_attenuation(args.attenuation))
+    head = (f"photon budget, {result['settings']['attenuation_model']} attenuation, panel "
+            f"{result['settings']['reflectance']:g}: photoelectrons / echo peak LSB / SNR per channel")
+    return result, "\n".join([head] + budget_table(result)), None
 
 
 def _cmd_coaxial(args):
@@ -574,7 +594,7 @@ def _cmd_multiscatter_study(args):
 
 DEFAULT_OUT = {"waveform": "waveform.png", "maxrange": "maxrange.png", "precision": "precision.png",
                "coaxial": "coaxial.png", "multiscatter": "multiscatter.png", "multiscatter-study": "multiscatter_study",
-               "experiment": "experiment_{experiment}", "budget": "budget.png"}
+               "experiment": "experiment_{experiment}"}
 #: Commands whose --out is a folder of files, each written whole by the command itself.
 FOLDER_OUTPUTS = ("multiscatter-study", "experiment")
 
@@ -601,6 +621,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gate-delay-ns", type=non_negative_float(), default=None,
                    help="CH3 gate delay [ns] (default: that water's experiment)")
     p.add_argument("--gate-width-ns", type=positive_float(), default=None, help="CH3 gate width [ns]")
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="attenuation rule (k_lidar, c, kd, small_angle)")
     common(p)
     p.set_defaults(run=_cmd_waveform)
 
@@ -610,6 +632,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--waters", nargs="+", type=nonempty(), default=list(studies.MAXRANGE_WATERS),
                    help=f"water presets ({waters})")
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="attenuation rule (k_lidar, c, kd, small_angle)")
     common(p)
     p.set_defaults(run=_cmd_maxrange)
 
@@ -621,6 +645,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--gate-delay-ns", type=non_negative_float(), default=None)
     p.add_argument("--gate-width-ns", type=positive_float(), default=None)
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="attenuation rule (k_lidar, c, kd, small_angle)")
     common(p)
     p.set_defaults(run=_cmd_precision)
 
@@ -634,6 +660,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="attenuation rule (k_lidar, c, kd, small_angle)")
     common(p, out_type=output_dir)  # a folder: experiment.json and experiment.png
     p.set_defaults(run=_cmd_experiment)
+
+    p = sub.add_parser("budget", help="photon budget of every study point; where reported ranges exceed it")
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="attenuation rule (k_lidar, c, kd, small_angle)")
+    common(p, plot=False)
+    p.set_defaults(run=_cmd_budget)
 
     p = sub.add_parser("coaxial", help="column backscatter, coaxial vs non-coaxial (paper Fig. 13)")
     p.add_argument("--water", default="turbid_harbor", type=nonempty(), help=f"water preset ({waters})")

@@ -23,8 +23,8 @@ def _pyplot():
     return plt
 
 
-def _save(fig, path):
-    fig.tight_layout()
+def _save(fig, path, top: float = 1.0):
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, top))
     fig.savefig(path, dpi=120)
     _pyplot().close(fig)
     return path
@@ -215,3 +215,47 @@ def plot_multiscatter_study(result: dict, path):
     fig.suptitle(f"Where single scattering fails: {result['settings']['geometry']}, "
                  f"{result['settings']['packets']:,} packets per water", fontsize=10)
     return _save(fig, path)
+
+
+def plot_experiment(result: dict, path):
+    """One shot's record per distance (rows) and channel CH1-CH3 (columns), like the paper's Figures 7, 8 and
+    10: the noisy codes [LSB] over the dashed noise-free curve vs time [ns], the full-scale code, CH3's gate,
+    the true echo time and the peaks the ranging found; each row titled with the distance's statistics."""
+    plt = _pyplot()
+    s = result["settings"]
+    waves = result["waveforms"]
+    names = [n for n in waves[0]["channels"] if n != "ch0"]
+    fig, axes = plt.subplots(len(waves), len(names), figsize=(4.2 * len(names), 1.9 * len(waves) + 0.6),
+                             squeeze=False, sharex="row")
+    for row, wave in zip(axes, waves):
+        key = f"{wave['range_m']:g}"
+        echo_ns = 2e9 * wave["range_m"] / s["speed_m_s"]
+        t = wave["time_ns"]
+        for ax, name in zip(row, names):
+            colour = CHANNEL_COLOURS.get(name, "tab:purple")
+            ax.plot(t, wave["noise_free"][name], color="0.35", lw=0.9, ls="--", zorder=1)
+            ax.plot(t, wave["channels"][name], color=colour, lw=0.8, zorder=2)
+            ax.axhline(s["max_code"], color="0.5", lw=0.6, ls=":")
+            ax.axvline(echo_ns, color="k", lw=0.5, alpha=0.4)
+            if name == "ch3":
+                d, w = s["gate_delay_ns"], s["gate_width_ns"]
+                ax.axvspan(d, d + w, color="tab:red", alpha=0.07, lw=0)
+            for p in wave["peaks"]:
+                if p["channel"] == name:
+                    ax.plot(p["time_ns"], s["max_code"] * 1.04, marker="v", color="tab:green", ms=5)
+            st = result["distances"][key][name]
+            prec = "-" if st["precision_m"] is None else f"{100 * st['precision_m']:.1f} cm"
+            ax.set_title(f"{key} m {name}: detected {st['detected_fraction']:.0%}, std {prec}"
+                         + (f", clipped {st['clipped_fraction']:.0%}" if st["clipped_fraction"] else ""), fontsize=8)
+            ax.set_ylim(-20, 1.12 * s["max_code"])
+            ax.tick_params(labelsize=7)
+        right = max(echo_ns + 60.0, (s["gate_delay_ns"] + 40.0) if "ch3" in names else 0.0)
+        row[0].set_xlim(0.0, min(t[-1], right))
+        row[0].set_ylabel("LSB", fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("time after emission [ns]", fontsize=8)
+    fig.suptitle(f"{s['experiment']}: panel {s['reflectance']:g}, M1 {s['gain_pmt1']:.0f}, M2 {s['gain_pmt2']:.0f}, "
+                 f"CH3 gate {s['gate_delay_ns']:g}/{s['gate_width_ns']:g} ns, {s['ranging']} ranging, "
+                 f"{s['attenuation_model']} attenuation\n(solid: one shot; dashed: noise-free; v: the peaks the ranging "
+                 "found; grey line: the echo's start; shaded: CH3's gate)", fontsize=9)
+    return _save(fig, path, top=1.0 - 0.5 / (1.9 * len(waves) + 0.6))

@@ -66,24 +66,46 @@ POND_GATE_S = (100e-9, 400e-9)
 POOL_GATE_S = (150e-9, 400e-9)
 
 
-def mul2023(gate_delay_s: float = POND_GATE_S[0], gate_width_s: float = POND_GATE_S[1]) -> Instrument:
-    """The paper's MUL prototype: Table 1, gains of section 4.2, named assumptions elsewhere."""
+#: PMT gains of the pond experiment, the only ones the paper states (section 4.2): M1 (PMT1, CH1 and CH2)
+#: and M2 (PMT2, CH3). Gains are an operating setting: muls.experiments sets them for each experiment.
+POND_GAIN_PMT1 = 2000.0
+POND_GAIN_PMT2 = 20000.0
+
+
+def mul2023(gate_delay_s: float = POND_GATE_S[0], gate_width_s: float = POND_GATE_S[1],
+            gain_pmt1: float = POND_GAIN_PMT1, gain_pmt2: float = POND_GAIN_PMT2) -> Instrument:
+    """The paper's MUL prototype: Table 1, the pond's gains and gate (section 4.2) unless given, named
+    assumptions elsewhere."""
     return Instrument(
         name="mul2023",
         channels=(
             # PMT1 (H10720-01, non-gated) gets 2 % of the light; its output splits 9:1 (Table 1, section 3).
-            Channel("ch1", "near", split_ratio=0.02, voltage_ratio=0.9, gain=2000.0),  # M1 = 2000, section 4.2
-            Channel("ch2", "near", split_ratio=0.02, voltage_ratio=0.1, gain=2000.0),
-            # PMT2 (H11526-01, gated) gets 98 % (section 3); M2 = 20,000 (section 4.2).
-            Channel("ch3", "far", split_ratio=0.98, voltage_ratio=1.0, gain=20000.0,
+            Channel("ch1", "near", split_ratio=0.02, voltage_ratio=0.9, gain=gain_pmt1),
+            Channel("ch2", "near", split_ratio=0.02, voltage_ratio=0.1, gain=gain_pmt1),
+            # PMT2 (H11526-01, gated) gets 98 % (section 3).
+            Channel("ch3", "far", split_ratio=0.98, voltage_ratio=1.0, gain=gain_pmt2,
                     gate_delay_s=gate_delay_s, gate_width_s=gate_width_s),
         ),
     )
 
 
-#: assumption: the highest PMT gain a user would set on the single-channel instrument, that of the MUL's
-#: far-field PMT (section 4.2); higher gains only scale the dark noise of a real tube.
-SINGLE_CHANNEL_MAX_GAIN = 20000.0
+#: assumption: the highest PMT gain a user would set on any tube, that of the MUL's far-field PMT (section 4.2);
+#: higher gains only scale the dark noise of a real tube.
+MAX_PMT_GAIN = 20000.0
+SINGLE_CHANNEL_MAX_GAIN = MAX_PMT_GAIN
+#: assumption: the gain rule keeps this many standard deviations of noise below the top code above the peak.
+GAIN_RULE_SIGMA = 5.0
+
+#: The attenuation rule of the studies that predict the paper (docs/design.md#attenuation): forward
+#: scattering kept by the receiver's field of view (small-angle approximation). The water presets keep Eq.
+#: 6's k_lidar as their own default (muls.montecarlo tabulates MULS by the names k_lidar, c and kd).
+STUDY_ATTENUATION_MODEL = "small_angle"
+
+
+def study_water(water: str | Water, attenuation_model: str | None = STUDY_ATTENUATION_MODEL) -> Water:
+    """A water preset (or a Water) with the studies' attenuation rule; ``None`` keeps the water's own."""
+    w = water if isinstance(water, Water) else water_preset(water)
+    return w if attenuation_model is None else w.with_models(attenuation_model=attenuation_model)
 
 
 def coaxial() -> Instrument:
@@ -105,34 +127,62 @@ def instrument_preset(name: str, water: Water | None = None) -> Instrument:
     raise ParameterError(f"instrument = {name!r}: must be one of 'coaxial', 'mul2023', 'single_channel'")
 
 
+def headroom_lsb(channel: Channel, digitizer, peak_w: float, k_sigma: float = GAIN_RULE_SIGMA) -> float:
+    """Codes left above a signal of ``peak_w`` [W] in ``channel``: top code minus (dark level + signal +
+    ``k_sigma`` standard deviations of dark and shot noise) [LSB]; negative when it would clip."""
+    level = channel.volts_per_watt * peak_w * digitizer.lsb_per_volt  # MULS Eqs. 12, 13
+    shot_var = shot_noise_lsb2_per_w(channel, digitizer.bandwidth_hz, digitizer.lsb_per_volt) * peak_w
+    return digitizer.max_code - (channel.dark_mean_lsb + level + k_sigma * math.sqrt(channel.dark_std_lsb**2 + shot_var))
+
+
+def highest_unclipped_gain(channel: Channel, digitizer, peak_w: float, max_gain: float = MAX_PMT_GAIN) -> float:
+    """The gain rule of every preset that sets one: the highest PMT gain M (up to ``max_gain``) at which a
+    signal of ``peak_w`` [W] plus the dark level and GAIN_RULE_SIGMA standard deviations of noise stays below
+    the top code (bisection on ln M). Raises when even gain 1 clips."""
+    if headroom_lsb(replace(channel, gain=max_gain), digitizer, peak_w) >= 0.0:
+        return float(max_gain)
+    if headroom_lsb(replace(channel, gain=1.0), digitizer, peak_w) < 0.0:
+        raise ParameterError(f"channel '{channel.name}': a signal of {peak_w:.3g} W clips the digitiser even at gain 1")
+    lo, hi = 0.0, math.log(max_gain)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if headroom_lsb(replace(channel, gain=math.exp(mid)), digitizer, peak_w) >= 0.0 else (lo, mid)
+    return math.exp(lo)
+
+
+def column_peak_w(model: OpticalModel) -> float:
+    """Peak of the noise-free water-column power [W] over the record (no target, no gate)."""
+    t = np.arange(0.0, model.instrument.digitizer.record_length_s, 0.25e-9)
+    return float(np.max(model.column_power_w(t)))
+
+
 def single_channel(water: Water, base: Instrument | None = None) -> Instrument:
-    """One non-gated detector receiving all the light, its gain set for ``water`` as a user would.
+    """One non-gated detector receiving all the light, its gain set for ``water`` as a designer would.
 
     The gain is the highest (up to ``SINGLE_CHANNEL_MAX_GAIN``) at which the noise-free water-column
-    backscatter plus the dark level and five standard deviations of noise stays below the top code.
+    backscatter plus the dark level and five standard deviations of noise stays below the top code
+    (:func:`highest_unclipped_gain`).
     """
     base = base or mul2023()
     template = Channel("ch1", "single", split_ratio=1.0, voltage_ratio=1.0, gain=1.0)
     unit = replace(base, name="single_channel", channels=(template,))
-    model = OpticalModel.build(unit, water)
-    t = np.arange(0.0, unit.digitizer.record_length_s, 0.25e-9)
-    peak_w = float(np.max(model.column_power_w(t)))
-    dig = unit.digitizer
-
-    def headroom(gain: float) -> float:
-        ch = replace(template, gain=gain)
-        level = ch.volts_per_watt * peak_w * dig.lsb_per_volt
-        shot_var = shot_noise_lsb2_per_w(ch, dig.bandwidth_hz, dig.lsb_per_volt) * peak_w
-        return dig.max_code - (ch.dark_mean_lsb + level + 5.0 * math.sqrt(ch.dark_std_lsb**2 + shot_var))
-
-    if headroom(SINGLE_CHANNEL_MAX_GAIN) >= 0.0:
-        gain = SINGLE_CHANNEL_MAX_GAIN
-    else:
-        lo, hi = 0.0, math.log(SINGLE_CHANNEL_MAX_GAIN)
-        if headroom(1.0) < 0.0:
-            raise ParameterError(f"water '{water.name}': the column backscatter clips the digitiser even at gain 1")
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if headroom(math.exp(mid)) >= 0.0 else (lo, mid)
-        gain = math.exp(lo)
+    peak_w = column_peak_w(OpticalModel.build(unit, water))
+    try:
+        gain = highest_unclipped_gain(template, unit.digitizer, peak_w, SINGLE_CHANNEL_MAX_GAIN)
+    except ParameterError:
+        raise ParameterError(f"water '{water.name}': the column backscatter clips the digitiser even at gain 1") from None
     return replace(unit, channels=(replace(template, gain=gain),))
+
+
+def designed_mul(water: Water, gate_delay_s: float = POND_GATE_S[0], gate_width_s: float = POND_GATE_S[1],
+                 max_gain: float = MAX_PMT_GAIN) -> Instrument:
+    """The MUL with its gains set for ``water`` as a designer would (the maximum-range comparison).
+
+    PMT1 gets the highest gain (up to ``max_gain``) at which CH2, its low-gain output, keeps the water column
+    unclipped (the rule of :func:`single_channel`); CH1 is then nine times CH2 by the 9:1 split and clips on
+    the column near the instrument, which is what CH2 is for. PMT2 behind its gate runs at ``max_gain``.
+    """
+    probe = mul2023(gate_delay_s, gate_width_s, gain_pmt1=1.0, gain_pmt2=max_gain)
+    peak_w = column_peak_w(OpticalModel.build(probe, water))
+    m1 = highest_unclipped_gain(probe.channel("ch2"), probe.digitizer, peak_w, max_gain)
+    return replace(mul2023(gate_delay_s, gate_width_s, gain_pmt1=m1, gain_pmt2=max_gain), name="mul2023 (designed)")

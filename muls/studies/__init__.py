@@ -5,6 +5,9 @@
   (paper section 5, Figure 14 and Table 3);
 - :func:`precision_study`: range precision and mean deviation per channel (paper Table 2, Figure 11);
 - :func:`coaxial_study`: water-column backscatter of coaxial vs non-coaxial optics (paper Figure 13);
+- :func:`experiment_study`: the paper's pond and pool tests predicted per distance and channel (Table 2,
+  Figures 7, 8, 10 and 11);
+- :func:`budget_study`: the photon budget of every study point, and where a reported range exceeds it;
 - :func:`bench_study`: pulses per second of :func:`muls.simulate.simulate` on this machine.
 
 Every study goes through the instrument's own digitiser and ranging (:func:`muls.simulate.simulate`);
@@ -14,6 +17,7 @@ placement, detection criterion, shots) are written down in docs/studies.md.
 """
 
 from .bench import bench_study
+from .budget import budget_study
 from .coaxial import coaxial_study
 from .common import (
                      COARSE_START_M,
@@ -27,6 +31,7 @@ from .common import (
                      nearest_to_truth,
                      range_tolerance_m,
 )
+from .experiment import experiment_study
 from .maxrange import maxrange_study
 from .precision import precision_study
 from .waveform import waveform_study
@@ -43,8 +48,10 @@ __all__ = [
     "nearest_to_truth",
     "range_tolerance_m",
     "waveform_study",
+    "experiment_study",
     "maxrange_study",
     "precision_study",
     "coaxial_study",
     "bench_study",
+    "budget_study",
 ]

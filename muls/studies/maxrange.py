@@ -6,8 +6,9 @@ import time
 
 import numpy as np
 
+from ..budget import LIMITS, channel_budget, limiting_cause
 from ..errors import check_fraction, check_positive
-from ..presets import mul2023, single_channel
+from ..presets import designed_mul, single_channel, study_water
 from ..simulate import simulate
 from ..water import Water
 from ..waveform import OpticalModel
@@ -45,6 +46,11 @@ def _single_fractions(model: OpticalModel, ranges_m, shots, reflectance, seed, f
     return {"single": _fraction(np.abs(error) <= range_tolerance_m(model), shots)}
 
 
+def _mul_model(water: Water, gate_delay_s: float) -> OpticalModel:
+    """The designed MUL (:func:`muls.presets.designed_mul`) with CH3 gated from ``gate_delay_s``."""
+    return OpticalModel.build(designed_mul(water, float(gate_delay_s), FAR_GATE_WIDTH_S), water)
+
+
 def _mul_fractions(water: Water, ranges_m, shots, reflectance, seed, first_id) -> dict:
     """{"near", "far", "total": (n_ranges,)} for the MUL with CH3 gated for each range (far_gate_delay_s).
 
@@ -55,7 +61,7 @@ def _mul_fractions(water: Water, ranges_m, shots, reflectance, seed, first_id) -
     out = {g: np.zeros(ranges_m.shape[0]) for g in ("near", "far", "total")}
     for delay in np.unique(delays):
         idx = np.nonzero(delays == delay)[0]
-        model = OpticalModel.build(mul2023(gate_delay_s=float(delay), gate_width_s=FAR_GATE_WIDTH_S), water)
+        model = _mul_model(water, delay)
         truth, batch = truth_batch(model.instrument, ranges_m[idx], shots, reflectance, first_id, idx)
         _, ranging = simulate(model, batch, seed, mode="windowed")
         tol = range_tolerance_m(model)
@@ -64,6 +70,26 @@ def _mul_fractions(water: Water, ranges_m, shots, reflectance, seed, first_id) -
             error, _ = nearest_to_truth(peaks, truth, channels)
             out[group][idx] = _fraction(np.abs(error) <= tol, shots)
     return out
+
+
+GROUP_CHANNELS = {"single": ("ch1",), "near": ("ch1", "ch2"), "far": ("ch3",), "total": ("ch1", "ch2", "ch3")}
+
+
+def _limit(water: Water, single: OpticalModel, group: str, edge_m, reflectance: float) -> dict | None:
+    """What stops a group one fine step beyond its maximum range: :func:`muls.budget.limiting_cause` of its
+    channel with the best SNR there (the gate, the column's clipping, or the largest noise term), with that
+    channel's SNR and the terms behind it."""
+    if edge_m is None:
+        return None
+    r = round(edge_m + FINE_STEP_M, 6)
+    model = single if group == "single" else _mul_model(water, float(far_gate_delay_s(r, water.speed_m_s)))
+    _, budget = channel_budget(model, r, reflectance)
+    name = max(GROUP_CHANNELS[group], key=lambda c: budget[c]["snr"])
+    b = budget[name]
+    return {"range_m": r, "channel": name, "cause": limiting_cause(b), "snr": round(b["snr"], 3),
+            "photon_limited_snr": None if b["photon_limited_snr"] is None else round(b["photon_limited_snr"], 3),
+            "peak_lsb": round(b["peak_lsb"], 4), "noise_terms_lsb": {k: round(v, 4) for k, v in b["noise_terms_lsb"].items()},
+            "photoelectrons": round(b["photoelectrons"], 2)}
 
 
 def _largest_passing(ranges_m: np.ndarray, fraction: np.ndarray, level: float):
@@ -117,6 +143,7 @@ def _max_range_one_water(water: Water, shots: int, reflectance: float, seed: int
     all_r = all_r[order]
     edges = {g: _largest_passing(all_r, curves[g], level) for g in groups}
     total = edges["total"]
+    mul = _mul_model(water, 0.0).instrument
     return {
         "single_channel_m": edges["single"],
         "near_field_m": edges["near"],
@@ -125,13 +152,17 @@ def _max_range_one_water(water: Water, shots: int, reflectance: float, seed: int
         "improvement": None if not (total and edges["single"]) else round(total / edges["single"], 3),
         "near_far_max_m": max((e for e in (edges["near"], edges["far"]) if e is not None), default=None),
         "single_channel_gain": single.instrument.channels[0].gain,
+        "gains": {"single": single.instrument.channels[0].gain, "pmt1": mul.channel("ch1").gain,
+                  "pmt2": mul.channel("ch3").gain},
+        "limits": {g: _limit(water, single, g, edges[g], reflectance) for g in groups},
         "range_tolerance_m": range_tolerance_m(single),
         "curves": {"range_m": _list(all_r, 4), **{g: _list(curves[g], 4) for g in groups}},
     }
 
 
 def maxrange_study(waters=MAXRANGE_WATERS, shots: int = 200, reflectance: float = 0.1, seed: int = 0,
-                   detection_fraction: float = DETECTION_FRACTION, max_range_m: float | None = None) -> dict:
+                   detection_fraction: float = DETECTION_FRACTION, max_range_m: float | None = None,
+                   attenuation_model: str | None = None) -> dict:
     """Maximum detectable range [m] per water: single channel, MUL near field, far field, total.
 
     A range is detectable when, of ``shots`` seeded pulses on a flat panel (``reflectance``, normal
@@ -139,9 +170,12 @@ def maxrange_study(waters=MAXRANGE_WATERS, shots: int = 200, reflectance: float 
     range is the largest detectable range scanned (coarse 1 m grid, then 0.1 m above the edge). Single and
     total use the chosen returns (``Ranging.returns``) of ``single_channel(water)`` and of the MUL; near
     and far use the MUL's per-channel peaks (CH1 or CH2; CH3 with its gate placed for each range by
-    :func:`far_gate_delay_s`). Windowed records. Returns {water: {single_channel_m, near_field_m,
-    far_field_m, total_m, improvement, near_far_max_m, single_channel_gain, range_tolerance_m, curves}},
-    plus ``settings``; a range is None when no scanned range passes.
+    :func:`far_gate_delay_s`). Gains as a designer sets them: the single channel and PMT1 (through CH2) the
+    highest that keeps the water column unclipped, CH1 nine times CH2 by the split, PMT2 20,000
+    (:func:`muls.presets.designed_mul`). ``attenuation_model``: the rule every water uses (None: as each
+    water is configured). Windowed records. Returns {water: {single_channel_m, near_field_m, far_field_m,
+    total_m, improvement, near_far_max_m, single_channel_gain, gains, limits, range_tolerance_m, curves}},
+    plus ``settings``; a range is None when no scanned range passes; ``limits`` says what stops each group.
     """
     shots = _shots("shots", shots)
     check_fraction("reflectance", reflectance)
@@ -152,11 +186,16 @@ def maxrange_study(waters=MAXRANGE_WATERS, shots: int = 200, reflectance: float 
     out = {}
     t0 = time.perf_counter()
     for name in names:
-        w = _water(name)
+        w = study_water(_water(name), attenuation_model)
         out[w.name] = _max_range_one_water(w, shots, float(reflectance), int(seed), float(detection_fraction),
                                            max_range_m)
     out["settings"] = {
-        "waters": [_water(n).name for n in names], "shots": shots, "reflectance": float(reflectance),
+        "waters": [_water(n).name for n in names], "shots": shots,
+        "attenuation_model": attenuation_model or "as each water is configured",
+        "gains": ("single channel and PMT1 (through CH2): the highest gain <= 20000 keeping the water column "
+                  "unclipped; CH1 = 9 x CH2 by the split; PMT2 (CH3) at 20000"),
+        "limits": f"one fine step beyond each edge, the cause of its best channel: {', '.join(LIMITS)}",
+        "reflectance": float(reflectance),
         "incidence_deg": 0.0, "seed": int(seed), "detection_fraction": float(detection_fraction),
         "tolerance_bins": DETECTION_TOLERANCE_BINS, "record_mode": "windowed",
         "coarse_step_m": COARSE_STEP_M, "fine_step_m": FINE_STEP_M, "coarse_start_m": COARSE_START_M,

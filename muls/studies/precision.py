@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import check_fraction
-from ..presets import mul2023
+from ..presets import mul2023, study_water
 from ..simulate import simulate
 from ..water import Water
 from ..waveform import OpticalModel
@@ -37,17 +37,20 @@ def _stats(error: np.ndarray, saturated: np.ndarray, tol: float) -> dict:
 
 def precision_study(water: str | Water = "pond", ranges_m=(8.5, 10.0, 11.5), shots: int = 1000, seed: int = 0,
                     reflectance: float = 0.1, gate_delay_s: float | None = None,
-                    gate_width_s: float | None = None, record_mode: str = "windowed") -> dict:
+                    gate_width_s: float | None = None, record_mode: str = "windowed",
+                    attenuation_model: str | None = None) -> dict:
     """Range precision and mean deviation [m] per channel of static pulses on a flat panel.
 
     Each channel is ranged on its own: per shot, its peak nearest the truth (``Ranging.peaks``), kept when
     within 3 range bins. ``precision_m`` is the sample std of the kept ranges, ``mean_deviation_m`` their
     mean minus the truth, ``detected_fraction`` kept shots over all shots, ``saturated_fraction`` clipped
     peaks among the kept ones. ``chosen`` gives the same for the instrument's chosen returns. The CH3 gate is
-    that of the paper's experiment in the water unless given [s]. Returns {"8.5": {"ch1": {...}, "ch2":
-    {...}, "ch3": {...}, "chosen": {...}}, ..., "settings": {...}}; precision is None below 2 detections.
+    that of the paper's experiment in the water unless given [s]. ``attenuation_model``: the rule the
+    water uses (None: as configured; the ``muls`` command passes the studies' rule, ``small_angle``).
+    Returns {"8.5": {"ch1": {...}, "ch2": {...}, "ch3": {...}, "chosen": {...}}, ..., "settings": {...}};
+    precision is None below 2 detections.
     """
-    w = _water(water)
+    w = study_water(_water(water), attenuation_model)
     r = _ranges("ranges_m", ranges_m)
     shots = _shots("shots", shots)
     check_fraction("reflectance", reflectance)
@@ -65,7 +68,8 @@ def precision_study(water: str | Water = "pond", ranges_m=(8.5, 10.0, 11.5), sho
         rows = slice(i * shots, (i + 1) * shots)
         out[f"{range_m:g}"] = {name: _stats(err[rows], sat[rows], tol) for name, (err, sat) in per_channel.items()}
     out["settings"] = {
-        "water": w.name, "instrument": instrument.name, "ranges_m": r.tolist(), "shots": shots, "seed": int(seed),
+        "water": w.name, "attenuation_model": w.attenuation_model,
+        "instrument": instrument.name, "ranges_m": r.tolist(), "shots": shots, "seed": int(seed),
         "reflectance": float(reflectance), "gate_delay_ns": delay * 1e9, "gate_width_ns": width * 1e9,
         "record_mode": record_mode, "tolerance_bins": DETECTION_TOLERANCE_BINS, "tolerance_m": tol,
         "speed_m_s": w.speed_m_s,

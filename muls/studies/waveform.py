@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import check_fraction
-from ..presets import mul2023
+from ..presets import mul2023, study_water
 from ..ranging import DROPOUT_CAUSES
 from ..simulate import simulate
 from ..water import Water
@@ -20,16 +20,18 @@ from .common import (
 
 
 def waveform_study(water: str | Water = "pond", range_m: float = 11.5, seed: int = 0, reflectance: float = 0.1,
-                   gate_delay_s: float | None = None, gate_width_s: float | None = None) -> dict:
+                   gate_delay_s: float | None = None, gate_width_s: float | None = None,
+                   attenuation_model: str | None = None) -> dict:
     """CH0-CH3 full records [LSB] of one pulse of the MUL on a flat panel, noisy and noise-free.
 
     water: preset name or Water; range_m: panel range [m]; reflectance: Lambertian reflectance [0, 1];
     gate: CH3's gate [s], by default the one of the paper's experiment in that water (pond 100/400 ns,
-    pool 150/400 ns, the pond's elsewhere). Returns ``time_ns`` (n_samples,) sample times after emission,
-    ``channels`` and ``noise_free`` {"ch0".."ch3": (n_samples,) LSB}, ``returns`` (what the instrument's
-    ranging made of the pulse), ``dropout_cause`` and ``settings``.
+    pool 150/400 ns, the pond's elsewhere); attenuation_model: the rule the water uses (None: as
+    configured; the ``muls`` command passes the studies' rule, ``small_angle``). Returns ``time_ns``
+    (n_samples,) sample times after emission, ``channels`` and ``noise_free`` {"ch0".."ch3": (n_samples,)
+    LSB}, ``returns`` (what the instrument's ranging made of the pulse), ``dropout_cause`` and ``settings``.
     """
-    w = _water(water)
+    w = study_water(_water(water), attenuation_model)
     range_m = float(_ranges("range_m", range_m)[0])
     check_fraction("reflectance", reflectance)
     delay, width = _gate(w, gate_delay_s, gate_width_s)
@@ -58,7 +60,8 @@ def waveform_study(water: str | Water = "pond", range_m: float = 11.5, seed: int
         ],
         "dropout_cause": None if cause < 0 else DROPOUT_CAUSES[cause],
         "settings": {
-            "water": w.name, "instrument": instrument.name, "range_m": range_m, "reflectance": float(reflectance),
+            "water": w.name, "attenuation_model": w.attenuation_model,
+        "instrument": instrument.name, "range_m": range_m, "reflectance": float(reflectance),
             "seed": int(seed), "record_mode": "full", "gate_delay_ns": delay * 1e9, "gate_width_ns": width * 1e9,
             "sample_interval_ns": instrument.digitizer.sample_interval_s * 1e9,
             "max_code": instrument.digitizer.max_code, "speed_m_s": w.speed_m_s,
