@@ -561,13 +561,16 @@ def _cmd_multiscatter_study(args):
     s = result["settings"]
     lines = [f"Monte Carlo / MULS, {s['geometry']}, flat 0.1 plate, {s['phase']} phase function, "
              f"{s['packets']:,} packets per water, seed {s['seed']} ({s['seconds']:.0f} s)",
-             "target echo energy, MC / MULS with each attenuation rule, and the MC's effective attenuation:",
-             f"{'water':14s} {'range m':>7s} {'k_lidar':>9s} {'c':>9s} {'kd':>9s} {'closest':>8s} {'k_eff /m':>8s} {'err':>6s}"]
+             "target echo energy, MC / MULS with each attenuation rule, the share of it due to the transceiver "
+             "geometry alone (MC without scattering / Eq. 7), and the MC's effective attenuation:",
+             f"{'water':14s} {'range m':>7s} {'k_lidar':>9s} {'c':>9s} {'kd':>9s} {'closest':>8s} {'geometry':>8s} "
+             f"{'k_eff /m':>8s} {'err':>6s}"]
     for w in s["waters"]:
         for row in result[w]["ranges"]:
             r = row["ratio"]
-            lines.append(f"{w:14s} {row['range_m']:7.1f} {r['k_lidar']:9.3g} {r['c']:9.3g} {r['kd']:9.3g} "
-                         f"{row['closest_rule']:>8s} {row['effective_attenuation_per_m']:8.3f} {row['mc_rel_err']:6.1%}")
+            lines.append(f"{w:14s} {row['range_m']:7.2f} {r['k_lidar']:9.3g} {r['c']:9.3g} {r['kd']:9.3g} "
+                         f"{row['closest_rule']:>8s} {_fmt(row['geometry'], 3):>8s} "
+                         f"{row['effective_attenuation_per_m']:8.3f} {row['mc_rel_err']:6.1%}")
     lines.append("water column peak, MC / MULS (MULS's beta_pi; with the phase function's beta_pi), first-order "
                  "share, and the detection range MULS needs vs the MC implies:")
     lines.append(f"{'water':14s} {'k_lidar':>15s} {'c':>17s} {'kd':>15s} {'1st order':>9s} {'err':>6s} "

@@ -943,14 +943,35 @@ def muls_power_w(instrument: Instrument, water: Water, range_m: float, reflectan
 
 
 def effective_attenuation_per_m(instrument: Instrument, range_m: float, reflectance: float, water: Water,
-                                echo_energy_j: float) -> float | None:
-    """The two-way k of Eq. 7 that gives ``echo_energy_j`` for a flat plate at ``range_m`` [1/m]."""
+                                echo_energy_j: float, geometry: float = 1.0) -> float | None:
+    """The two-way k of Eq. 7 that gives ``echo_energy_j`` for a flat plate at ``range_m`` [1/m].
+
+    geometry: the exact transceiver geometry over Eq. 7's (``geometry_factor``), so that k holds the
+    propagation alone; 1 uses Eq. 11's overlap as it is.
+    """
     if not echo_energy_j > 0.0:
         return None
     unattenuated = instrument.transmitter.pulse_energy_j * float(target_factor(
         instrument, water.with_models(attenuation_model="c"), range_m,
         lambertian_weight(instrument, range_m, reflectance))) * math.exp(2.0 * water.attenuation_per_m * range_m)
-    return math.log(unattenuated / echo_energy_j) / (2.0 * range_m)
+    return math.log(geometry * unattenuated / echo_energy_j) / (2.0 * range_m)
+
+
+def geometry_factor(instrument: Instrument, ranges_m, packets: int = 100_000, seed: int = 0) -> np.ndarray:
+    """(K,) echo of a flat plate in water that does not scatter, Monte Carlo over MULS Eq. 7.
+
+    The Monte Carlo lets an aperture point see a point of the plate only within its own field of view;
+    Eq. 11 counts the whole aperture once the point lies in the union of the fields (radius r_ap +
+    z tan(theta_r/2)). Beyond the range where every aperture point sees the whole spot the two agree
+    (to the 1/R^2 of the offset path).
+    """
+    clear = Water("no_scattering", 1e-9, 0.0, attenuation_model="c")
+    ranges = tuple(sorted(float(r) for r in np.atleast_1d(ranges_m)))
+    result = run_monte_carlo(instrument, clear, TargetPlanes(ranges, 0.1), packets=packets, seed=seed,
+                             receiver_packets=BATCHES)
+    eta = two_way_transmission(instrument)
+    return np.array([result.target(k)[0].sum() * eta / float(target_factor(
+        instrument, clear, r, lambertian_weight(instrument, r, 0.1))) for k, r in enumerate(ranges)])  # MULS Eq. 7
 
 
 #: Beam packets of ``muls multiscatter`` by default: the pond at 10 m then has every bin within 100 times
@@ -987,7 +1008,8 @@ def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geome
     mc_energy_err = float(math.sqrt(tv.sum())) * e_scale
     muls_total = muls["column"] + muls["target"]
     col_mc, col_muls = mc["column"][0][keep], muls["column"]
-    k_eff = effective_attenuation_per_m(instrument, range_m, reflectance, w, mc_energy)
+    geometry_ratio = float(geometry_factor(instrument, [range_m], seed=seed)[0])
+    k_eff = effective_attenuation_per_m(instrument, range_m, reflectance, w, mc_energy, geometry_ratio)
     seconds = time.perf_counter() - t0
     rules = {rule: w.with_models(attenuation_model=rule).two_way_attenuation_per_m for rule in ("k_lidar", "c", "kd")}
     ph = check_phase(phase)
@@ -1009,7 +1031,7 @@ def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geome
             "mc_target_w": _round(mc["target"][0][keep]), "mc_target_err_w": _round(mc["target"][1][keep]),
             "mc_column_err_w": _round(mc["column"][1][keep]),
             "muls_column_w": _round(col_muls), "muls_target_w": _round(muls["target"]),
-            "mc_target_energy_err_j": mc_energy_err,
+            "mc_target_energy_err_j": mc_energy_err, "geometry_ratio": geometry_ratio,
             "mc_column_peak_time_ns": float(t[np.argmax(col_mc)] * 1e9),
             "muls_column_peak_time_ns": float(t[np.argmax(col_muls)] * 1e9),
             "column_first_peak_ratio": float(mc["column_first"][0][keep].max() / col_muls.max()) if col_muls.max() > 0 else None,
@@ -1123,8 +1145,8 @@ class MultipleScatteringCorrection:
 #: Waters of the study (the paper's two test waters and the three Petzold waters of its Table 3).
 STUDY_WATERS = ("pond", "pool", "clean_ocean", "coastal_ocean", "turbid_harbor")
 #: Target ranges of the correction tables [m], and ranges between them where the interpolation is checked.
-STUDY_RANGES_M = (2.0, 3.0, 4.0, 5.0, 7.5, 10.0, 12.5, 15.0, 20.0, 25.0, 30.0)
-CHECK_RANGES_M = (2.5, 6.0, 8.75, 17.5)
+STUDY_RANGES_M = (2.0, 2.25, 2.5, 2.75, 3.0, 3.5, 4.0, 5.0, 7.5, 10.0, 12.5, 15.0, 20.0, 25.0, 30.0)
+CHECK_RANGES_M = (2.125, 2.625, 3.25, 6.0, 8.75, 17.5)
 #: Ranges scanned around MULS's maximum detectable range R_det for the detection question.
 DETECTION_FACTORS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
 ATTENUATION_RULES = ("k_lidar", "c", "kd")
@@ -1154,6 +1176,8 @@ def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, pack
     evaluated with each attenuation rule (k_lidar, c, kd; beta_pi as the water is configured). The
     detection range the Monte Carlo implies is where its echo peak power falls to MULS's echo peak at R_det
     (the far channel's threshold is fixed by its dark noise, so a peak level is what detection needs).
+    ``geometry`` per range is the echo without scattering over Eq. 7 (:func:`geometry_factor`), and the
+    effective attenuation is taken against it, so that it holds the propagation alone.
     Returns {water: {...}, "settings": {...}}.
     """
     if geometry not in ("mul2023", "coaxial"):
@@ -1162,6 +1186,8 @@ def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, pack
     ph = check_phase(phase)
     t_all = time.perf_counter()
     out = {}
+    geo_ranges = sorted({float(r) for r in list(ranges_m) + list(check_ranges_m)})
+    geo = dict(zip(geo_ranges, geometry_factor(instrument, geo_ranges, seed=seed)))
     for name in ([waters] if isinstance(waters, str) else list(waters)):
         w = water_preset(name)
         t0 = time.perf_counter()
@@ -1181,12 +1207,13 @@ def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, pack
                 instrument, w.with_models(attenuation_model=rule), r, lambertian_weight(instrument, r, 0.1)))
                 for rule in ATTENUATION_RULES}  # MULS Eq. 7 with each rule
             ratios = {rule: mc_e / v for rule, v in muls_e.items()}
+            g = geo.get(r)
             rows.append({
-                "range_m": r, "mc_energy_j": mc_e, "mc_rel_err": math.sqrt(tv.sum()) / tm.sum(),
+                "range_m": r, "mc_energy_j": mc_e, "mc_rel_err": math.sqrt(tv.sum()) / tm.sum(), "geometry": g,
                 "mc_peak_w": float(parts["target"][0].max()),
                 "muls_peak_w": muls_e[w.attenuation_model] * pulse_peak,
                 "ratio": ratios, "closest_rule": min(ratios, key=lambda q: abs(math.log(ratios[q]))),
-                "effective_attenuation_per_m": effective_attenuation_per_m(instrument, r, 0.1, w, mc_e),
+                "effective_attenuation_per_m": effective_attenuation_per_m(instrument, r, 0.1, w, mc_e, g or 1.0),
             })
         # the column: the farthest scene holds every earlier time
         far = len(ranges) - 1

@@ -14,7 +14,14 @@ import pytest
 from scipy.integrate import quad
 
 from muls import Water, coaxial, mul2023, water_preset
-from muls.montecarlo import MultipleScatteringCorrection, TargetPlanes, mc_power_w, multiscatter_waters_study, run_monte_carlo
+from muls.montecarlo import (
+    MultipleScatteringCorrection,
+    TargetPlanes,
+    geometry_factor,
+    mc_power_w,
+    multiscatter_waters_study,
+    run_monte_carlo,
+)
 from muls.phase import PHASE_FUNCTIONS, phase_function, sample_angle
 from muls.radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission
 from muls.water import henyey_greenstein as hg_closed_form
@@ -296,3 +303,23 @@ def test_study_reduced_runs_and_reports_every_water_and_range():
         # and MULS with K_d (all kept)
         assert row["ratio"]["kd"] < 1.0 < row["ratio"]["c"]
     assert w["detection"]["muls_m"] > 0 and w["correction_check"][0]["range_m"] == 4.5
+
+
+def test_geometry_factor_is_the_aperture_seen_within_the_field_of_view():
+    """Without scattering the echo is Eq. 7 with the exact overlap: the share of the aperture whose own field
+    of view holds the point, averaged over the beam spot (a direct numerical integral here), not Eq. 11."""
+    instrument = mul2023()
+    g = instrument.geometry
+    ranges = (2.5, 3.0, 6.0)
+    factor = geometry_factor(instrument, ranges, packets=100_000)
+    rng = np.random.default_rng(0)
+    r_ap = 0.5 * g.receiver_diameter_m
+    q = rng.uniform(-1.0, 1.0, (20_000, 2))
+    q = q[(q**2).sum(axis=1) < 1.0] * r_ap + np.array([g.offset_m, 0.0])
+    for f, z in zip(factor, ranges):
+        spot = rng.uniform(-1.0, 1.0, (400, 2))
+        spot = spot[(spot**2).sum(axis=1) < 1.0] * float(g.beam_radius_m(z))
+        seen = np.mean([np.mean(((q - p) ** 2).sum(axis=1) <= (z * math.tan(0.5 * g.fov_full_rad)) ** 2) for p in spot])
+        exact = seen / float(g.overlap(z)) * (z * z / (z * z + g.offset_m**2)) ** 2
+        assert f == pytest.approx(exact, rel=0.03, abs=0.01)
+    assert factor[0] < 0.5  # Eq. 11 says 1 at 2.5 m
