@@ -231,3 +231,47 @@ def test_two_echoes_in_one_footprint_give_two_returns_and_close_ones_merge():
     assert np.all(close.number_of_returns == 1)
     merged = close.returns.range_m
     assert np.all((merged > 15.0) & (merged < 15.3))  # one biased range between the two surfaces
+
+
+# --- the prototype's plain peak detection (Processing.peak_fit = "sample_maximum") ----------------------------
+
+def _prototype(model):
+    from dataclasses import replace
+
+    ins = model.instrument
+    return OpticalModel.build(replace(ins, processing=replace(ins.processing, peak_fit="sample_maximum")), model.water)
+
+
+def test_sample_maximum_ranges_are_quantised_to_the_sample_interval():
+    """Without noise, the CH0 reference and the echo are both timed at their highest sample, taken with the
+    same free-running clock. With the echo delay tau = (n + f) samples, the two indices differ by n or n + 1,
+    so the range error takes two values, -f and 1 - f range bins (c_w x 1 ns / 2), with probabilities 1 - f
+    and f over the pulses' random phases: mean 0, standard deviation sqrt(f (1 - f)) bins."""
+    model = _prototype(_model())
+    n = 600
+    batch = PulseBatch.flat_target(model.instrument, np.full(n, 15.0), pulse_id=np.arange(n))  # nothing clips
+    _, ranging = simulate(model, batch, seed=5, noise=False)
+    err = ranging.returns.range_m - 15.0
+    bin_m = model.water.speed_m_s * 1e-9 / 2.0
+    f = (15.0 / bin_m) % 1.0  # tau in samples = range in bins
+    assert err.size == n
+    assert np.all(np.isclose(err, -f * bin_m, atol=1e-9) | np.isclose(err, (1.0 - f) * bin_m, atol=1e-9))
+    assert err.std() == pytest.approx(np.sqrt(f * (1.0 - f)) * bin_m, rel=0.1)
+    assert abs(err.mean()) < 0.01
+    # the pulse-shape fit of the same records is far finer
+    _, fitted = simulate(_model(), batch, seed=5, noise=False)
+    assert np.abs(fitted.returns.range_m - 15.0).max() < 0.01
+
+
+def test_sample_maximum_times_a_clipped_echo_at_its_first_clipped_sample():
+    """A clipped echo's plateau starts before its true peak: plain peak detection ranges it short, by more
+    the wider the plateau; the pulse-shape fit recovers the peak from the plateau's width."""
+    model = _prototype(_model())
+    batch = PulseBatch.flat_target(model.instrument, np.full(50, 5.0), pulse_id=np.arange(50))
+    _, ranging = simulate(model, batch, seed=2)
+    ch1 = ranging.peaks.select(ranging.peaks.channel == 1)
+    assert ch1.saturated.all()
+    assert np.all(ch1.range_m < 5.0 - 0.1)
+    _, fitted = simulate(_model(), batch, seed=2)
+    ch1_fit = fitted.peaks.select(fitted.peaks.channel == 1)
+    assert np.all(np.abs(ch1_fit.range_m - 5.0) < 0.1)

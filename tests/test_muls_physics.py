@@ -235,3 +235,67 @@ def test_reflectance_over_one_is_rejected():
 
     with pytest.raises(ParameterError, match="reflectance"):
         PulseBatch.flat_target(mul2023(), [5.0], 1.2)
+
+
+# --- the small_angle attenuation rule (muls.smallangle) ---------------------------------------------------------
+
+def _small_angle(water, fov_full_rad=0.1, ranges=(5.0, 10.0, 20.0)):
+    from muls.radiometry import attenuation_per_m
+
+    ins = mul2023()
+    ins = replace(ins, receiver=replace(ins.receiver, fov_full_rad=fov_full_rad))
+    return attenuation_per_m(ins, water.with_models(attenuation_model="small_angle"), np.asarray(ranges))
+
+
+def test_small_angle_rule_of_an_absorbing_water_is_its_absorption():
+    """With no scattering there is nothing to keep: k = a = c at every range and field of view."""
+    np.testing.assert_allclose(_small_angle(Water("absorbing", 0.2, 0.0)), 0.2, rtol=1e-9)
+    np.testing.assert_allclose(_small_angle(Water("absorbing", 0.2, 0.0), fov_full_rad=1.0), 0.2, rtol=1e-9)
+
+
+def test_small_angle_rule_at_low_optical_depth_is_single_scattering_kept_in_the_footprint():
+    """Through the pool (b Z = 0.06 at 10 m) only single scattering counts: k = a + b (1 - s), s the share of
+    single scattering that lands inside the footprint, int_0^1 F(theta_h / (1 - u)) du, computed directly
+    from Petzold's cumulative distribution (a different path from the rule's Hankel integral)."""
+    from muls.phase import petzold
+
+    phase = petzold()
+    u = (np.arange(4000) + 0.5) / 4000
+    share = np.mean([phase.forward_fraction(min(0.05 / (1 - v), math.pi / 2)) for v in u])
+    assert 0.55 < share < 0.65
+    pool = water_preset("pool")
+    expected = pool.absorption_per_m + pool.scattering_per_m * (1.0 - share)
+    np.testing.assert_allclose(_small_angle(pool, ranges=(10.0,)), expected, rtol=2e-3)
+
+
+def test_small_angle_rule_lies_between_c_and_the_fully_kept_limit_and_falls_as_the_field_widens():
+    """A narrow field keeps little (k within 20 % of c: even 0.1 mrad holds part of Petzold's sharp forward
+    peak); a wide one nearly all forward scattering (k near a + b_b, Petzold's b_b/b = 0.0183); in between k
+    falls as the field of view widens, and in the pond as the range grows."""
+    coastal = water_preset("coastal_ocean")
+    a, b, c = coastal.absorption_per_m, coastal.scattering_per_m, coastal.attenuation_per_m
+    narrow, medium, wide = (_small_angle(coastal, fov) for fov in (1e-4, 0.1, 1.5))
+    assert np.all(narrow > 0.8 * c) and np.all(narrow <= c + 1e-9)
+    assert np.all(wide < a + 0.0183 * b + 0.1 * b) and np.all(wide >= a + 0.0183 * b - 1e-3)
+    assert np.all(narrow > medium) and np.all(medium > wide)
+    pond = _small_angle(water_preset("pond"))
+    assert np.all(np.diff(pond) < 0.0)  # more multiple scattering kept farther away
+
+
+@pytest.mark.slow
+def test_small_angle_rule_against_the_monte_carlo():
+    """The Monte Carlo reference (muls.montecarlo) through the MUL's geometry: in single-scattering waters the
+    rule gives the echo's effective attenuation within 3 %; in the pond (b Z = 12 at 10 m) the approximation
+    keeps more scattered light than the Monte Carlo (no longer paths, no scattering back from large angles):
+    k lower, within 15 %."""
+    from muls.montecarlo import TargetPlanes, effective_attenuation_per_m, run_monte_carlo, two_way_transmission
+
+    ins = mul2023()
+    for name, tol in (("coastal_ocean", 0.03), ("pond", 0.15)):
+        water = water_preset(name)
+        result = run_monte_carlo(ins, water, TargetPlanes((10.0,), 0.1), packets=100_000, seed=3)
+        energy = float(result.target(0)[0].sum()) * ins.transmitter.pulse_energy_j * two_way_transmission(ins)
+        k_mc = effective_attenuation_per_m(ins, 10.0, 0.1, water, energy)
+        k_rule = float(_small_angle(water, ranges=(10.0,))[0])
+        assert k_rule == pytest.approx(k_mc, rel=tol), name
+        assert k_rule <= k_mc * 1.01

@@ -9,6 +9,8 @@ import pytest
 from muls import studies
 from muls.peaks import Peaks
 from muls.presets import POND_GATE_S, POOL_GATE_S, water_preset
+from muls.simulate import simulate
+from muls.waveform import OpticalModel, PulseBatch
 
 MAXRANGE_KEYS = {"single_channel_m", "near_field_m", "far_field_m", "total_m", "improvement"}
 CHANNEL_KEYS = {"precision_m", "mean_deviation_m", "detected_fraction", "saturated_fraction"}
@@ -189,3 +191,31 @@ def test_bench_study_keys_small():
     assert r["windowed_pulses_per_s"] > 0 and r["full_record_pulses_per_s"] > 0
     assert {"cpu_count", "numba_threads", "loadavg_1_5_15"} <= set(r["machine"])
     assert r["windowed"]["pulses"] == 2000 and r["full_record"]["pulses"] == 200
+
+
+def test_maxrange_gains_as_a_designer_sets_them():
+    """The single channel and PMT1 (through CH2) get the highest gain that keeps the water column unclipped,
+    CH1 is CH2's tube (nine times CH2 by the 9:1 split), PMT2 runs at 20,000; each group names its limit."""
+    from muls.budget import LIMITS
+    from muls.presets import designed_mul, single_channel, study_water
+
+    r = studies.maxrange_study(["turbid_harbor"], shots=20, seed=0, attenuation_model="k_lidar")
+    t = r["turbid_harbor"]
+    water = water_preset("turbid_harbor")
+    assert t["gains"]["single"] == pytest.approx(single_channel(water).channels[0].gain)
+    mul = designed_mul(water)
+    assert t["gains"]["pmt1"] == pytest.approx(mul.channel("ch2").gain) == pytest.approx(mul.channel("ch1").gain)
+    assert mul.channel("ch1").volts_per_watt == pytest.approx(9.0 * mul.channel("ch2").volts_per_watt)
+    assert t["gains"]["pmt2"] == 20000.0
+    # below the cap, the column just fits in CH2: its noise-free peak ends within a few codes of the rule's
+    # ceiling (top code - 5 sigma), checked on the record of a pulse meeting nothing
+    assert t["gains"]["pmt1"] < 20000.0
+    model = OpticalModel.build(mul, water)
+    rec, _ = simulate(model, PulseBatch.flat_target(mul, np.full(32, np.inf)), seed=0, mode="full",
+                      keep_noise_free=True, noise=False)
+    top = float(rec.noise_free_lsb[:, 1, :].max())
+    assert 1023.0 - 5.0 * math.sqrt(1.0 + 0.0111330 / 9.0 * t["gains"]["pmt1"] / 2000.0 * top) - top == pytest.approx(
+        0.0, abs=3.0)
+    for group in ("single", "near", "far", "total"):
+        assert t["limits"][group]["cause"] in LIMITS
+    assert study_water("turbid_harbor").attenuation_model == "small_angle"
