@@ -277,4 +277,4 @@ def test_docs_example_validates():
     text = (Path(__file__).resolve().parent.parent / "docs" / "scene-format.md").read_text()
     block = text.split("```yaml\n", 1)[1].split("```", 1)[0]
     cfg = parse_scene(yaml.safe_load(block), base_dir=SCENES_DIR)
-    assert cfg.name == "cable_survey" and cfg.platform.navigation_noise.seed == 11
+    assert cfg.name == "example_cable_survey" and cfg.platform.navigation_noise.seed == 11
