@@ -4,8 +4,11 @@ another pulse's."""
 import numpy as np
 import pytest
 
+from muls.peaks import Peaks
+from muls.ranging import Ranging
 from scanner_sim.config import parse_scene
-from scanner_sim.points import NO_OBJECT, NOISE_CLASS
+from scanner_sim.points import NO_OBJECT, NOISE_CLASS, LinesOfSight, georeference
+from scanner_sim.raycast import Hits
 from scanner_sim.scene import LABELS
 from scanner_sim.survey import PassOptions, PassSetup
 
@@ -71,7 +74,6 @@ def test_regression_false_alarms_carry_no_other_pulses_truth():
         assert len(chunk.points) + len(chunk.dropouts) >= slots.size
         noise.append(chunk.points)
     points = noise[0].concatenate(noise)
-    assert len(points) > 0  # the turbid column and the noise do raise false alarms here
     assert np.all(points.classification == NOISE_CLASS)
     assert np.all(points.object_id == NO_OBJECT)
     assert np.all(np.isnan(points.true_range_m)) and np.all(np.isnan(points.incidence_deg))
@@ -108,3 +110,34 @@ def test_regression_a_second_return_is_judged_against_the_second_surface():
     assert np.all(points.classification[second] == LABELS["debris"])
     assert np.all(np.abs(points.true_range_m[second] - (upper_m + step_m)) < 0.02)
     assert np.median(np.abs(points.range_error_m[second])) < 0.1
+
+
+def _hits(pulse_index, range_m, object_id):
+    """Hits of a chunk of 2 pulses (one row per hit), every attribute set."""
+    n = len(pulse_index)
+    f = np.ones(n)
+    return Hits(pulse_index=np.asarray(pulse_index, np.int64), subray_index=np.zeros(n, np.int32),
+                range_m=np.asarray(range_m, float), point=np.zeros((n, 3)), normal=np.tile([0.0, 0.0, 1.0], (n, 1)),
+                incidence_rad=0 * f, reflectance=0.1 * f, label=np.full(n, LABELS["panel"], np.int16),
+                object_id=np.asarray(object_id, np.int32), receiver_weight=f, weight=f, rx_distance_m=f,
+                n_pulses=2, n_subrays=1)
+
+
+@pytest.mark.parametrize("hits", [_hits([], [], []), _hits([1], [4.0], [3])], ids=["no hits", "another pulse's hit"])
+def test_a_false_alarm_takes_no_hit_of_another_pulse(hits):
+    """Pulse 0 has a return that no echo explains (echo_index -1); the chunk has no hit at all, or one hit
+    of pulse 1. The point is noise with no object, no incidence and the truth of its own line of sight (none
+    here), whatever the other pulses met."""
+    returns = Peaks(pulse=np.array([0]), channel=np.array([3]), time_s=np.array([3e-8]), range_m=np.array([3.3]),
+                    amplitude_lsb=np.array([9.0]), snr=np.array([5.5]), saturated=np.array([False]),
+                    peak_power_w=np.array([1e-7]), echo_index=np.array([-1]))
+    ranging = Ranging(returns, np.array([1], np.uint8), np.array([1], np.uint8), returns,
+                      np.array([-1, 2], np.int8), np.zeros(2))
+    sight = LinesOfSight(origin_m=np.zeros((2, 3)), direction=np.tile([0.0, 0.0, -1.0], (2, 1)),
+                         true_range_m=np.full(2, np.nan), first_object=np.full(2, -1), scan_angle_deg=np.zeros(2),
+                         time_s=np.array([0.0, 2e-4]), slot=np.array([10, 11]), leg=np.ones(2, np.uint16))
+    points = georeference(ranging, hits, sight)
+    assert len(points) == 1 and points.pulse_index[0] == 10
+    assert points.classification[0] == NOISE_CLASS and points.object_id[0] == NO_OBJECT
+    assert np.isnan(points.true_range_m[0]) and np.isnan(points.incidence_deg[0])
+    np.testing.assert_allclose(points.xyz[0], [0.0, 0.0, -3.3])
