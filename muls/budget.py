@@ -85,7 +85,7 @@ def channel_budget(model: OpticalModel, range_m: float, reflectance: float) -> t
             "in_gate": in_gate, "blind": blind,
             "noise_terms_lsb": {"dark": dark, "column_shot": column_shot, "echo_shot": echo_shot},
         }
-        budget["limit"] = None if budget["detectable"] else limiting_cause(budget)
+        budget["limit"] = None if budget["detectable"] else limiting_cause(budget, k)
         out[ch.name] = budget
     return photons, out
 
@@ -100,15 +100,19 @@ def _photons_needed(photons: float, peak: float, echo_shot: float, column_shot: 
     return s * photons
 
 
-def limiting_cause(budget: dict) -> str:
-    """What limits a channel's view of an echo: ``gate`` when the gate is shut at the echo's peak,
-    ``backscatter`` when the water column clips the channel there, else the largest noise term at the peak:
-    the digitiser's dark and rounding noise (``ADC noise``: more gain would lift the echo above it, if the
-    gain rule allowed it), the column's shot noise (``backscatter``) or the echo's own shot noise
-    (``photons``: too few photoelectrons; no gain helps)."""
+def limiting_cause(budget: dict, k: float) -> str:
+    """What limits a channel's view of an echo, tested in order: ``gate`` (shut at the echo's peak);
+    ``backscatter`` (the water column clips the channel there); when even unlimited gain would leave the
+    echo under ``k`` sigma of shot noise, ``photons`` (too few photoelectrons in the echo) or ``backscatter``
+    (the column's shot noise, if it is the larger); else the largest noise term at the peak: ``ADC noise``
+    (the digitiser's dark and rounding noise: more gain would lift the echo above it, if the gain rule
+    allowed it), ``backscatter`` (the column's shot noise) or ``photons`` (the echo's own)."""
     if not budget["in_gate"]:
         return "gate"
     if budget["blind"]:
         return "backscatter"
     terms = budget["noise_terms_lsb"]
+    limited = budget["photon_limited_snr"]
+    if limited is not None and limited < k:
+        return "photons" if terms["echo_shot"] >= terms["column_shot"] else "backscatter"
     return {"dark": "ADC noise", "column_shot": "backscatter", "echo_shot": "photons"}[max(terms, key=terms.get)]

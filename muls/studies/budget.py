@@ -105,22 +105,20 @@ def budget_study(attenuation_model: str = STUDY_ATTENUATION_MODEL, waters=MAXRAN
 
 def budget_table(result: dict) -> list[str]:
     """Short text lines of the budget (the experiments in full, the Petzold waters every 10 m)."""
-    lines = [f"{'study':9s} {'water':14s} {'R m':>5s} {'photons':>9s} " + " ".join(
-        f"{c + ' pe/LSB/SNR':>22s}" for c in ("ch1", "ch2", "ch3", "single"))]
+    names = ("ch1", "ch2", "ch3", "single")
+    lines = [f"{'':35s}" + "".join(f"{n:^27s}" for n in names),
+             f"{'study':9s} {'water':14s} {'R m':>5s} {'photons':>9s}" + f" {'pe':>8s} {'LSB':>8s} {'SNR':>7s} " * 4]
     for case in result["cases"]:
         if case["study"] == "maxrange" and case["range_m"] % 10 != 0:
             continue
         cells = []
-        for c in ("ch1", "ch2", "ch3", "single"):
+        for c in names:
             b = case["channels"].get(c)
-            if b is None:
-                cells.append(f"{'':>22s}")
-                continue
-            mark = "" if b["detectable"] else "x"
-            cells.append(f"{b['photoelectrons']:8.3g}/{b['peak_lsb']:6.3g}/{b['snr']:5.3g}{mark:1s}")
-        lines.append(f"{case['study']:9s} {case['water']:14s} {case['range_m']:5.1f} {case['photons_at_aperture']:9.3g} "
-                     + " ".join(f"{c:>22s}" for c in cells))
-    lines.append("x: not detectable at the project's threshold with the case's gains")
+            cells.append(" " * 27 if b is None else
+                         f" {b['photoelectrons']:8.3g} {b['peak_lsb']:8.3g} {b['snr']:7.3g}{' ' if b['detectable'] else 'x'}")
+        lines.append(f"{case['study']:9s} {case['water']:14s} {case['range_m']:5.1f} {case['photons_at_aperture']:9.3g}"
+                     + "".join(cells))
+    lines.append("pe: echo photoelectrons; LSB: echo peak; x: not detectable at the project's threshold with the case's gains")
     for row in result["beyond_the_budget"]:
         lines.append(f"beyond the photon budget: {row['study']} {row['range_m']:g} m {row['channel']} needs "
                      f"{row['photons_needed_at_aperture']:.3g} photons at the aperture, the pulse delivers "

@@ -77,8 +77,8 @@ GROUP_CHANNELS = {"single": ("ch1",), "near": ("ch1", "ch2"), "far": ("ch3",), "
 
 def _limit(water: Water, single: OpticalModel, group: str, edge_m, reflectance: float) -> dict | None:
     """What stops a group one fine step beyond its maximum range: :func:`muls.budget.limiting_cause` of its
-    channel with the best SNR there (the gate, the column's clipping, or the largest noise term), with that
-    channel's SNR and the terms behind it."""
+    channel with the best SNR there (the gate, the column, too few photons, or the largest noise term), with
+    that channel's SNR and the terms behind it."""
     if edge_m is None:
         return None
     r = round(edge_m + FINE_STEP_M, 6)
@@ -86,7 +86,8 @@ def _limit(water: Water, single: OpticalModel, group: str, edge_m, reflectance: 
     _, budget = channel_budget(model, r, reflectance)
     name = max(GROUP_CHANNELS[group], key=lambda c: budget[c]["snr"])
     b = budget[name]
-    return {"range_m": r, "channel": name, "cause": limiting_cause(b), "snr": round(b["snr"], 3),
+    cause = limiting_cause(b, model.instrument.processing.threshold_sigma)
+    return {"range_m": r, "channel": name, "cause": cause, "snr": round(b["snr"], 3),
             "photon_limited_snr": None if b["photon_limited_snr"] is None else round(b["photon_limited_snr"], 3),
             "peak_lsb": round(b["peak_lsb"], 4), "noise_terms_lsb": {k: round(v, 4) for k, v in b["noise_terms_lsb"].items()},
             "photoelectrons": round(b["photoelectrons"], 2)}
