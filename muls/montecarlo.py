@@ -107,9 +107,6 @@ MAX_TILT_RAD = math.radians(60.0)
 #: give rare, huge estimates. The split is exact: together the two cover every direction once.
 CONE_APERTURES = 0.3
 CONE_MAX_RAD = 0.03
-#: A ghost, aimed at the aperture, leaves a wider forward cone to counting: theta_c = min(0.1,
-#: GHOST_CONE_APERTURES_THETA x aperture radius / distance), about the aperture's angular size.
-GHOST_CONE_APERTURES_THETA = 2.0
 #: Ghosts (see _trace_beam): the cone towards the aperture has the half-angle
 #: GHOST_CONE_FOV tan(theta_r/2) + GHOST_CONE_APERTURE r_ap / d (a line within tan(theta_r/2) + r_ap / d of
 #: the way to the aperture stays in the receiver's view all along); a ghost's direction is drawn from p
@@ -241,7 +238,7 @@ def _grid_cell(k, x, y, z, origin, e1, e2, edges, n_phi):
 # ----------------------------------------------------------------------------------------------------------
 # Kernels. ``geo`` = (beam radius, beam slope, aperture x, aperture radius, tan and cos of the half field of
 # view, CONE_APERTURES, CONE_MAX_RAD, ghosts on (1) or off (0), GHOST_MIX, GHOST_SURVIVAL, GHOST_CONE_FOV,
-# GHOST_CONE_APERTURES_THETA, GHOST_CONE_APERTURE); ``water`` = (a, b, c, speed); plane normal ``n`` (towards the
+# unused, GHOST_CONE_APERTURE); ``water`` = (a, b, c, speed); plane normal ``n`` (towards the
 # instrument), in-plane axes e1, e2, penetration depth S_k = -n . P_k of each plane (ascending), grid
 # origins (K, 3), ring edges (K, n_r + 1); ``times`` = (histogram step, histogram length, grid step, grid
 # length, end of the run). Tallies are per batch; see _trace_beam.
@@ -263,9 +260,7 @@ def _cones(x, y, z, geo):
 @numba.njit(cache=True)
 def _column_estimate(state, batch, world, first_order, x, y, z, dx, dy, dz, w, t, theta_c, geo, c, speed,
                      ln_p, ln_theta0, inv_step, dt, n_t, column, column1):
-    """Local estimate of a scattering event towards the aperture, for directions beyond theta_c.
-
-    """
+    """Local estimate of a scattering event towards the aperture, for directions beyond theta_c."""
     state, area, qx, qy = _aperture_point(state, x, y, z, geo[2], geo[3], geo[4])
     if area > 0.0:
         vx, vy, vz = qx - x, qy - y, -z
@@ -358,7 +353,6 @@ def _ghost(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, in_x, in_y, in_
         n_scat += 1
         world = nxt
         ax, ay, az, alpha, theta_c = _cones(x, y, z, geo)
-        theta_c = min(0.1, geo[12] * geo[3] / math.sqrt((geo[2] - x) ** 2 + y * y + z * z))
         state = _column_estimate(state, batch, world, n_scat == 1, x, y, z, dx, dy, dz, w, t, theta_c, geo, c,
                                  speed, ln_p, ln_theta0, inv_step, dt, n_t, column, column1)
         in_x, in_y, in_z, ev_x, ev_y, ev_z = dx, dy, dz, x, y, z
@@ -752,7 +746,7 @@ def run_monte_carlo(instrument: Instrument, water: Water, targets: TargetPlanes 
     half = 0.5 * g.fov_full_rad
     geo = np.array([0.5 * g.beam_diameter_m, math.tan(0.5 * g.beam_divergence_full_rad), g.offset_m, r_ap,
                     math.tan(half), math.cos(half), cone_apertures, cone_max_rad, 1.0 if ghosts else 0.0,
-                    GHOST_MIX, GHOST_SURVIVAL, GHOST_CONE_FOV, GHOST_CONE_APERTURES_THETA, GHOST_CONE_APERTURE])
+                    GHOST_MIX, GHOST_SURVIVAL, GHOST_CONE_FOV, 0.0, GHOST_CONE_APERTURE])
     b = water.scattering_per_m
     if peak_truncation_rad > 0.0:
         b *= 1.0 - phase.forward_fraction(peak_truncation_rad)
