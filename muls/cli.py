@@ -484,7 +484,8 @@ def _cmd_budget(args):
 
 
 def _cmd_coaxial(args):
-    result = studies.coaxial_study(_water_name(args.water))
+    rule = _attenuation(args.attenuation)
+    result = studies.coaxial_study(_water_name(args.water), attenuation_model=rule)
     s = result["settings"]
     text = (f"coaxial vs non-coaxial water-column backscatter in {s['water']}:\n"
             f"  peak coaxial {result['coaxial_peak_w']:.4g} W at {result['coaxial_peak_time_ns']:.1f} ns, "
@@ -493,7 +494,7 @@ def _cmd_coaxial(args):
     from .plots import plot_coaxial
 
     def plot(res, path):
-        others = {w: studies.coaxial_study(w) for w in studies.MAXRANGE_WATERS if w != s["water"]}
+        others = {w: studies.coaxial_study(w, attenuation_model=rule) for w in studies.MAXRANGE_WATERS if w != s["water"]}
         return plot_coaxial({s["water"]: res, **others}, path)
 
     return result, text, plot
@@ -672,6 +673,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("coaxial", help="column backscatter, coaxial vs non-coaxial (paper Fig. 13)")
     p.add_argument("--water", default="turbid_harbor", type=nonempty(), help=f"water preset ({waters})")
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="attenuation rule (k_lidar, c, kd, small_angle)")
     common(p)
     p.set_defaults(run=_cmd_coaxial)
 

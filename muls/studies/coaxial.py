@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import check_positive
-from ..presets import coaxial, mul2023
+from ..presets import coaxial, mul2023, study_water
+from ..radiometry import attenuation_per_m
 from ..water import Water
 from ..waveform import OpticalModel, PulseBatch
 from .common import (
@@ -14,16 +15,18 @@ from .common import (
 )
 
 
-def coaxial_study(water: str | Water = "turbid_harbor", t_max_ns: float = 200.0, step_ns: float = 0.2) -> dict:
+def coaxial_study(water: str | Water = "turbid_harbor", t_max_ns: float = 200.0, step_ns: float = 0.2,
+                  attenuation_model: str | None = None) -> dict:
     """Noise-free water-column power [W] of ``coaxial()`` and ``mul2023()``, both as non-gated receivers.
 
     The column alone (MULS Eq. 4 convolved with the pulse, no target: ``OpticalModel.column_power_w``) on
     a grid of ``step_ns`` up to ``t_max_ns`` after emission; same parameters except the transceiver offset
     (0 vs 130 mm). The coaxial design's window return (Eq. 3), a separate echo at the window, is reported
     as ``coaxial_window_peak_w`` and left out of the curves and the ratio. ``peak_ratio`` = peak coaxial /
-    peak non-coaxial column power.
+    peak non-coaxial column power. ``attenuation_model``: the rule the water uses (None: as configured; the
+    ``muls`` command passes the studies' rule, ``small_angle``).
     """
-    w = _water(water)
+    w = study_water(_water(water), attenuation_model)
     check_positive("t_max_ns", t_max_ns)
     check_positive("step_ns", step_ns)
     t = np.arange(0.0, t_max_ns + 0.5 * step_ns, step_ns) * 1e-9
@@ -47,10 +50,11 @@ def coaxial_study(water: str | Water = "turbid_harbor", t_max_ns: float = 200.0,
         "non_coaxial_peak_time_ns": float(t[np.argmax(non)] * 1e9),
         "coaxial_window_peak_w": window_peak,
         "settings": {
-            "water": w.name, "quantity": "noise-free water-column power at the receiver (no target)",
+            "water": w.name, "attenuation_model": w.attenuation_model,
+            "quantity": "noise-free water-column power at the receiver (no target)",
             "t_max_ns": float(t_max_ns), "step_ns": float(step_ns),
             "non_coaxial_offset_m": non_model.instrument.receiver.offset_m,
             "blind_zone_m": geometry.blind_zone_m, "full_overlap_m": geometry.full_overlap_m,
-            "k_per_m": w.two_way_attenuation_per_m, "beta_pi_per_m_sr": w.beta_pi_per_m_sr,
+            "k_per_m_at_10_m": float(attenuation_per_m(non_model.instrument, w, 10.0)), "beta_pi_per_m_sr": w.beta_pi_per_m_sr,
         },
     }
