@@ -528,7 +528,8 @@ MULTISCATTER_KEYS = ("time_ns", "mc_w", "mc_rel_err", "muls_w", "target", "colum
 def _cmd_multiscatter(args):
     full = montecarlo.multiscatter_study(_water_name(args.water), _positive("--range-m", args.range_m),
                                          geometry=_geometry(args.geometry), packets=_count("--packets", args.packets),
-                                         seed=args.seed, reflectance=args.reflectance)
+                                         seed=args.seed, reflectance=args.reflectance,
+                                         attenuation_model=_attenuation(args.attenuation))
     d = full["details"]
     tg = full["target"]
     rules = d["attenuation_rules_per_m"]
@@ -558,24 +559,26 @@ def _cmd_multiscatter(args):
 def _cmd_multiscatter_study(args):
     waters = [_water_name(w) for w in args.waters]
     result = montecarlo.multiscatter_waters_study(waters, packets=_count("--packets", args.packets), seed=args.seed,
-                                                  geometry=_geometry(args.geometry))
+                                                  geometry=_geometry(args.geometry),
+                                                  attenuation_model=_attenuation(args.attenuation))
     s = result["settings"]
-    lines = [f"Monte Carlo / MULS, {s['geometry']}, flat 0.1 plate, {s['phase']} phase function, "
+    lines = [f"Monte Carlo / MULS, {s['geometry']}, flat 0.1 plate, {s['phase']} phase function, MULS's own rule "
+             f"{s['attenuation_model']} (its maximum range, the correction table), "
              f"{s['packets']:,} packets per water, seed {s['seed']} ({s['seconds']:.0f} s)",
              "target echo energy, MC / MULS with each attenuation rule, the share of it due to the transceiver "
              "geometry alone (MC without scattering / Eq. 7), and the MC's effective attenuation:",
-             f"{'water':14s} {'range m':>7s} {'k_lidar':>9s} {'c':>9s} {'kd':>9s} {'closest':>8s} {'geometry':>8s} "
-             f"{'k_eff /m':>8s} {'err':>6s}"]
+             f"{'water':14s} {'range m':>7s} {'k_lidar':>9s} {'c':>9s} {'kd':>9s} {'small_ang':>9s} {'closest':>11s} "
+             f"{'geometry':>8s} {'k_eff /m':>8s} {'err':>6s}"]
     for w in s["waters"]:
         for row in result[w]["ranges"]:
             r = row["ratio"]
             lines.append(f"{w:14s} {row['range_m']:7.2f} {r['k_lidar']:9.3g} {r['c']:9.3g} {r['kd']:9.3g} "
-                         f"{row['closest_rule']:>8s} {_fmt(row['geometry'], 3):>8s} "
+                         f"{r['small_angle']:9.3g} {row['closest_rule']:>11s} {_fmt(row['geometry'], 3):>8s} "
                          f"{row['effective_attenuation_per_m']:8.3f} {row['mc_rel_err']:6.1%}")
     lines.append("water column peak, MC / MULS (MULS's beta_pi; with the phase function's beta_pi), first-order "
                  "share, and the detection range MULS needs vs the MC implies:")
-    lines.append(f"{'water':14s} {'k_lidar':>15s} {'c':>17s} {'kd':>15s} {'1st order':>9s} {'err':>6s} "
-                 f"{'R_det MULS':>10s} {'R_det MC':>9s} {'interp err':>10s}")
+    lines.append(f"{'water':14s} {'k_lidar':>15s} {'c':>17s} {'kd':>15s} {'small_angle':>15s} {'1st order':>9s} "
+                 f"{'err':>6s} {'R_det MULS':>10s} {'R_det MC':>9s} {'interp err':>10s}")
     for w in s["waters"]:
         c, det = result[w]["column"], result[w]["detection"]
         rules = " ".join(f"{c['rules'][q]['peak_ratio']:7.3g} ({c['rules'][q]['peak_ratio_same_beta_pi']:6.3g})"
@@ -693,6 +696,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--packets", type=positive_int(), default=montecarlo.DEFAULT_PACKETS, help="beam packets")
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="MULS's attenuation rule (k_lidar, c, kd, small_angle)")
     common(p)
     p.set_defaults(run=_cmd_multiscatter)
 
@@ -702,6 +707,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--geometry", default="mul2023", type=nonempty(), help="mul2023 or coaxial")
     p.add_argument("--packets", type=positive_int(), default=montecarlo.STUDY_PACKETS, help="beam packets per water")
     p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="MULS's own rule for its maximum range and the correction table (k_lidar, c, kd, small_angle)")
     common(p, out_type=output_dir)  # a folder: the study's chart and its JSON
     p.set_defaults(run=_cmd_multiscatter_study)
     checked_types(parser)

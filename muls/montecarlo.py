@@ -975,15 +975,18 @@ DEFAULT_PACKETS = 4_000_000
 
 def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geometry: str = "mul2023",
                        packets: int = DEFAULT_PACKETS, seed: int = 0, phase: str = "petzold",
-                       reflectance: float = 0.1) -> dict:
+                       reflectance: float = 0.1, attenuation_model: str | None = None) -> dict:
     """The Monte Carlo waveform of one pulse on a flat plate beside MULS's, for ``muls multiscatter``.
 
-    water: preset name or Water (MULS uses it as configured: its attenuation and backscatter rules);
-    geometry: ``mul2023`` (receiver 130 mm beside the beam) or ``coaxial``. Returns the keys of the JSON
-    output (``time_ns``, ``mc_w``, ``mc_rel_err``, ``muls_w``, ``target``, ``column_peak_ratio``,
-    ``effective_attenuation_per_m``, ``packets``, ``seconds``) and ``details`` (parts, rules, budget).
+    water: preset name or Water (MULS uses it as configured: its attenuation and backscatter rules, the
+    attenuation replaced by ``attenuation_model`` when given); geometry: ``mul2023`` (receiver 130 mm beside
+    the beam) or ``coaxial``. Returns the keys of the JSON output (``time_ns``, ``mc_w``, ``mc_rel_err``,
+    ``muls_w``, ``target``, ``column_peak_ratio``, ``effective_attenuation_per_m``, ``packets``, ``seconds``)
+    and ``details`` (parts, rules, budget).
     """
     w = water if isinstance(water, Water) else water_preset(water)
+    if attenuation_model is not None:
+        w = w.with_models(attenuation_model=attenuation_model)
     check_positive("range_m", range_m)
     if geometry not in ("mul2023", "coaxial"):
         raise ParameterError(f"geometry = {geometry!r}: must be 'mul2023' or 'coaxial'")
@@ -1143,7 +1146,7 @@ STUDY_RANGES_M = (2.0, 2.25, 2.5, 2.75, 3.0, 3.5, 4.0, 5.0, 7.5, 10.0, 12.5, 15.
 CHECK_RANGES_M = (2.125, 2.625, 3.25, 6.0, 8.75, 17.5)
 #: Ranges scanned around MULS's maximum detectable range R_det for the detection question.
 DETECTION_FACTORS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
-ATTENUATION_RULES = ("k_lidar", "c", "kd")
+ATTENUATION_RULES = ("k_lidar", "c", "kd", "small_angle")
 #: Beam packets per water of the study by default (docs/multiple-scattering.md gives the errors).
 STUDY_PACKETS = 600_000
 
@@ -1161,17 +1164,19 @@ def _detection_range(ranges, mc_peak, level):
 
 def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, packets: int = STUDY_PACKETS, seed: int = 0,
                               phase: str = "petzold", geometry: str = "mul2023", detection_shots: int = 200,
-                              check_ranges_m=CHECK_RANGES_M) -> dict:
+                              check_ranges_m=CHECK_RANGES_M, attenuation_model: str | None = None) -> dict:
     """Monte Carlo over MULS per water: column peak, target echo, implied detection range, correction table.
 
     For each water one Monte Carlo run serves flat 0.1 plates at all ``ranges_m``, at ``check_ranges_m``
     (for the interpolation error of the correction) and around MULS's maximum detectable range R_det
     (``muls.studies.maxrange_study``, the MUL's total, ``detection_shots`` pulses per range). MULS is
-    evaluated with each attenuation rule (k_lidar, c, kd; beta_pi as the water is configured). The
+    evaluated with each attenuation rule (k_lidar, c, kd, small_angle; beta_pi as the water is configured). The
     detection range the Monte Carlo implies is where its echo peak power falls to MULS's echo peak at R_det
     (the far channel's threshold is fixed by its dark noise, so a peak level is what detection needs).
     ``geometry`` per range is the echo without scattering over Eq. 7 (:func:`geometry_factor`), and the
     effective attenuation is taken against it, so that it holds the propagation alone.
+    ``attenuation_model`` (default: each water's own) is the rule of MULS's maximum range, of the
+    correction table and of the column's ``under_echo`` comparison.
     Returns {water: {...}, "settings": {...}}.
     """
     if geometry not in ("mul2023", "coaxial"):
@@ -1184,8 +1189,11 @@ def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, pack
     geo = dict(zip(geo_ranges, geometry_factor(instrument, geo_ranges, seed=seed)))
     for name in ([waters] if isinstance(waters, str) else list(waters)):
         w = water_preset(name)
+        if attenuation_model is not None:
+            w = w.with_models(attenuation_model=attenuation_model)
         t0 = time.perf_counter()
-        r_det = maxrange_study([name], shots=detection_shots, seed=seed)[name]["total_m"] if detection_shots else None
+        r_det = (maxrange_study([name], shots=detection_shots, seed=seed, attenuation_model=w.attenuation_model)[name]
+                 ["total_m"] if detection_shots else None)
         table = sorted(float(r) for r in ranges_m)
         extra = list(check_ranges_m) + ([r_det * f for f in DETECTION_FACTORS] if r_det else [])
         ranges = sorted({round(float(r), 3) for r in table + extra})
@@ -1258,7 +1266,7 @@ def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, pack
             "detection": detection,
             "correction_check": checks,
             "attenuation_per_m": {rule: w.with_models(attenuation_model=rule).two_way_attenuation_per_m
-                                  for rule in ATTENUATION_RULES},
+                                  for rule in ("k_lidar", "c", "kd")},
             "model_rule": w.attenuation_model,
             "beta_pi_ratio": ph.value_at_pi_per_sr * w.scattering_per_m / w.beta_pi_per_m_sr,
             "packets": result.packets, "receiver_packets": result.receiver_packets,
@@ -1268,6 +1276,7 @@ def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, pack
         "waters": [water_preset(n).name for n in ([waters] if isinstance(waters, str) else waters)],
         "ranges_m": list(ranges_m), "check_ranges_m": list(check_ranges_m), "geometry": geometry, "phase": ph.name,
         "packets": int(packets), "seed": int(seed), "reflectance": 0.1, "detection_shots": detection_shots,
+        "attenuation_model": attenuation_model,
         "seconds": round(time.perf_counter() - t_all, 1),
     }
     return out

@@ -181,7 +181,7 @@ def plot_multiscatter_study(result: dict, path):
     plt = _pyplot()
     waters = result["settings"]["waters"]
     colours = dict(zip(waters, ["tab:brown", "tab:blue", "tab:cyan", "tab:green", "tab:purple"]))
-    styles = {"k_lidar": "-", "c": ":", "kd": "--"}
+    styles = {"k_lidar": "-", "c": ":", "kd": "--", "small_angle": "-."}
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(15, 4.8))
     for w in waters:
         rows = result[w]["ranges"]
@@ -190,12 +190,12 @@ def plot_multiscatter_study(result: dict, path):
             a1.semilogy(r, [q["ratio"][rule] for q in rows], color=colours[w], ls=ls, lw=1.2,
                         label=f"{w}, {rule}" if rule == "k_lidar" else None)
         a2.plot(r, [q["effective_attenuation_per_m"] for q in rows], color=colours[w], marker="o", ms=3, label=w)
-        for rule, value in result[w]["attenuation_per_m"].items():
+        for rule, value in result[w]["attenuation_per_m"].items():  # the range-independent rules
             a2.axhline(value, color=colours[w], ls=styles[rule], lw=0.6, alpha=0.6)
     a1.axhline(1.0, color="0.4", lw=0.6)
     a1.set_xlabel("plate range [m]")
     a1.set_ylabel("echo energy, Monte Carlo / MULS")
-    a1.set_title("target echo (solid k_lidar, dotted c, dashed kd)", fontsize=9)
+    a1.set_title("target echo (solid k_lidar, dotted c, dashed kd, dash-dot small_angle)", fontsize=9)
     a1.set_ylim(1e-4, 1e3)
     a1.legend(fontsize=7)
     a2.set_xlabel("plate range [m]")
@@ -204,14 +204,14 @@ def plot_multiscatter_study(result: dict, path):
     a2.set_title("Monte Carlo k_eff (markers); MULS rules (lines)", fontsize=9)
     a2.legend(fontsize=7)
     x = np.arange(len(waters))
-    for i, (rule, hatch) in enumerate((("k_lidar", ""), ("c", "//"), ("kd", ".."))):
-        a3.bar(x + (i - 1) * 0.27, [result[w]["column"]["rules"][rule]["peak_ratio"] for w in waters], width=0.27,
+    for i, (rule, hatch) in enumerate((("k_lidar", ""), ("c", "//"), ("kd", ".."), ("small_angle", "xx"))):
+        a3.bar(x + (i - 1.5) * 0.2, [result[w]["column"]["rules"][rule]["peak_ratio"] for w in waters], width=0.2,
                color=[colours[w] for w in waters], hatch=hatch, edgecolor="k", lw=0.4, label=rule)
     a3.set_yscale("log")
     a3.axhline(1.0, color="0.4", lw=0.6)
     a3.set_xticks(x, waters, rotation=20, fontsize=8)
     a3.set_ylabel("column peak, Monte Carlo / MULS")
-    a3.set_title("water-column peak (bars: k_lidar, c hatched //, kd dotted)", fontsize=9)
+    a3.set_title("water-column peak (bars: k_lidar, c //, kd dotted, small_angle xx)", fontsize=9)
     fig.suptitle(f"Where single scattering fails: {result['settings']['geometry']}, "
                  f"{result['settings']['packets']:,} packets per water", fontsize=10)
     return _save(fig, path)

@@ -298,7 +298,7 @@ def test_study_reduced_runs_and_reports_every_water_and_range():
     w = result["turbid_harbor"]
     assert [row["range_m"] for row in w["ranges"]] == [3.0, 6.0, 12.0]
     for row in w["ranges"]:
-        assert set(row["ratio"]) == {"k_lidar", "c", "kd"}
+        assert set(row["ratio"]) == {"k_lidar", "c", "kd", "small_angle"}
         # through turbid water the Monte Carlo echo lies between MULS with c (all scattered light lost)
         # and MULS with K_d (all kept)
         assert row["ratio"]["kd"] < 1.0 < row["ratio"]["c"]
