@@ -239,3 +239,9 @@ def test_campaign_command_errors_are_one_line(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert "\n" not in err and all(w in err for w in words), err
     assert not (tmp_path / "x").exists()
+
+
+def test_the_docs_show_the_shipped_example_file():
+    page = (Path(__file__).parents[1] / "docs" / "campaigns.md").read_text()
+    block = page.split("```yaml\n", 1)[1].split("```", 1)[0]
+    assert block == EXAMPLE.read_text()
