@@ -245,3 +245,17 @@ def test_the_docs_show_the_shipped_example_file():
     page = (Path(__file__).parents[1] / "docs" / "campaigns.md").read_text()
     block = page.split("```yaml\n", 1)[1].split("```", 1)[0]
     assert block == EXAMPLE.read_text()
+
+
+def test_a_campaign_of_segmented_passes_in_this_process(tmp_path):
+    from scanner_sim.campaign import run_campaign
+
+    campaign = parse_campaign({"scene": "cable_survey", "sweep": {"seed": [5]},
+                               "options": {"max_pulses": 3000, "chunk_pulses": 1000, "segments": 2,
+                                           "render": False}})
+    (job,) = campaign.jobs
+    assert (job.name, job.segments, job.config.survey.seed) == ("seed=5", 2, 5)
+    result = run_campaign(campaign, tmp_path / "campaign", progress=False)
+    assert result["ran"] == 1 and result["charts"] == ["covered_fraction_vs_seed.png"]
+    run_pass(job.config, tmp_path / "serial", job.options)
+    assert_same_pass(tmp_path / "campaign" / "seed=5", tmp_path / "serial")
