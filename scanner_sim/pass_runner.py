@@ -23,18 +23,17 @@ import tempfile
 import time
 import uuid
 from collections.abc import Iterator, Sequence
-from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
 from tqdm import tqdm
 
-from . import io, sinks
+from . import io
 from .config import SceneConfig
 from .raycast import tune_memory
 from .scene import Scene, build_scene
-from .survey import Chunk, PassOptions, PassResult, PassSetup, point_cloud_sinks, run_pass
+from .survey import Chunk, PassOptions, PassResult, PassSetup, run_pass, stream_to_files
 
 #: Times a task that raised is tried again (a task whose worker died is rescheduled by the scheduler
 #: itself, up to ``distributed.scheduler.allowed-failures`` times).
@@ -143,27 +142,7 @@ def merge_segments(config: SceneConfig, options: PassOptions, *segments: Segment
         raise RuntimeError(f"merge_segments: the segments hold {len(chunks)} chunks, the pass has {len(expected)}")
     with tempfile.TemporaryDirectory(prefix="muls-pass-") as tmp:
         out = Path(tmp)
-        # survey.run_pass with survey.stream_pass's loop over the segments' chunks: keep the three in step
-        coverage = sinks.CoverageSink(setup.scene, options.coverage) if setup.scene.heightfield is not None else None
-        stats = sinks.PassStats(len(setup.model.instrument.channels))
-        started = time.perf_counter()
-        with ExitStack() as stack:
-            clouds = [stack.enter_context(sink) for sink in point_cloud_sinks(setup, out)]
-            dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
-            every = [*clouds, dropouts, stats] + ([coverage] if coverage is not None else [])
-            for chunk in chunks:
-                for sink in every:
-                    sink.add(chunk)
-            wall_s = time.perf_counter() - started + sum(segment.wall_s for segment in segments)
-        summary = sinks.pass_summary(setup, stats, stats.points, dropouts.counts_by_cause(), wall_s, setup_s)
-        if coverage is not None:
-            summary["coverage"] = coverage.write(out / "coverage_grid.npz")
-        sinks.write_pass_files(setup, out, options)
-        if options.render and clouds:
-            sinks.render_pass(setup, clouds[0], out, options.render_size)
-            if coverage is not None:
-                sinks.render_coverage_map(setup, coverage, out / "coverage_map.png", summary)
-        io.write_summary_json(out / "summary.json", summary)
+        stream_to_files(setup, out, chunks, options, setup_s, sum(segment.wall_s for segment in segments))
         return _read_files(out)
 
 

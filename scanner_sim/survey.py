@@ -244,20 +244,7 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
     run_dir = RunDirectory(out_dir or setup.config.output_dir).open()  # locked; written in a hidden sibling
-    out = run_dir.path
-    with ExitStack() as stack:
-        clouds = [stack.enter_context(sink) for sink in point_cloud_sinks(setup, out)]
-        dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
-        stats, coverage, wall_s = stream_pass(setup, [*clouds, dropouts], options)
-    summary = sinks.pass_summary(setup, stats, stats.points, dropouts.counts_by_cause(), wall_s, setup_s)
-    if coverage is not None:
-        summary["coverage"] = coverage.write(out / "coverage_grid.npz")
-    sinks.write_pass_files(setup, out, options)
-    if options.render and clouds:
-        sinks.render_pass(setup, clouds[0], out, options.render_size)
-        if coverage is not None:
-            sinks.render_coverage_map(setup, coverage, out / "coverage_map.png", summary)
-    io.write_summary_json(out / "summary.json", summary)  # last: a complete pass is one with a summary
+    summary = stream_to_files(setup, run_dir.path, pass_chunks(setup, options), options, setup_s)
     return PassResult(summary, run_dir.commit())  # swapped in whole for the output folder (io/run_dir.py)
 
 
@@ -269,7 +256,7 @@ def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), sce
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
     memory = sinks.MemorySink()
-    stats, coverage, wall_s = stream_pass(setup, [memory], options)
+    stats, coverage, wall_s = stream_pass(setup, pass_chunks(setup, options), [memory], options)
     dropouts = memory.dropouts()
     summary = sinks.pass_summary(setup, stats, stats.points, dropouts.counts_by_cause(), wall_s, setup_s)
     if coverage is not None:
@@ -287,19 +274,48 @@ def point_cloud_sinks(setup: PassSetup, out: Path) -> list:
     return [sinks.LasSink(out / f"points{s}", origin, metadata) for s in suffixes]
 
 
-def stream_pass(setup: PassSetup, chunk_sinks: list, options: PassOptions):
-    """Every chunk of the pass through the flow and into ``chunk_sinks`` (plus the running figures and, over a
-    seabed, coverage). Returns (stats, coverage sink or None, wall seconds)."""
+def pass_chunks(setup: PassSetup, options: PassOptions):
+    """Every chunk of the pass through the flow, in order (with the nominal footprint where coverage needs it),
+    under a progress bar with the pass's pulse count as its total."""
+    footprint = setup.scene.heightfield is not None
+    bar = tqdm(total=setup.expected_pulses(), unit="pulse", unit_scale=True, disable=not options.progress,
+               desc=setup.config.name)
+    for slots in setup.slot_chunks():
+        yield setup.simulate_chunk(slots, footprint=footprint)
+        bar.update(slots.size)
+    bar.close()
+
+
+def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):
+    """``chunks`` into ``chunk_sinks``, plus the running figures and, over a seabed, coverage. Returns (stats,
+    coverage sink or None, wall seconds)."""
     coverage = sinks.CoverageSink(setup.scene, options.coverage) if setup.scene.heightfield is not None else None
     stats = sinks.PassStats(len(setup.model.instrument.channels))
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
-    bar = tqdm(total=setup.expected_pulses(), unit="pulse", unit_scale=True, disable=not options.progress,
-               desc=setup.config.name)
     started = time.perf_counter()
-    for slots in setup.slot_chunks():
-        chunk = setup.simulate_chunk(slots, footprint=coverage is not None)
+    for chunk in chunks:
         for sink in every:
             sink.add(chunk)
-        bar.update(slots.size)
-    bar.close()
     return stats, coverage, time.perf_counter() - started
+
+
+def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, setup_s: float,
+               earlier_wall_s: float = 0.0) -> dict:
+    """``chunks`` of the pass streamed into its files in ``out`` (what the scene's ``output`` asks for, dropouts,
+    coverage grid, trajectory, scene, renders), summary.json last; returns the summary. ``earlier_wall_s``:
+    seconds already spent simulating the chunks elsewhere (a pass split in segments), added to ``wall_s``."""
+    with ExitStack() as stack:
+        clouds = [stack.enter_context(sink) for sink in point_cloud_sinks(setup, out)]
+        dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
+        stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts], options)
+    summary = sinks.pass_summary(setup, stats, stats.points, dropouts.counts_by_cause(), wall_s + earlier_wall_s,
+                                 setup_s)
+    if coverage is not None:
+        summary["coverage"] = coverage.write(out / "coverage_grid.npz")
+    sinks.write_pass_files(setup, out, options)
+    if options.render and clouds:
+        sinks.render_pass(setup, clouds[0], out, options.render_size)
+        if coverage is not None:
+            sinks.render_coverage_map(setup, coverage, out / "coverage_map.png", summary)
+    io.write_summary_json(out / "summary.json", summary)  # last: a complete pass is one with a summary
+    return summary
