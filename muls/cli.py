@@ -211,6 +211,16 @@ def _signals_as_exceptions():
             signal.signal(s, handler)
 
 
+def _signal_behind(exc: BaseException) -> BaseException | None:
+    """The KeyboardInterrupt or :class:`Terminated` that ``exc`` was raised from, if any (its cause chain)."""
+    seen = exc.__cause__ or exc.__context__
+    while seen is not None:
+        if isinstance(seen, (KeyboardInterrupt, Terminated)):
+            return seen
+        seen = seen.__cause__ or seen.__context__
+    return None
+
+
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
@@ -237,6 +247,8 @@ def run_guarded(prog: str, func, bad_input: tuple[type[BaseException], ...] = ()
                 return int(func() or 0)
             except bad_input as exc:
                 raise ValueError(_one_line(exc)) from None
+            except SystemError as exc:  # a signal raised while a compiled kernel returned: numba wraps it
+                raise _signal_behind(exc) or exc from None
     except KeyboardInterrupt:
         print(f"{prog}: interrupted (Ctrl-C); temporary files removed, earlier outputs kept", file=sys.stderr)
         return EXIT_SIGINT
