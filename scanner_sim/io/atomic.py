@@ -28,7 +28,8 @@ def _fsync_path(path: Path) -> None:
         os.close(fd)
 
 
-def _fsync_dir(directory: Path) -> None:
+def fsync_dir(directory: Path) -> None:
+    """Flush a folder's entries (renames, new files) to disk, where the platform has directory fds."""
     try:
         fd = os.open(directory, os.O_RDONLY)
     except OSError:  # pragma: no cover - platforms without directory fds
@@ -83,7 +84,7 @@ def atomic_path(final_path: PathLike) -> Iterator[Path]:
         if isinstance(exc, OSError) and exc.filename is None:
             exc.filename = str(final)  # a failed write (ENOSPC) names no file; say which
         raise
-    _fsync_dir(parent)
+    fsync_dir(parent)
 
 
 @contextlib.contextmanager

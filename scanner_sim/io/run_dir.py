@@ -34,7 +34,7 @@ import shutil
 import threading
 from pathlib import Path
 
-from .atomic import PathLike
+from .atomic import PathLike, fsync_dir
 
 try:
     import fcntl
@@ -103,7 +103,7 @@ class RunDirectory:
             raise ValueError(f"output folder {str(self.final)!r} is not open")
         new, target = self.path, self._target
         try:
-            _fsync(new)
+            fsync_dir(new)
             if target.exists():
                 self._check_target()  # it may have changed while the run was written
                 if _exchange(new, target):
@@ -116,11 +116,11 @@ class RunDirectory:
                     except BaseException:
                         os.rename(old, target)
                         raise
-                _fsync(target.parent)
+                fsync_dir(target.parent)
                 shutil.rmtree(old, ignore_errors=True)
             else:
                 os.rename(new, target)
-            _fsync(target.parent)
+            fsync_dir(target.parent)
         except BaseException:
             self.abort()
             raise
@@ -257,19 +257,6 @@ def _alive(pid: int) -> bool:
     except PermissionError:  # someone else's live process
         return True
     return True
-
-
-def _fsync(folder: Path) -> None:
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:  # pragma: no cover - platforms without directory fds
-        return
-    try:
-        os.fsync(fd)
-    except OSError:  # pragma: no cover
-        pass
-    finally:
-        os.close(fd)
 
 
 def _exchange(a: Path, b: Path) -> bool:
