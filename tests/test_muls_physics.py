@@ -215,7 +215,17 @@ def test_background_terms_eqs_8_to_10():
     att = math.exp(-2 * water.k_lidar_per_m * z)
     common = lb * rx.area_m2 * rx.efficiency * 1.0 * att
     expected = common * rho * rx.fov_full_rad**2 / 4 + common * water.beta_pi_per_m_sr * math.pi * rx.fov_full_rad**2 / 4
-    assert float(background_power_w(ins, water, lb, z, rho)[()]) == pytest.approx(expected)
+    # powers of 1e-10 W: pytest.approx's default absolute tolerance (1e-12) would hide a 1 % error
+    assert float(background_power_w(ins, water, lb, z, rho)[()]) == pytest.approx(expected, rel=1e-9, abs=0)
+    # a 2 nm filter lets in twice the light (Eqs. 9, 10 are linear in the filter width)
+    wide = replace(ins, receiver=replace(rx, filter_bandwidth_m=2e-9))
+    assert float(background_power_w(wide, water, lb, z, rho)[()]) == pytest.approx(2 * expected, rel=1e-9, abs=0)
+    # a pulse that meets nothing: no target term, the scattered term at the record's far end, c_w x 1 us / 2
+    far = water.speed_m_s * 1e-6 / 2
+    scatter_far = lb * rx.area_m2 * rx.efficiency * math.exp(-2 * water.k_lidar_per_m * far) * water.beta_pi_per_m_sr \
+        * math.pi * rx.fov_full_rad**2 / 4
+    got = background_power_w(ins, water, lb, np.array([np.inf, 5.0]), np.array([0.1, 0.1]))
+    assert got[0] == pytest.approx(scatter_far, rel=1e-9, abs=0) and got[1] == pytest.approx(expected, rel=1e-9, abs=0)
 
 
 @pytest.mark.parametrize("build, key", [
@@ -299,3 +309,31 @@ def test_small_angle_rule_against_the_monte_carlo():
         k_rule = float(_small_angle(water, ranges=(10.0,))[0])
         assert k_rule == pytest.approx(k_mc, rel=tol), name
         assert k_rule <= k_mc * 1.01
+
+
+def test_eq7_and_eq4_inside_the_first_metre_and_at_zero_range():
+    """Where Eq. 11's overlap is 1 from the window on (the coaxial receiver), Eq. 7 holds at 0.5 m as at any
+    range, and Eq. 4's density is A_r beta_pi eta_t eta_o (1 - T_s)^2 exp(-2 k z) / z^2 with A_r / z^2 capped
+    at the field stop's pi tan^2(theta_r / 2): closer than sqrt(A_r / pi) / tan(0.05) = 0.75 m the z^2 is gone.
+    At zero and negative range there is no echo and no column (0, never inf or NaN)."""
+    ins, water = coaxial(), water_preset("pool")
+    k = 0.050923  # Eq. 6 for the pool, worked by hand in tests/test_budget_chain.py
+    optics = 0.9 * 0.6 * (1 - 0.0039) ** 2
+    for z in (0.3, 0.5, 0.7, 0.9):
+        assert float(target_factor(ins, water, z, 0.01)) == pytest.approx(
+            4.4e-3 * 0.01 * optics * math.exp(-2 * k * z) / z**2, rel=1e-4)
+        collected = min(math.pi * math.tan(0.05) ** 2, 4.4e-3 / z**2)
+        assert float(column_density_per_m(ins, water, z)) == pytest.approx(
+            collected * water.beta_pi_per_m_sr * optics * math.exp(-2 * k * z), rel=1e-4)
+    for z in (0.0, -1.0):
+        assert float(target_factor(ins, water, z, 0.01)) == 0.0
+        assert float(column_density_per_m(ins, water, z)) == 0.0
+
+
+def test_lambertian_weight_follows_the_cosine_of_incidence():
+    """A Lambertian plate tilted by theta returns cos(theta) of a normal one: half at 60 degrees, none at 90."""
+    ins = mul2023()
+    normal = float(lambertian_weight(ins, 6.0, 0.1))
+    assert normal == pytest.approx(0.1 / math.pi * float(ins.geometry.overlap(6.0)))
+    assert float(lambertian_weight(ins, 6.0, 0.1, math.radians(60.0))) == pytest.approx(0.5 * normal, rel=1e-12)
+    assert float(lambertian_weight(ins, 6.0, 0.1, math.pi / 2)) == pytest.approx(0.0, abs=1e-15)
