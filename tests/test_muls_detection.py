@@ -349,3 +349,35 @@ def test_regression_windowed_records_hold_chained_echoes_whole(near_m, gap_ns):
     assert np.array_equal(windowed.peaks.channel, full.peaks.channel)
     assert np.allclose(windowed.peaks.range_m, full.peaks.range_m, rtol=0, atol=1e-9)
     assert records.window_pulse.size == n  # one window per pulse: the two echoes chain
+
+
+def test_a_shut_gate_leaves_only_dark_noise():
+    """Before its gate opens CH3 reads its dark level with dark and rounding noise alone (1 + 1/12 LSB^2), though
+    the pond's column then carries PMT2's shot noise of thousands of LSB^2 at gain 20,000."""
+    model = _model("pond", (200e-9, 400e-9))
+    rec, _ = simulate(model, PulseBatch.flat_target(model.instrument, np.full(200, 40.0)), seed=8, mode="full",
+                      keep_noise_free=True)
+    t_ns = rec.sample_times_s(model) * 1e9
+    shut = (t_ns > 5.0) & (t_ns < 195.0)
+    resid = rec.codes[:, 2, :].astype(float)[shut] - 8.0
+    assert np.all(rec.noise_free_lsb[:, 2, :][shut] == pytest.approx(8.0))
+    assert resid.var() == pytest.approx(1.0 + 1.0 / 12.0, rel=0.05)
+    assert abs(resid.mean()) < 0.02
+
+
+def test_dark_noise_is_independent_per_channel_and_on_ch0():
+    """Far from any signal every channel, CH0 included, reads its dark level with 1 LSB of dark noise and the
+    rounding's 1/12 LSB^2; the channels' dark noises do not correlate (only their shot noise is shared)."""
+    model = _model("pool", (150e-9, 400e-9))
+    rec, _ = simulate(model, PulseBatch.flat_target(model.instrument, np.full(300, np.inf)), seed=9, mode="full",
+                      keep_noise_free=True)
+    t_ns = rec.sample_times_s(model)[0] * 1e9
+    quiet = t_ns > 700.0  # the pool's column has faded far below 0.01 LSB
+    resid = [rec.codes[:, j, quiet].astype(float).ravel() - 8.0 for j in range(3)]
+    for r in resid:
+        assert r.var() == pytest.approx(1.0 + 1.0 / 12.0, rel=0.05)
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        assert abs(np.corrcoef(resid[a], resid[b])[0, 1]) < 0.02
+    ref_times = rec.reference_times_s(model)[0] * 1e9
+    ch0 = rec.reference[:, ref_times < -2.0].astype(float).ravel() - 8.0  # before the laser fires
+    assert ch0.size > 3000 and ch0.var() == pytest.approx(1.0 + 1.0 / 12.0, rel=0.08)
