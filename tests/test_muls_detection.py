@@ -320,6 +320,7 @@ def test_digitise_defaults_and_records():
     assert not np.array_equal(rec.codes, quiet.codes)  # noise is on by default
     full = digitise(model, batch, seed=3, mode="full", keep_noise_free=True, noise=False)
     assert full.mode == "full" and full.reference.shape == (4, ins.digitizer.n_samples)
+    assert full.reference_noise_free_lsb.shape == full.reference.shape and full.noise_free_lsb.shape == full.codes.shape
     assert full.reference_noise_free_lsb[:, :5] == pytest.approx(20.0)  # before the pulse: CH0's own dark level
     with pytest.raises(ValueError, match="record_mode"):
         digitise(model, batch, seed=3, mode="sparse")
@@ -381,3 +382,43 @@ def test_dark_noise_is_independent_per_channel_and_on_ch0():
     ref_times = rec.reference_times_s(model)[0] * 1e9
     ch0 = rec.reference[:, ref_times < -2.0].astype(float).ravel() - 8.0  # before the laser fires
     assert ch0.size > 3000 and ch0.var() == pytest.approx(1.0 + 1.0 / 12.0, rel=0.08)
+
+
+def test_sample_and_reference_times_are_the_free_running_clock():
+    """Sample k of a pulse is taken at -pretrigger + k x 1 ns + the pulse's phase, in every window and in CH0's
+    record; the phase lies in [0, 1 ns) and is the same for CH0 and the channels (one clock)."""
+    model = _model()
+    rec, _ = simulate(model, PulseBatch.flat_target(model.instrument, np.array([9.0, 14.0, 30.0])), seed=2)
+    phase = rec.phase_s
+    assert np.all((phase >= 0.0) & (phase < 1e-9)) and np.unique(phase).size == 3
+    k = rec.window_start[:, None] + np.arange(rec.codes.shape[2])[None, :]
+    np.testing.assert_allclose(rec.sample_times_s(model), -16e-9 + k * 1e-9 + phase[rec.window_pulse][:, None],
+                               rtol=0, atol=1e-18)
+    kr = np.arange(rec.reference.shape[1])[None, :]
+    np.testing.assert_allclose(rec.reference_times_s(model), -16e-9 + kr * 1e-9 + phase[:, None], rtol=0, atol=1e-18)
+
+
+def test_ch0_uses_the_references_own_dark_noise():
+    """A reference photodiode with 2 LSB of dark noise reads 4 + 1/12 LSB^2 before the laser fires."""
+    from dataclasses import replace
+
+    base = _model()
+    ins = replace(base.instrument, reference=replace(base.instrument.reference, dark_std_lsb=2.0))
+    model = OpticalModel.build(ins, base.water)
+    rec, _ = simulate(model, PulseBatch.flat_target(ins, np.full(300, 10.0)), seed=5, mode="full")
+    ref = rec.reference[:, rec.reference_times_s(model)[0] * 1e9 < -2.0].astype(float).ravel()
+    assert ref.var() == pytest.approx(4.0 + 1.0 / 12.0, rel=0.08)
+
+
+def test_seed_key_accepts_ints_and_generators_and_names_what_it_refuses():
+    """A seed is an integer from 0, or a numpy Generator, which is advanced once: its key is that of the integer
+    the generator draws from [0, 2**63). Negative numbers, booleans and floats are refused, naming the seed."""
+    from muls.noise import seed_key
+
+    assert seed_key(0) != seed_key(1)
+    drawn = int(np.random.default_rng(7).integers(0, 2**63))
+    assert seed_key(np.random.default_rng(7)) == seed_key(drawn)
+    assert seed_key(np.random.default_rng(7)) != seed_key(np.random.default_rng(8))
+    for bad in (-1, True, 1.5, "3"):
+        with pytest.raises(ValueError, match="seed"):
+            seed_key(bad)

@@ -226,6 +226,15 @@ def test_background_terms_eqs_8_to_10():
         * math.pi * rx.fov_full_rad**2 / 4
     got = background_power_w(ins, water, lb, np.array([np.inf, 5.0]), np.array([0.1, 0.1]))
     assert got[0] == pytest.approx(scatter_far, rel=1e-9, abs=0) and got[1] == pytest.approx(expected, rel=1e-9, abs=0)
+    # linear in L_b (1 W/(m^2 sr nm) too), the shape of the ranges kept when dark, and any attenuation rule
+    assert float(background_power_w(ins, water, 1.0, z, rho)[()]) == pytest.approx(1e3 * expected, rel=1e-9, abs=0)
+    assert background_power_w(ins, water, 0.0, np.array([5.0, 6.0]), np.array([0.1, 0.1])).shape == (2,)
+    from muls.radiometry import attenuation_per_m
+
+    small = water.with_models(attenuation_model="small_angle")
+    k5 = float(attenuation_per_m(ins, small, 5.0))
+    assert float(background_power_w(ins, small, lb, z, rho)[()]) == pytest.approx(
+        expected * math.exp(-2 * (k5 - water.k_lidar_per_m) * z), rel=1e-9, abs=0)
 
 
 @pytest.mark.parametrize("build, key", [
