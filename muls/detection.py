@@ -2,8 +2,9 @@
 noise, sampling with a random phase, quantisation and clipping (Eq. 13); CH0 the reference photodiode.
 
 Two record modes share this code: ``full`` synthesises every sample of the record, ``windowed`` only
-windows around the emission (for CH0) and around each echo (one window for a pulse's echoes that chain). Noise is keyed by (seed, pulse id, channel,
-sample index), so both modes and any batching see identical samples where they overlap.
+windows around the emission (for CH0) and around each echo (one window for a pulse's echoes that chain).
+Noise is keyed by (seed, pulse id, channel, sample index), so both modes and any batching see identical
+samples where they overlap.
 """
 
 from __future__ import annotations
