@@ -98,7 +98,7 @@ GAIN_RULE_SIGMA = 5.0
 
 #: The attenuation rule of the studies that predict the paper (docs/design.md#attenuation): forward
 #: scattering kept by the receiver's field of view (small-angle approximation). The water presets keep Eq.
-#: 6's k_lidar as their own default (muls.montecarlo tabulates MULS by the names k_lidar, c and kd).
+#: 6's k_lidar as their own default for now (docs/design.md#attenuation: switching changes every survey pass).
 STUDY_ATTENUATION_MODEL = "small_angle"
 
 
