@@ -71,6 +71,7 @@ from scipy.signal import fftconvolve
 from . import radiometry
 from .errors import ParameterError, check_fraction, check_positive
 from .instrument import Instrument
+from .noise import GAMMA, splitmix64
 from .phase import PhaseFunction, check_phase, sample_angle, value_at
 from .presets import instrument_preset, water_preset
 from .radiometry import lambertian_weight, target_factor
@@ -127,31 +128,21 @@ ENERGY_KEYS = ("emitted", "absorbed_by_water", "escaped_behind_instrument", "esc
 # ----------------------------------------------------------------------------------------------------------
 # Counter-based random numbers: one SplitMix64 stream per packet.
 
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
 _STREAM = np.uint64(0xD1B54A32D192ED03)
 _INV53 = 1.0 / 9007199254740992.0
 
 
 @numba.njit(cache=True, inline="always")
-def _mix(z):
-    z = (z ^ (z >> np.uint64(30))) * _M1
-    z = (z ^ (z >> np.uint64(27))) * _M2
-    return z ^ (z >> np.uint64(31))
-
-
-@numba.njit(cache=True, inline="always")
 def _stream(seed_key, stream, packet):
     """Initial state of packet ``packet`` of stream ``stream`` (0 beam, 1 receiver)."""
-    return _mix(seed_key ^ _mix(np.uint64(packet) * _GOLDEN + np.uint64(stream) * _STREAM))
+    return splitmix64(seed_key ^ splitmix64(np.uint64(packet) * GAMMA + np.uint64(stream) * _STREAM))
 
 
 @numba.njit(cache=True, inline="always")
 def _uniform(state):
     """(next state, uniform in [0, 1))."""
-    state = state + _GOLDEN
-    return state, float(_mix(state) >> np.uint64(11)) * _INV53
+    state = state + GAMMA
+    return state, float(splitmix64(state) >> np.uint64(11)) * _INV53
 
 
 # ----------------------------------------------------------------------------------------------------------

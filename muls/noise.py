@@ -13,7 +13,8 @@ import math
 import numba
 import numpy as np
 
-_GAMMA = np.uint64(0x9E3779B97F4A7C15)
+#: Weyl increment of the SplitMix64 sequence (the golden ratio in 64 bits).
+GAMMA = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
 _INV_2_32 = 1.0 / 4294967296.0
@@ -32,11 +33,12 @@ def seed_key(seed) -> np.uint64:
         seed = int(seed.integers(0, 2**63))
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed = {seed!r}: must be a non-negative integer or a numpy.random.Generator")
-    return np.uint64(_mix(np.uint64(int(seed) & 0xFFFFFFFFFFFFFFFF)))
+    return np.uint64(splitmix64(np.uint64(int(seed) & 0xFFFFFFFFFFFFFFFF)))
 
 
 @numba.njit(cache=True, inline="always")
-def _mix(z):
+def splitmix64(z):
+    """The SplitMix64 finaliser: a 64-bit integer to a well-mixed one (Steele et al. 2014)."""
     z = (z ^ (z >> np.uint64(30))) * _M1
     z = (z ^ (z >> np.uint64(27))) * _M2
     return z ^ (z >> np.uint64(31))
@@ -45,13 +47,13 @@ def _mix(z):
 @numba.njit(cache=True, inline="always")
 def stream_base(key, pulse_id, stream):
     """State of one (pulse, stream) sequence."""
-    return _mix(key ^ _mix(np.uint64(pulse_id) * np.uint64(64) + np.uint64(stream) + _GAMMA))
+    return splitmix64(key ^ splitmix64(np.uint64(pulse_id) * np.uint64(64) + np.uint64(stream) + GAMMA))
 
 
 @numba.njit(cache=True, inline="always")
 def uniform_at(base, index):
     """Uniform in [0, 1) at position ``index`` of a stream."""
-    h = _mix(base + (np.uint64(index) + np.uint64(1)) * _GAMMA)
+    h = splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
     return float(h >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
@@ -83,7 +85,7 @@ def _inverse_normal_cdf(p):
 @numba.njit(cache=True, inline="always")
 def normal_pair_at(base, index):
     """Two independent standard normals at position ``index`` of a stream (one per 32-bit half, |x| < 6.3)."""
-    h = _mix(base + (np.uint64(index) + np.uint64(1)) * _GAMMA)
+    h = splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
     u1 = (float(h >> np.uint64(32)) + 0.5) * _INV_2_32
     u2 = (float(h & np.uint64(0xFFFFFFFF)) + 0.5) * _INV_2_32
     return _inverse_normal_cdf(u1), _inverse_normal_cdf(u2)
