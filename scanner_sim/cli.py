@@ -4,7 +4,7 @@ Subcommands live in :data:`SUBCOMMANDS`, a registry of builder functions: adding
 ``coverage``, ``view``...) is a small, separate edit: write ``def _add_name(sub)`` that adds its parser and
 sets ``func``, and decorate it with ``@subcommand("name")``. A ``ValueError`` (bad scene file, bad
 parameter) becomes one line on stderr and exit code 2, without a traceback; every option is range-checked by
-argparse through the typed helpers of :mod:`muls.cli`, and any other ending is one line too (a full disk 1,
+argparse through the typed helpers of :mod:`muls.command`, and any other ending is one line too (a full disk 1,
 Ctrl-C 130, SIGTERM 143; ``docs/errors.md``).
 """
 
@@ -15,7 +15,7 @@ import json
 import sys
 from collections.abc import Callable
 
-from muls.cli import (
+from muls.command import (
     OneLineParser,
     checked_types,
     non_negative_float,

@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import muls.cli as muls_cli
+import muls.command as muls_command
 import scanner_sim.cli as sim_cli
 
 COMMANDS = {"scanner-sim": sim_cli, "muls": muls_cli}
@@ -154,13 +155,13 @@ def test_help_shows_every_default(command, capsys):
 
 
 # -- properties of the argument types ------------------------------------------------------------------------
-TYPES = {"positive_int": (muls_cli.positive_int(), lambda v: isinstance(v, int) and v >= 1),
-         "non_negative_int": (muls_cli.non_negative_int(), lambda v: isinstance(v, int) and v >= 0),
-         "seed": (muls_cli.seed(), lambda v: isinstance(v, int) and 0 <= v <= 2**63 - 1),
-         "positive_float": (muls_cli.positive_float(), lambda v: v > 0 and v < float("inf")),
-         "non_negative_float": (muls_cli.non_negative_float(), lambda v: 0 <= v < float("inf")),
-         "fraction": (muls_cli.fraction(), lambda v: 0 <= v <= 1),
-         "nonempty": (muls_cli.nonempty(), lambda v: bool(v.strip()))}
+TYPES = {"positive_int": (muls_command.positive_int(), lambda v: isinstance(v, int) and v >= 1),
+         "non_negative_int": (muls_command.non_negative_int(), lambda v: isinstance(v, int) and v >= 0),
+         "seed": (muls_command.seed(), lambda v: isinstance(v, int) and 0 <= v <= 2**63 - 1),
+         "positive_float": (muls_command.positive_float(), lambda v: v > 0 and v < float("inf")),
+         "non_negative_float": (muls_command.non_negative_float(), lambda v: 0 <= v < float("inf")),
+         "fraction": (muls_command.fraction(), lambda v: 0 <= v <= 1),
+         "nonempty": (muls_command.nonempty(), lambda v: bool(v.strip()))}
 
 _numbers = st.one_of(st.integers(min_value=-(2**70), max_value=2**70).map(str),
                      st.floats(allow_nan=True, allow_infinity=True).map(repr), st.text(max_size=12),
