@@ -82,7 +82,7 @@ def _cmd_validate(args) -> int:
     extra = ""
     if args.build:
         from .scene import build_scene
-        from .trajectory import build_trajectory
+        from .setup_checks import build_trajectory
 
         scene = build_scene(cfg)
         traj = build_trajectory(cfg, scene)

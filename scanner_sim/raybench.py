@@ -27,7 +27,7 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
     from .raycast import RayCaster, ReceiverCone, cast_beams, shadow_offset_m
     from .scanner import Scanner
     from .scene import build_scene
-    from .trajectory import build_trajectory
+    from .setup_checks import build_trajectory
 
     cfg = load_scene(scene_name)
     inst = cfg.instrument_model()

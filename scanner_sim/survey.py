@@ -35,7 +35,8 @@ from .raycast import Hits, RayCaster, cast_beams
 from .records import DropoutRecords, PointRecords
 from .scanner import Scanner
 from .scene import Scene, build_scene
-from .trajectory import Trajectory, build_trajectory
+from .setup_checks import build_trajectory
+from .trajectory import Trajectory
 
 
 @dataclass(frozen=True)

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from scanner_sim.config import NavigationNoiseConfig, build, load_scene
+from scanner_sim.setup_checks import build_trajectory
 from scanner_sim.terrain import generate_heightfield
-from scanner_sim.trajectory import Trajectory, build_trajectory, lawnmower_waypoints
+from scanner_sim.trajectory import Trajectory, lawnmower_waypoints
 
 #: Stated tolerance of constant-altitude following (docs/scene-format.md): over fractal relief of 0.3 m rms
 #: (10 m features, Hurst 0.7) plus 3 cm ripples, followed with follow_length_m = 1.5 m, the altitude above
