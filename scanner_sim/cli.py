@@ -6,6 +6,10 @@ sets ``func``, and decorate it with ``@subcommand("name")``. A ``ValueError`` (b
 parameter) becomes one line on stderr and exit code 2, without a traceback; every option is range-checked by
 argparse through the typed helpers of :mod:`muls.command`, and any other ending is one line too (a full disk 1,
 Ctrl-C 130, SIGTERM 143; ``docs/errors.md``).
+
+It is longer than the other modules on purpose: it holds only the eleven subcommands' parsers and the thin
+functions that call the package for them, one registry entry each; the work itself lives in the modules they
+call.
 """
 
 from __future__ import annotations
