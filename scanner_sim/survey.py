@@ -28,7 +28,7 @@ from . import io, sinks, viz
 from .beams import BeamPattern, beam_pattern
 from .config import SceneConfig
 from .coverage import CoverageSettings, Footprint, nominal_footprint
-from .fidelity import FidelityLevel
+from .fidelity import FidelityLevel, column_cuts
 from .io.run_dir import RunDirectory, abort_on_error
 from .points import LinesOfSight, georeference
 from .raycast import Hits, RayCaster, cast_beams
@@ -147,7 +147,8 @@ class PassSetup:
         beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(self.trajectory.poses(times))
         hits = cast_beams(self.caster, self.scene, beam_o, beam_d, shaft, rx_o, rx_d, self.pattern,
                           self.model.instrument.geometry, self.level.shadow_rays)
-        batch = pulse_batch(hits, slots, self.model, self.config.water.background_radiance_w_m2_sr_nm)
+        batch = pulse_batch(hits, slots, self.model, self.config.water.background_radiance_w_m2_sr_nm,
+                            self.level.column_cut)
         records, ranging = simulate(self.model, batch, self.seed, record_mode or self.level.record_mode)
         sight = self.lines_of_sight(slots, times, ranging)
         lost = ranging.dropout_cause >= 0
@@ -174,15 +175,16 @@ def hit_echo_range_m(hits: Hits) -> np.ndarray:
     return 0.5 * (hits.range_m + hits.rx_distance_m)
 
 
-def pulse_batch(hits: Hits, slots: np.ndarray, model: OpticalModel, background_radiance: float = 0.0) -> PulseBatch:
+def pulse_batch(hits: Hits, slots: np.ndarray, model: OpticalModel, background_radiance: float = 0.0,
+                column_cut: str = "pulse") -> PulseBatch:
     """The muls input of a chunk: one echo per sub-ray hit (return i is hit i), the column cut where the
     beam's energy stops, and the background light.
 
     Echo weight (Eq. 7 per sub-ray): w_j (rho_j / pi) cos(theta_j) x receiver weight. The column of the
-    footprint is cut at the energy-weighted mean hit range for the share of the beam that hits, and runs to
-    the record's end for the share that misses (two cuts per pulse). The background (Eqs. 8-10) of artificial
-    light of spectral radiance ``background_radiance`` [W/(m^2 sr nm)] sees the footprint's mean range and
-    reflectance.
+    footprint is cut as ``column_cut`` says (:func:`scanner_sim.fidelity.column_cuts`: once per pulse at the
+    energy-weighted mean hit range, or per sub-ray), and runs to the record's end for the share that misses.
+    The background (Eqs. 8-10) of artificial light of spectral radiance ``background_radiance``
+    [W/(m^2 sr nm)] sees the footprint's mean range and reflectance.
     """
     n = slots.shape[0]
     echo_range = hit_echo_range_m(hits)
@@ -190,8 +192,7 @@ def pulse_batch(hits: Hits, slots: np.ndarray, model: OpticalModel, background_r
     hit_share = np.bincount(hits.pulse_index, weights=hits.weight, minlength=n)
     mean_range = np.bincount(hits.pulse_index, weights=hits.weight * hits.range_m, minlength=n)
     mean_range = np.divide(mean_range, hit_share, out=np.full(n, np.inf), where=hit_share > 0)
-    cuts = np.stack([mean_range, np.full(n, np.inf)], axis=1)
-    shares = np.stack([hit_share, 1.0 - hit_share], axis=1)
+    cuts, shares = column_cuts(hits.pulse_index, hits.range_m, hits.weight, n, column_cut)
     background = np.zeros(n)
     if background_radiance > 0.0:
         rho = np.bincount(hits.pulse_index, weights=hits.weight * hits.reflectance, minlength=n)
