@@ -124,3 +124,31 @@ def test_muls_experiment_runs_1000_shots_within_two_minutes(capsys, tmp_path, na
     assert main(["experiment", name, "--shots", "1000", "--json", "--out", str(tmp_path / name)]) == 0
     assert time.perf_counter() - t0 < 120.0
     assert json.loads(capsys.readouterr()[0])["settings"]["shots"] == 1000
+
+
+@pytest.mark.parametrize("ranging", sorted(RANGING))
+def test_pool_ch1_clipped_at_3_m_is_detected_and_ranged(ranging):
+    """Root cause of 'CH1 detected 0.0 at 3 m in the pool' (prototype ranging): the operator's M1 keeps CH2
+    just on scale on the 3 m panel, so CH1 (nine times CH2) clips over about 20 samples; plain peak detection
+    times that plateau at its first sample, where the echo's rise crosses the top code about 4 ns before its
+    peak, 0.46 m short, and the study's 3-bin tolerance (0.33 m) counted every one of those shots a miss
+    though the echo was found. Noise cannot reach the top code, so a clipped peak the echo explains is now a
+    detection (studies.detections). Both rangings must detect the clipped CH1 echo in every shot, CH2 keeps
+    the whole echo, and CH3 sees the panel exactly where its echo starts inside the 150 ns gate."""
+    r = experiment_study("pool", shots=60, seed=5, ranging=ranging, waveforms=False)
+    s = r["settings"]
+    tol, c_w = s["tolerance_m"], s["speed_m_s"]
+    near = r["distances"]["3"]
+    assert near["ch1"]["detected_fraction"] == 1.0 and near["ch1"]["clipped_fraction"] == 1.0
+    assert near["ch2"]["detected_fraction"] == 1.0 and near["ch2"]["clipped_fraction"] == 0.0
+    bias = near["ch1"]["bias_m"]
+    if ranging == "prototype":
+        # timed on the rising edge: short, beyond the tolerance, but by less than the pulse's whole rise
+        # (its peak delay, about 5 ns) plus one sample, both as range (c_w t / 2)
+        rise_m = 0.5 * c_w * (pool().instrument().pulse.peak_delay_s + 1e-9)
+        assert -rise_m < bias < -tol
+    else:
+        assert abs(bias) < tol / 3  # the plateau's width and clip levels place the peak
+    for d, chans in r["distances"].items():
+        in_gate = 2.0 * float(d) / c_w >= s["gate_delay_ns"] * 1e-9
+        assert chans["ch3"]["detected_fraction"] == (1.0 if in_gate else 0.0), d

@@ -31,17 +31,26 @@ def test_far_gate_opens_20_to_30_ns_before_the_echo():
     assert studies.far_gate_delay_s(1.0, c_w) == 0.0  # never negative
 
 
-def test_nearest_to_truth_picks_the_closest_peak_per_pulse_and_channel():
+def test_detections_pick_the_closest_detecting_peak_per_pulse_and_channel():
     peaks = Peaks(pulse=np.array([0, 0, 0, 2]), channel=np.array([1, 1, 3, 1]),
                   time_s=np.zeros(4), range_m=np.array([4.0, 5.1, 5.0, 7.3]), amplitude_lsb=np.ones(4),
                   snr=np.ones(4), saturated=np.array([False, True, False, False]), peak_power_w=np.ones(4),
                   echo_index=np.arange(4))
     truth = np.array([5.0, 6.0, 7.0])
-    err, sat = studies.nearest_to_truth(peaks, truth, (1,))
+    err, sat = studies.detections(peaks, truth, 0.5, (1,))
     np.testing.assert_allclose(err[[0, 2]], [0.1, 0.3])
     assert math.isnan(err[1]) and sat.tolist() == [True, False, False]
-    err_all, _ = studies.nearest_to_truth(peaks, truth)
+    err_all, _ = studies.detections(peaks, truth, 0.5)
     assert err_all[0] == 0.0
+    # beyond the tolerance: an unclipped peak is not the target, a clipped one the echo explains is
+    err, _ = studies.detections(peaks, truth, 0.2, (1,))
+    assert np.isnan(err[2]) and err[0] == pytest.approx(0.1)
+    err, sat = studies.detections(peaks, truth, 0.01, (1,))
+    assert err[0] == pytest.approx(0.1) and sat[0]
+    # a clipped peak no echo explains (the water column's plateau) is not the target
+    orphan = Peaks(**{**peaks.__dict__, "echo_index": np.array([0, -1, 2, 3])})
+    err, _ = studies.detections(orphan, truth, 0.01, (1,))
+    assert np.isnan(err[0])
 
 
 def test_experiment_gates():

@@ -26,9 +26,9 @@ from .common import (
                      DETECTION_TOLERANCE_BINS,
                      FINE_STEP_M,
                      MAXRANGE_WATERS,
+                     detections,
                      experiment_gate_s,
                      far_gate_delay_s,
-                     nearest_to_truth,
                      range_tolerance_m,
 )
 from .experiment import experiment_study
@@ -43,9 +43,9 @@ __all__ = [
     "DETECTION_TOLERANCE_BINS",
     "FINE_STEP_M",
     "MAXRANGE_WATERS",
+    "detections",
     "experiment_gate_s",
     "far_gate_delay_s",
-    "nearest_to_truth",
     "range_tolerance_m",
     "waveform_study",
     "experiment_study",

@@ -12,8 +12,9 @@ from ..presets import POND_GATE_S, POOL_GATE_S, water_preset
 from ..water import Water
 from ..waveform import OpticalModel, PulseBatch
 
-#: Detection criterion of the maximum-range and precision studies: a measured range counts as the target
-#: when it lies within this many range bins (c_w x sample interval / 2) of the truth.
+#: Detection criterion of the studies (:func:`detections`): a measured range counts as the target when it
+#: lies within this many range bins (c_w x sample interval / 2) of the truth, or when its peak is clipped
+#: and the target's echo explains it.
 DETECTION_TOLERANCE_BINS = 3
 #: Share of seeded pulses that must detect the target for a range to count as detectable (issue 2).
 DETECTION_FRACTION = 0.9
@@ -56,16 +57,28 @@ def far_gate_delay_s(range_m, speed_m_s: float) -> np.ndarray:
     return np.maximum(0.0, np.floor((start - FAR_GATE_LEAD_S) / FAR_GATE_STEP_S) * FAR_GATE_STEP_S)
 
 
-def nearest_to_truth(peaks: Peaks, truth_m: np.ndarray, channels=None) -> tuple[np.ndarray, np.ndarray]:
-    """Per pulse, the signed error [m] of the peak (or return) nearest the truth, and whether it was clipped.
+def detections(peaks: Peaks, truth_m: np.ndarray, tolerance_m: float, channels=None) -> tuple[np.ndarray, np.ndarray]:
+    """Per pulse, the signed error [m] of the peak (or return) that detects its target, and whether it was
+    clipped.
+
+    A peak detects the target when it lies within ``tolerance_m`` of the truth, or when it is clipped and
+    the pulse's echo explains it (``Peaks.echo_index`` >= 0; the studies' batches hold one target per
+    pulse). Noise cannot reach the top code, so a clipped peak the echo explains is the echo, however its
+    plateau was timed: plain peak detection (``peak_fit = "sample_maximum"``) times it at the plateau's
+    first sample, which the pulse's rise can put several range bins ahead of the echo's peak. Of several
+    detecting peaks, the one nearest the truth.
 
     peaks: any :class:`muls.ranging.Peaks` (``Ranging.peaks`` or ``Ranging.returns``); truth_m: (n_pulses,)
     true ranges [m]; channels: 1-based channel indices to keep, or None for all. Returns (n_pulses,) float
-    errors (NaN where the pulse has no peak on those channels) and (n_pulses,) bool saturated flags.
+    errors (NaN where no peak on those channels detects the target) and (n_pulses,) bool clipped flags.
     """
-    keep = np.ones(peaks.pulse.shape[0], bool) if channels is None else np.isin(peaks.channel, channels)
+    error_all = peaks.range_m - truth_m[peaks.pulse]
+    keep = np.abs(error_all) <= tolerance_m
+    keep |= peaks.saturated & (peaks.echo_index >= 0)
+    if channels is not None:
+        keep &= np.isin(peaks.channel, channels)
     pulse = peaks.pulse[keep]
-    error = peaks.range_m[keep] - truth_m[pulse]
+    error = error_all[keep]
     order = np.lexsort((np.abs(error), pulse))
     first = np.ones(order.shape[0], bool)
     first[1:] = pulse[order][1:] != pulse[order][:-1]

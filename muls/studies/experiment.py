@@ -11,18 +11,18 @@ from ..experiments import EXPERIMENT_SHOTS, RANGING, Experiment, experiment_pres
 from ..ranging import DROPOUT_CAUSES
 from ..simulate import simulate
 from ..waveform import OpticalModel, PulseBatch
-from .common import DETECTION_TOLERANCE_BINS, _list, _num, _shots, nearest_to_truth, range_tolerance_m, truth_batch
+from .common import DETECTION_TOLERANCE_BINS, _list, _num, _shots, detections, range_tolerance_m, truth_batch
 
 
-def channel_stats(error: np.ndarray, saturated: np.ndarray, tol: float) -> dict:
-    """Statistics of one channel at one distance from the per-shot signed errors [m] (NaN: no peak).
+def channel_stats(error: np.ndarray, saturated: np.ndarray) -> dict:
+    """Statistics of one channel at one distance from the per-shot signed errors [m] of the peaks that
+    detect the panel (NaN: none does; :func:`muls.studies.common.detections`).
 
-    A shot detects the panel when the channel's peak nearest the truth lies within ``tol`` [m].
     ``precision_m``: sample standard deviation of the detected ranges (None below 2);
     ``mean_abs_deviation_m``: mean absolute deviation of the detected ranges from their mean;
     ``bias_m``: their mean minus the truth (signed); ``clipped_fraction``: clipped peaks among them.
     """
-    detected = np.abs(error) <= tol
+    detected = np.isfinite(error)
     e = error[detected]
     n = int(e.shape[0])
     return {
@@ -61,10 +61,11 @@ def experiment_study(experiment: str | Experiment = "pond", shots: int = EXPERIM
     """Predict one of the paper's tank tests (:mod:`muls.experiments`).
 
     ``shots`` static pulses on the panel at each distance (windowed records, one :func:`simulate` call), each
-    channel ranged on its own (its peak nearest the truth, kept within 3 range bins, as the precision study
-    does), with the prototype's plain peak detection (``ranging = "prototype"``) or the project's pulse-shape
-    fit (``"template"``). Returns {"distances": {"8.5": {"ch1": :func:`channel_stats`, "ch2", "ch3"}, ...},
-    "settings": {...}} and, with ``waveforms``, "waveforms": one full-record shot per distance.
+    channel ranged on its own (its peak nearest the truth among those that detect the panel, as the
+    precision study does: :func:`muls.studies.common.detections`), with the prototype's plain peak
+    detection (``ranging = "prototype"``) or the project's pulse-shape fit (``"template"``). Returns
+    {"distances": {"8.5": {"ch1": :func:`channel_stats`, "ch2", "ch3"}, ...}, "settings": {...}} and,
+    with ``waveforms``, "waveforms": one full-record shot per distance.
     """
     exp = experiment if isinstance(experiment, Experiment) else experiment_preset(experiment)
     shots = _shots("shots", shots)
@@ -75,18 +76,19 @@ def experiment_study(experiment: str | Experiment = "pond", shots: int = EXPERIM
     truth, batch = truth_batch(instrument, r, shots, exp.reflectance, 0)
     _, result = simulate(model, batch, seed, mode="windowed")
     tol = range_tolerance_m(model)
-    per_channel = {name: nearest_to_truth(result.peaks, truth, (j + 1,)) for j, name in enumerate(instrument.channel_names)}
+    per_channel = {name: detections(result.peaks, truth, tol, (j + 1,)) for j, name in enumerate(instrument.channel_names)}
     distances = {}
     for i, d in enumerate(r):
         rows = slice(i * shots, (i + 1) * shots)
-        distances[f"{d:g}"] = {name: channel_stats(err[rows], sat[rows], tol) for name, (err, sat) in per_channel.items()}
+        distances[f"{d:g}"] = {name: channel_stats(err[rows], sat[rows]) for name, (err, sat) in per_channel.items()}
     out = {
         "distances": distances,
         "settings": {
             **exp.settings(), "ranging": ranging, "peak_fit": RANGING[ranging], "shots": shots, "seed": int(seed),
             "record_mode": "windowed", "tolerance_bins": DETECTION_TOLERANCE_BINS, "tolerance_m": tol,
             "speed_m_s": exp.water.speed_m_s, "max_code": instrument.digitizer.max_code,
-            "detection": "per channel: its peak nearest the truth within the tolerance (Ranging.peaks)",
+            "detection": "per channel: its peak nearest the truth within the tolerance, or clipped and explained by "
+                         "the panel's echo (Ranging.peaks)",
             "mean_abs_deviation": "mean |range - mean range| of the detected shots",
             "bias": "mean range of the detected shots minus the true distance",
         },

@@ -27,8 +27,8 @@ from .common import (
     _list,
     _shots,
     _water,
+    detections,
     far_gate_delay_s,
-    nearest_to_truth,
     range_tolerance_m,
     truth_batch,
 )
@@ -39,11 +39,11 @@ def _fraction(detected: np.ndarray, shots: int) -> np.ndarray:
 
 
 def _single_fractions(model: OpticalModel, ranges_m, shots, reflectance, seed, first_id) -> dict:
-    """{"single": (n_ranges,)} share of shots whose chosen return lies within tolerance; one batch."""
+    """{"single": (n_ranges,)} share of shots whose chosen return detects the panel (:func:`detections`); one batch."""
     truth, batch = truth_batch(model.instrument, ranges_m, shots, reflectance, first_id)
     _, ranging = simulate(model, batch, seed, mode="windowed")
-    error, _ = nearest_to_truth(ranging.returns, truth)
-    return {"single": _fraction(np.abs(error) <= range_tolerance_m(model), shots)}
+    error, _ = detections(ranging.returns, truth, range_tolerance_m(model))
+    return {"single": _fraction(np.isfinite(error), shots)}
 
 
 def _mul_model(water: Water, gate_delay_s: float) -> OpticalModel:
@@ -55,7 +55,7 @@ def _mul_fractions(water: Water, ranges_m, shots, reflectance, seed, first_id) -
     """{"near", "far", "total": (n_ranges,)} for the MUL with CH3 gated for each range (far_gate_delay_s).
 
     Ranges sharing a gate delay go through one :func:`simulate` call; near = nearest CH1/CH2 peak,
-    far = nearest CH3 peak, total = nearest chosen return, each within tolerance.
+    far = nearest CH3 peak, total = nearest chosen return, each detecting the panel (:func:`detections`).
     """
     delays = far_gate_delay_s(ranges_m, water.speed_m_s)
     out = {g: np.zeros(ranges_m.shape[0]) for g in ("near", "far", "total")}
@@ -67,8 +67,8 @@ def _mul_fractions(water: Water, ranges_m, shots, reflectance, seed, first_id) -
         tol = range_tolerance_m(model)
         for group, channels, peaks in (("near", (1, 2), ranging.peaks), ("far", (3,), ranging.peaks),
                                        ("total", None, ranging.returns)):
-            error, _ = nearest_to_truth(peaks, truth, channels)
-            out[group][idx] = _fraction(np.abs(error) <= tol, shots)
+            error, _ = detections(peaks, truth, tol, channels)
+            out[group][idx] = _fraction(np.isfinite(error), shots)
     return out
 
 
@@ -167,7 +167,8 @@ def maxrange_study(waters=MAXRANGE_WATERS, shots: int = 200, reflectance: float 
     """Maximum detectable range [m] per water: single channel, MUL near field, far field, total.
 
     A range is detectable when, of ``shots`` seeded pulses on a flat panel (``reflectance``, normal
-    incidence), at least ``detection_fraction`` give a range within 3 range bins of the truth; the maximum
+    incidence), at least ``detection_fraction`` detect it (:func:`detections`: a range within 3 range bins
+    of the truth, or a clipped peak the echo explains); the maximum
     range is the largest detectable range scanned (coarse 1 m grid, then 0.1 m above the edge). Single and
     total use the chosen returns (``Ranging.returns``) of ``single_channel(water)`` and of the MUL; near
     and far use the MUL's per-channel peaks (CH1 or CH2; CH3 with its gate placed for each range by

@@ -16,14 +16,14 @@ from .common import (
     _ranges,
     _shots,
     _water,
-    nearest_to_truth,
+    detections,
     range_tolerance_m,
     truth_batch,
 )
 
 
-def _stats(error: np.ndarray, saturated: np.ndarray, tol: float) -> dict:
-    detected = np.abs(error) <= tol
+def _stats(error: np.ndarray, saturated: np.ndarray) -> dict:
+    detected = np.isfinite(error)
     e = error[detected]
     n = int(e.shape[0])
     return {
@@ -41,8 +41,9 @@ def precision_study(water: str | Water = "pond", ranges_m=(8.5, 10.0, 11.5), sho
                     attenuation_model: str | None = None) -> dict:
     """Range precision and mean deviation [m] per channel of static pulses on a flat panel.
 
-    Each channel is ranged on its own: per shot, its peak nearest the truth (``Ranging.peaks``), kept when
-    within 3 range bins. ``precision_m`` is the sample std of the kept ranges, ``mean_deviation_m`` their
+    Each channel is ranged on its own: per shot, its peak nearest the truth (``Ranging.peaks``) among those
+    that detect the panel (:func:`muls.studies.common.detections`: within 3 range bins, or clipped and
+    explained by the echo). ``precision_m`` is the sample std of the kept ranges, ``mean_deviation_m`` their
     mean minus the truth, ``detected_fraction`` kept shots over all shots, ``saturated_fraction`` clipped
     peaks among the kept ones. ``chosen`` gives the same for the instrument's chosen returns. The CH3 gate is
     that of the paper's experiment in the water unless given [s]. ``attenuation_model``: the rule the
@@ -61,12 +62,12 @@ def precision_study(water: str | Water = "pond", ranges_m=(8.5, 10.0, 11.5), sho
     _, ranging = simulate(model, batch, seed, mode=record_mode)
     tol = range_tolerance_m(model)
     out = {}
-    per_channel = {name: nearest_to_truth(ranging.peaks, truth, (j + 1,))
+    per_channel = {name: detections(ranging.peaks, truth, tol, (j + 1,))
                    for j, name in enumerate(instrument.channel_names)}
-    per_channel["chosen"] = nearest_to_truth(ranging.returns, truth)
+    per_channel["chosen"] = detections(ranging.returns, truth, tol)
     for i, range_m in enumerate(r):
         rows = slice(i * shots, (i + 1) * shots)
-        out[f"{range_m:g}"] = {name: _stats(err[rows], sat[rows], tol) for name, (err, sat) in per_channel.items()}
+        out[f"{range_m:g}"] = {name: _stats(err[rows], sat[rows]) for name, (err, sat) in per_channel.items()}
     out["settings"] = {
         "water": w.name, "attenuation_model": w.attenuation_model,
         "instrument": instrument.name, "ranges_m": r.tolist(), "shots": shots, "seed": int(seed),
