@@ -85,7 +85,7 @@ def sampling_phase_s(key: np.uint64, pulse_id: np.ndarray, sample_interval_s: fl
     return _phases(key, np.asarray(pulse_id, np.int64)) * sample_interval_s
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _phases(key, pulse_id):
     out = np.empty(pulse_id.shape[0])
     for i in range(pulse_id.shape[0]):
@@ -110,7 +110,7 @@ def plan_windows(model: OpticalModel, batch: PulseBatch, echoes: Echoes, mode: s
     return pulses, np.minimum(starts, dig.n_samples - width), width
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _plan(offsets, first, usable, reach):
     """Windows per pulse, one per cluster of echoes: an echo whose window would start before the cluster's
     earlier windows end (``reach`` samples after each window start) joins the cluster, whose window then
@@ -186,7 +186,7 @@ def _quantise(u, max_code):
     return 0 if u < 0.0 else (max_code if u > max_code else u)
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, parallel=True, nogil=True)
 def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_mean, dark_std, max_code,
                noise_scale):
     n_pulses, n_ref = reference.shape
@@ -201,7 +201,7 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
             reference[p, k] = _quantise(level + dark_mean + noise_scale * dark_std * normal_at(base, k), max_code)
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, parallel=True, nogil=True)
 def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, echoes, chans, max_code, noise_scale):
     n_windows, n_chan, n_samples = codes.shape
     n_pairs = (n_chan + 1) // 2

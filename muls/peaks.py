@@ -144,7 +144,7 @@ def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, extent_s: float)
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent):
     out = np.full(pulse.shape[0], -1, np.int64)
     for i in range(pulse.shape[0]):
@@ -180,7 +180,7 @@ def _refine(y0, y1, y2, fit, table):
     return np.interp(d, table.feature, table.offset), np.interp(d, table.feature, table.centre)
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, parallel=True, nogil=True)
 def _reference_peaks(reference, dark_mean, fit, table):
     """Sub-sample index of the CH0 peak of each pulse."""
     n_pulses, n_ref = reference.shape
@@ -196,7 +196,7 @@ def _reference_peaks(reference, dark_mean, fit, table):
     return out
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, parallel=True, nogil=True)
 def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
            clip_table, out):
     n_windows, n_chan, n_samples = codes.shape
@@ -342,7 +342,7 @@ def _on_geometric_grid(x, ratio, table):
     return table[i] + f * (table[i + 1] - table[i])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _clipped_peak(first, last, level_first, level_last, table):
     """(peak index [samples], amplitude) of an echo clipped from sample ``first`` to ``last``, where the clip
     level above the baseline was ``level_first`` and ``level_last``: the amplitude A whose pulse exceeds those

@@ -126,7 +126,7 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     return cause
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _powers(t, pulses, col, cuts, echoes, extent):
     out = np.empty(t.shape[0])
     for i in range(t.shape[0]):

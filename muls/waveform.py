@@ -241,7 +241,7 @@ class OpticalModel:
         return _column_many(t, np.broadcast_to(cut_tau, t.shape).astype(float), self.column)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sort_by_delay_within(offsets, delay, energy, source):
     """Sort each pulse's echoes by delay in place (insertion sort: a pulse has a few tens at most)."""
     for p in range(offsets.shape[0] - 1):
@@ -285,7 +285,7 @@ def column_value(t, cut_tau, col):
     return (basis[2] * (u * v0a + v1a) + basis[3] * v0a) * ea + basis[4] * v0b * math.exp(-basis[1] * u)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _column_many(t, cut_tau, col):
     out = np.empty(t.shape[0])
     for i in range(t.shape[0]):

@@ -80,7 +80,7 @@ class ShadowRays(NamedTuple):
     length: np.ndarray
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def subrays_local32(rays, p0, p1, layout, origins, dirs):
     """Fill ``origins`` and ``dirs`` ((n m, 3) float32, pulse-major, local frame) with the sub-rays of pulses
     p0 .. p1 - 1 of ``rays`` (:class:`PulseRays`)."""
@@ -103,7 +103,7 @@ def subrays_local32(rays, p0, p1, layout, origins, dirs):
             dirs[k, 2] = dz * inv
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half_fov, rows, shadows):
     """Turn one block of Embree first-hit results into hit rows, and set up their shadow rays.
 
@@ -190,7 +190,7 @@ def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def clear_blocked(occluded, sh_len, seen, base):
     """seen[base + c] = 0 where shadow ray c hit something (empty rays, length <= 0, never count)."""
     for c in range(occluded.shape[0]):

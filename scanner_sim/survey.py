@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +21,6 @@ import numpy as np
 from tqdm import tqdm
 
 from muls.radiometry import background_power_w
-from muls.ranging import Ranging
 from muls.simulate import simulate
 from muls.waveform import OpticalModel, PulseBatch
 
@@ -61,6 +61,17 @@ class PassOptions:
         keys = {"water": self.water, "survey.seed": self.seed, "survey.fidelity": self.fidelity,
                 "survey.max_pulses": self.max_pulses, "survey.chunk_pulses": self.chunk_pulses}
         return {k: v for k, v in keys.items() if v is not None}
+
+
+class RayStage(NamedTuple):
+    """A chunk after its ray stage: pulse slots (n,), the sub-ray hits, the muls input built from them, each
+    pulse's estimated line of sight with the truth along it, and the nominal footprint (None unless asked for)."""
+
+    slots: np.ndarray
+    hits: Hits
+    batch: PulseBatch
+    sight: LinesOfSight
+    footprint: Footprint | None
 
 
 class Chunk(NamedTuple):
@@ -140,32 +151,41 @@ class PassSetup:
             if self.max_pulses is not None and fired >= self.max_pulses:
                 return
 
-    def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, footprint: bool = False) -> Chunk:
-        """One chunk of pulse slots (n,) through the whole flow; ``footprint``: also the nominal beam footprint
-        that coverage needs (None otherwise)."""
+    def cast_chunk(self, slots: np.ndarray, footprint: bool = False) -> RayStage:
+        """The ray stage of one chunk of pulse slots (n,): poses, mirror directions, beam sub-rays and their hits,
+        the muls input, each pulse's estimated line of sight with the truth along it, and (``footprint``) the
+        nominal beam footprint that coverage needs. Only Embree and ray kernels that release the GIL: it runs
+        in a thread beside the physics of the chunk before (:func:`pass_chunks`)."""
         times = slots / self.scanner.pulse_rate_hz
         beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(self.trajectory.poses(times))
         hits = cast_beams(self.caster, self.scene, beam_o, beam_d, shaft, rx_o, rx_d, self.pattern,
                           self.model.instrument.geometry, self.level.shadow_rays)
         batch = pulse_batch(hits, slots, self.model, self.config.water.background_radiance_w_m2_sr_nm,
                             self.level.column_cut)
-        records, ranging = simulate(self.model, batch, self.seed, record_mode or self.level.record_mode)
-        sight = self.lines_of_sight(slots, times, ranging)
-        lost = ranging.dropout_cause >= 0
-        dropouts = DropoutRecords(pulse_index=slots[lost], time_s=times[lost], origin=sight.origin_m[lost],
-                                  direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
-        return Chunk(slots, georeference(ranging, hits, sight), dropouts, records,
-                     nominal_footprint(self.caster, self.scene, beam_o, beam_d) if footprint else None)
+        return RayStage(slots, hits, batch, self.lines_of_sight(slots, times),
+                        nominal_footprint(self.caster, self.scene, beam_o, beam_d) if footprint else None)
 
-    def lines_of_sight(self, slots: np.ndarray, times: np.ndarray, ranging: Ranging) -> LinesOfSight:
-        """Each pulse's estimated beam, with the first truth surface along it for the pulses that have points."""
+    def finish_chunk(self, stage: RayStage, record_mode: str | None = None) -> Chunk:
+        """The physics of a chunk after its ray stage: MULS waveforms and ranging, georeferencing, dropouts."""
+        records, ranging = simulate(self.model, stage.batch, self.seed, record_mode or self.level.record_mode)
+        sight, lost = stage.sight, ranging.dropout_cause >= 0
+        dropouts = DropoutRecords(pulse_index=stage.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
+                                  direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
+        return Chunk(stage.slots, georeference(ranging, stage.hits, sight), dropouts, records, stage.footprint)
+
+    def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, footprint: bool = False) -> Chunk:
+        """One chunk of pulse slots (n,) through the whole flow; ``footprint``: also the nominal beam footprint
+        that coverage needs (None otherwise)."""
+        return self.finish_chunk(self.cast_chunk(slots, footprint), record_mode)
+
+    def lines_of_sight(self, slots: np.ndarray, times: np.ndarray) -> LinesOfSight:
+        """Each pulse's estimated beam, with the first truth surface along it."""
         origin, direction, _, _, _ = self.scanner.world_rays(self.trajectory.poses(times, estimated=True))
-        ranged = np.unique(ranging.returns.pulse)
         true_range, first_object = np.full(slots.size, np.nan), np.full(slots.size, -1)
-        ray, tri, dist = self.caster.first_hits((origin[ranged] - self.scene.local_origin).astype(np.float32),
-                                                direction[ranged].astype(np.float32))
-        true_range[ranged[ray]] = dist
-        first_object[ranged[ray]] = self.scene.face_object[tri]
+        ray, tri, dist = self.caster.first_hits((origin - self.scene.local_origin).astype(np.float32),
+                                                direction.astype(np.float32))
+        true_range[ray] = dist
+        first_object[ray] = self.scene.face_object[tri]
         return LinesOfSight(origin, direction, true_range, first_object,
                             np.degrees(self.scanner.scan_angle_rad(times)), times, slots, self.trajectory.leg(times))
 
@@ -278,14 +298,32 @@ def point_cloud_sinks(setup: PassSetup, out: Path) -> list:
 
 def pass_chunks(setup: PassSetup, options: PassOptions):
     """Every chunk of the pass through the flow, in order (with the nominal footprint where coverage needs it),
-    under a progress bar with the pass's pulse count as its total."""
+    under a progress bar with the pass's pulse count as its total.
+
+    Two stages overlap: a thread casts the rays of chunk k + 1 (Embree and the ray kernels release the GIL)
+    while this one runs the physics of chunk k. Each chunk is a pure function of its slots, so the bits do not
+    depend on the overlap; at most two chunks are in flight.
+    """
     footprint = setup.scene.heightfield is not None
     bar = tqdm(total=setup.expected_pulses(), unit="pulse", unit_scale=True, disable=not options.progress,
                desc=setup.config.name)
-    for slots in setup.slot_chunks():
-        yield setup.simulate_chunk(slots, footprint=footprint)
-        bar.update(slots.size)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="ray-stage") as ray_stage:
+        pending = None
+        for slots in setup.slot_chunks():
+            cast = ray_stage.submit(setup.cast_chunk, slots, footprint)
+            if pending is not None:
+                yield _finished(setup, pending, bar)
+            pending = cast
+        if pending is not None:
+            yield _finished(setup, pending, bar)
     bar.close()
+
+
+def _finished(setup: PassSetup, cast: Future, bar) -> Chunk:
+    stage = cast.result()
+    chunk = setup.finish_chunk(stage)
+    bar.update(stage.slots.size)
+    return chunk
 
 
 def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):
