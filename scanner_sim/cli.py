@@ -7,7 +7,7 @@ parameter) becomes one line on stderr and exit code 2, without a traceback; ever
 argparse through the typed helpers of :mod:`muls.command`, and any other ending is one line too (a full disk 1,
 Ctrl-C 130, SIGTERM 143; ``docs/errors.md``).
 
-It is longer than the other modules on purpose: it holds only the eleven subcommands' parsers and the thin
+It is longer than the other modules on purpose: it holds only the twelve subcommands' parsers and the thin
 functions that call the package for them, one registry entry each; the work itself lives in the modules they
 call.
 """
@@ -326,6 +326,42 @@ def _cmd_bench(args) -> int:
             r = result[fidelity]
             print(f"{fidelity:10s} {r['pulses_per_s']:>10,.0f} pulses/s  raw embreex {r['raw_embreex_pulses_per_s']:>10,.0f}"
                   f" pulses/s  ratio {r['ratio_to_raw_rays']:.2f}")
+    return 0
+
+
+# -- tradeoff -------------------------------------------------------------------------------------------
+@subcommand("tradeoff")
+def _add_tradeoff(sub):
+    from .tradeoff import DEFAULT_PULSES, DEFAULT_WAVEFORM_PULSES, KNOBS
+
+    p = sub.add_parser("tradeoff", help="speed against accuracy: each fidelity level and knob on the same pulses, "
+                       "against the truth and the reference level (chart, table, JSON)")
+    p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path")
+    p.add_argument("--levels", nargs="+", choices=list(FIDELITY_LEVELS), default=list(FIDELITY_LEVELS),
+                   metavar="LEVEL", help=f"levels to run, of {', '.join(FIDELITY_LEVELS)} (default: all)")
+    p.add_argument("--knobs", nargs="*", choices=list(KNOBS), default=list(KNOBS), metavar="KNOB",
+                   help=f"single changes to balanced, of {', '.join(KNOBS)} (default: all; none: --knobs)")
+    p.add_argument("--pulses", type=positive_int(), default=DEFAULT_PULSES, help="pulses per run (default: %(default)s)")
+    p.add_argument("--waveform-pulses", type=positive_int(), default=DEFAULT_WAVEFORM_PULSES,
+                   help="pulses whose records are compared (default: %(default)s)")
+    p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /tradeoff)")
+    p.add_argument("--json", action="store_true", help="print tradeoff.json instead of the table")
+    p.add_argument("--no-render", action="store_true", help="no chart")
+    p.set_defaults(func=_cmd_tradeoff)
+
+
+def _cmd_tradeoff(args) -> int:
+    from pathlib import Path
+
+    from .config import load_scene
+    from .tradeoff import markdown_table, tradeoff, write_tradeoff
+
+    config = load_scene(args.scene)
+    out = Path(args.out or Path(config.output_dir) / "tradeoff")
+    progress = None if args.json else (lambda name: print(f"running {name}", file=sys.stderr, flush=True))
+    result = tradeoff(config, tuple(args.levels), tuple(args.knobs), args.pulses, args.waveform_pulses, progress)
+    path = write_tradeoff(result, out, render=not args.no_render)
+    print(json.dumps(result) if args.json else markdown_table(result) + str(path))
     return 0
 
 
