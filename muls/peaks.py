@@ -269,6 +269,10 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
                         through_blind = through_blind or blind[clipped_first]
                     if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
                         continue
+                    # A plateau that runs on into samples the backscatter alone clips ends there only in the
+                    # residual: its width, so its amplitude and time, are unknown (issue 12, blind-zone edge).
+                    if blind[clipped_last + 1] and codes[w, c, clipped_last + 1] >= max_code:
+                        continue
                 if blind[top - 1]:
                     continue
                 height = resid[top] - echoes[top]
