@@ -4,6 +4,10 @@ The layout comes from the field declarations of :class:`~scanner_sim.records.Poi
 :class:`~scanner_sim.records.LasStandard` field fills standard dimensions through its conversion
 (:data:`_TO_LAS`, :data:`_FROM_LAS`), a :class:`~scanner_sim.records.LasExtra` field is an extra
 dimension (:data:`EXTRA_DIMENSIONS`). Header, VLRs and time mapping: ``docs/outputs.md``.
+
+It is longer than the other io modules on purpose: it is one format, written (streamed, with the LAS 1.4 range
+checks of point format 6) and read back, and both directions share the one field mapping above; split, the
+writer and the reader would each need a copy of it.
 """
 
 from __future__ import annotations
