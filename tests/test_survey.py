@@ -2,6 +2,7 @@
 chunking invariance, outputs, memory."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -89,6 +90,18 @@ def test_same_seed_same_points_whatever_the_chunk_size(cable_survey, tmp_path):
     other = _pass(cable_survey, tmp_path / "c", max_pulses=12000, seed=2)
     c = laspy.read(tmp_path / "c" / "points.las")
     assert not np.array_equal(np.asarray(a.z), np.asarray(c.z)[: len(a.z)]) and other["seed"] == 2
+
+
+def test_same_seed_same_points_whatever_the_thread_count(tmp_path):
+    """One numba thread and two, with the ray stage overlapping the physics or not: the same bytes."""
+    code = ("import sys; from scanner_sim.cli import main; main(['run', '--out', sys.argv[1], '--max-pulses', "
+            "'12000', '--chunk-pulses', '5000', '--no-render', '--quiet'])")
+    for threads in ("1", "2"):
+        env = {**os.environ, "NUMBA_NUM_THREADS": threads}
+        subprocess.run([sys.executable, "-c", code, str(tmp_path / threads)], check=True, env=env)
+    a, b = (laspy.read(tmp_path / t / "points.las") for t in ("1", "2"))
+    assert len(a.points) > 11000
+    assert a.points.array.tobytes() == b.points.array.tobytes()
 
 
 def test_run_writes_every_output(tmp_path):
