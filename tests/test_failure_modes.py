@@ -52,3 +52,16 @@ def test_regression_no_phantom_returns_at_the_blind_zone_edge(distance_m, fideli
                                    instrument=OPEN_GATE, pulses=400))
     assert len(points) <= 400  # one return per pulse at most: a single plate
     assert np.all(np.abs(points.xyz[:, 2] - plate_z) < 0.15)
+
+
+# -- 3. a surface the receiver cannot see -------------------------------------------------------------------
+@pytest.mark.parametrize("fidelity", ["fast", "balanced", "reference"])
+def test_regression_no_level_puts_points_on_a_surface_the_receiver_cannot_see(fidelity):
+    """Root cause: ``fast`` checked each hit against the receiver's FOV cone only, without shadow rays, so a plate
+    that a visor hides from the receiver (13 cm beside the beam) but not from the beam gave a point on every
+    pulse (300 of 300 here). Every level now casts shadow rays (docs/fidelity.md: they cost ``fast`` a few per
+    cent); the plate gives no point at any level."""
+    visor = _panel("visor", (0, 0.3, LIDAR_Z - 0.5), (1.0, 0.5), material="black_painted_aluminium", label="debris")
+    points = _points(_static_scene([_panel("plate", (0, 0, -6.0), (3, 3)), visor], water="pool", fidelity=fidelity,
+                                   pulses=300))
+    assert len(points) == 0
