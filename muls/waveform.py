@@ -21,10 +21,10 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from scipy.signal import lfilter
 
 from .channels import ChannelArrays
 from .errors import ParameterError
+from .filters import first_order_filter
 from .instrument import Instrument
 from .radiometry import column_density_per_m, lambertian_weight, target_factor, window_factor
 from .shape_tables import ClipTable, FitTable
@@ -56,8 +56,8 @@ class ColumnTables:
         tables = []
         for rate in (a, b):
             r = math.exp(-rate * step_s)
-            s0 = lfilter([1.0], [1.0, -r], hs)
-            s1 = lfilter([0.0, r * step_s], [1.0, -r], s0)
+            s0 = first_order_filter(hs, r)
+            s1 = first_order_filter(s0, r, 0.0, r * step_s)
             # Trapezoid rule: half weight on both ends of the integral.
             decay = r ** np.arange(n)
             s0 = s0 - 0.5 * hs - 0.5 * hs[0] * decay

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
-from scipy.signal import lfilter
 
 from muls.errors import ParameterError
+from muls.filters import first_order_filter
 
 from .scene import compass_to_yaw_rad
 
@@ -160,7 +160,7 @@ class Trajectory:
         phi = math.exp(-1.0 / (cfg.rate_hz * cfg.correlation_time_s))
         w = rng.standard_normal((n, 6))
         w[0] /= math.sqrt(1.0 - phi * phi)  # start in the stationary distribution
-        x = lfilter([math.sqrt(1.0 - phi * phi)], [1.0, -phi], w, axis=0)  # AR(1), unit variance
+        x = first_order_filter(w, phi, math.sqrt(1.0 - phi * phi))  # AR(1), unit variance
         sigma = np.array([cfg.position_sigma_m, cfg.position_sigma_m, cfg.depth_sigma_m,
                           math.radians(cfg.attitude_sigma_deg), math.radians(cfg.attitude_sigma_deg),
                           math.radians(cfg.heading_sigma_deg)])
