@@ -198,7 +198,7 @@ def test_sections_are_frozen():
 
 def test_fidelity_table():
     assert {name: (lv.subrays, lv.shadow_rays, lv.record_mode, lv.column_cut) for name, lv in FIDELITY_LEVELS.items()} \
-        == {"fast": (7, False, "windowed", "pulse"), "balanced": (19, True, "windowed", "pulse"),
+        == {"fast": (7, True, "windowed", "pulse"), "balanced": (19, True, "windowed", "pulse"),
             "reference": (91, True, "full", "pulse")}
     for name, level in FIDELITY_LEVELS.items():
         assert level.name == name and level.subrays in SUBRAY_COUNTS and level.record_mode in RECORD_MODES
@@ -216,7 +216,7 @@ def test_survey_level_applies_the_scene_overrides():
 
     assert level(fidelity="fast") == FIDELITY_LEVELS["fast"]
     assert level(fidelity="fast", subrays=61).subrays == 61
-    assert level(fidelity="fast", shadow_rays=True).shadow_rays
+    assert not level(fidelity="fast", shadow_rays=False).shadow_rays
     overridden = level(fidelity="reference", subrays=37, shadow_rays=False)
     assert (overridden.name, overridden.subrays, overridden.shadow_rays, overridden.record_mode) == \
         ("reference", 37, False, "full")
