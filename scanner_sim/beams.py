@@ -58,7 +58,8 @@ class BeamPattern:
 
 
 def beam_pattern(count: int, profile: str = "top_hat", gaussian_waist: float = 1.0) -> BeamPattern:
-    """Ring layout of ``count`` sub-rays (one of :data:`SUBRAY_COUNTS`) with weights summing to 1."""
+    """Ring layout of ``count`` sub-rays (one of :data:`SUBRAY_COUNTS`) with weights summing to 1; sub-ray 0
+    is the beam axis (the coverage footprint reads the axis hit from it)."""
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or int(count) not in SUBRAY_COUNTS:
         raise ParameterError(f"subrays = {count!r}: must be one of {', '.join(map(str, SUBRAY_COUNTS))}")
     if profile not in PROFILES:

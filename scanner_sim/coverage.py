@@ -166,16 +166,16 @@ class Footprint:
     object_id: np.ndarray
 
 
-def nominal_footprint(caster, scene, beam_origin: np.ndarray, beam_direction: np.ndarray) -> Footprint:
-    """First hit of each beam axis (n, 3) world [m] / unit: what the scan pattern reaches geometrically;
-    ``caster``: the scene's :class:`scanner_sim.raycast.RayCaster`."""
-    n = beam_origin.shape[0]
-    ray, tri, dist = caster.first_hits((beam_origin - scene.local_origin).astype(np.float32),
-                                       beam_direction.astype(np.float32))
-    xyz = np.full((n, 3), np.nan)
-    xyz[ray] = beam_origin[ray] + dist[:, None].astype(float) * beam_direction[ray]
-    object_id = np.full(n, -1, np.int64)
-    object_id[ray] = scene.face_object[tri]
+def nominal_footprint(hits) -> Footprint:
+    """Where each beam axis first meets the truth meshes, from the beam cast itself: sub-ray 0 of every beam
+    pattern is the axis (:func:`scanner_sim.beams.beam_pattern`), so its hit, if any, is the axis hit;
+    ``hits``: the chunk's :class:`scanner_sim.raycast.Hits`."""
+    axis = hits.subray_index == 0
+    pulse = hits.pulse_index[axis]
+    xyz = np.full((hits.n_pulses, 3), np.nan)
+    xyz[pulse] = hits.point[axis]
+    object_id = np.full(hits.n_pulses, -1, np.int64)
+    object_id[pulse] = hits.object_id[axis]
     return Footprint(xyz, object_id)
 
 

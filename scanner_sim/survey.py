@@ -163,7 +163,7 @@ class PassSetup:
         batch = pulse_batch(hits, slots, self.model, self.config.water.background_radiance_w_m2_sr_nm,
                             self.level.column_cut)
         return RayStage(slots, hits, batch, self.lines_of_sight(slots, times),
-                        nominal_footprint(self.caster, self.scene, beam_o, beam_d) if footprint else None)
+                        nominal_footprint(hits) if footprint else None)
 
     def finish_chunk(self, stage: RayStage, record_mode: str | None = None) -> Chunk:
         """The physics of a chunk after its ray stage: MULS waveforms and ranging, georeferencing, dropouts."""

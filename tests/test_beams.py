@@ -23,6 +23,7 @@ def test_weights_sum_to_one(count, profile):
     assert np.all(p.rho <= 1.0)
     # ring n holds 6 n points
     assert np.array_equal(np.bincount(p.ring)[1:], 6 * np.arange(1, len(np.bincount(p.ring))))
+    assert np.array_equal(p.xy[0], [0.0, 0.0])  # sub-ray 0 is the axis: the coverage footprint relies on it
 
 
 def test_top_hat_is_equal_area_and_gaussian_peaks_in_the_centre():
