@@ -115,8 +115,8 @@ def _plan(offsets, first, usable, reach):
     """Windows per pulse, one per cluster of echoes: an echo whose window would start before the cluster's
     earlier windows end (``reach`` samples after each window start) joins the cluster, whose window then
     runs to its last echo's reach. A run of samples that chains several echoes so lies whole in one window
-    (a run cut by a window's edge cannot be ranged, and the ranging drops it). Returns (pulse, first sample,
-    samples the cluster spans) per window."""
+    (the ranging drops a run cut by a window's edge, unless it is clipped and its plateau ends inside the
+    window). Returns (pulse, first sample, samples the cluster spans) per window."""
     n = offsets.shape[0] - 1
     out_p = np.empty(first.shape[0], np.int64)
     out_s = np.empty(first.shape[0], np.int64)

@@ -255,7 +255,9 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
                     k += 1
                 # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
                 # threshold there, over what the echoes already found leave if their shape is a little off.
-                if start == 0 or k >= n_samples:
+                # A clipped run may run on past the window's end once its plateau has ended inside it: the
+                # plateau and its two clip levels alone time it, whatever the tail does after.
+                if start == 0 or (k >= n_samples and not (clipped_first >= 0 and clipped_last < n_samples - 1)):
                     continue
                 if clipped_first < 0 and (top == start or not open_[top - 1]):
                     continue  # no rising edge inside the gate: a gate opening on a tail, not an echo

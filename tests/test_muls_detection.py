@@ -352,6 +352,32 @@ def test_regression_windowed_records_hold_chained_echoes_whole(near_m, gap_ns):
     assert records.window_pulse.size == n  # one window per pulse: the two echoes chain
 
 
+@pytest.mark.parametrize("peak_fit", ["pulse", "sample_maximum"])
+def test_regression_clipped_echo_whose_tail_outlasts_its_window_is_ranged(peak_fit):
+    """Root cause: the ranging drops a run cut by a window's end (its maximum might lie beyond it), and a clipped
+    echo's run was no exception. In the pool at the pond's gain M1 = 2000, CH1's 3 m echo (about 40,000 LSB
+    unclipped) clips over 27 samples and its slow tail stays above half the threshold until about the end of
+    the 64-sample window; where noise carried it past, the echo was lost in windowed mode (16 of 1000 shots)
+    though the full record ranged it. A clipped run whose plateau ends inside the window is timed by that
+    plateau and its clip levels alone, so it is kept: windowed and full records give the same CH1 peaks."""
+    from dataclasses import replace
+
+    from muls.experiments import pool
+
+    exp = pool()
+    ins = mul2023(exp.gate_delay_s, exp.gate_width_s, 2000.0, 20000.0)
+    ins = replace(ins, processing=replace(ins.processing, peak_fit=peak_fit))
+    model = OpticalModel.build(ins, exp.water)
+    batch = PulseBatch.flat_target(ins, np.full(150, 3.0), 0.1)  # seed 0: shots 17 and 120 were lost
+    _, windowed = simulate(model, batch, seed=0, mode="windowed")
+    _, full = simulate(model, batch, seed=0, mode="full")
+    ch1_w, ch1_f = windowed.peaks.channel == 1, full.peaks.channel == 1
+    assert np.array_equal(windowed.peaks.pulse[ch1_w], np.arange(150))  # one clipped CH1 peak per shot
+    assert windowed.peaks.saturated[ch1_w].all()
+    assert np.array_equal(windowed.peaks.pulse[ch1_w], full.peaks.pulse[ch1_f])
+    assert np.allclose(windowed.peaks.range_m[ch1_w], full.peaks.range_m[ch1_f], rtol=0, atol=1e-9)
+
+
 def test_a_shut_gate_leaves_only_dark_noise():
     """Before its gate opens CH3 reads its dark level with dark and rounding noise alone (1 + 1/12 LSB^2), though
     the pond's column then carries PMT2's shot noise of thousands of LSB^2 at gain 20,000."""
