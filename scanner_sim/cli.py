@@ -308,9 +308,12 @@ def _cmd_run(args) -> int:
 # -- bench ----------------------------------------------------------------------------------------------
 @subcommand("bench")
 def _add_bench(sub):
-    p = sub.add_parser("bench", help="end-to-end pulses/s per fidelity beside raw embreex on the same rays")
+    p = sub.add_parser("bench", help="end-to-end pulses/s per fidelity beside raw embreex on the same rays, with "
+                       "cores used and peak memory, and a two-million-triangle seabed")
     p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--pulses", type=positive_int(), default=60000, help="pulses per fidelity level")
+    p.add_argument("--repeat", type=positive_int(), default=2, help="timed passes per level (the best is kept)")
+    p.add_argument("--no-large-seabed", action="store_true", help="skip the two-million-triangle seabed case")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench)
 
@@ -318,14 +321,20 @@ def _add_bench(sub):
 def _cmd_bench(args) -> int:
     from .bench import bench_pass
 
-    result = bench_pass(args.scene, args.pulses)
+    result = bench_pass(args.scene, args.pulses, args.repeat, large_seabed=not args.no_large_seabed)
     if args.json:
         print(json.dumps(result))
-    else:
-        for fidelity in FIDELITY_LEVELS:
-            r = result[fidelity]
-            print(f"{fidelity:10s} {r['pulses_per_s']:>10,.0f} pulses/s  raw embreex {r['raw_embreex_pulses_per_s']:>10,.0f}"
-                  f" pulses/s  ratio {r['ratio_to_raw_rays']:.2f}")
+        return 0
+    rows = [(name, result[name]) for name in FIDELITY_LEVELS]
+    if "large_seabed" in result:
+        big = result["large_seabed"]
+        rows.append((f"balanced, {big['triangles'] / 1e6:.1f} M triangles", big["balanced"]))
+    for name, r in rows:
+        print(f"{name:28s} {r['pulses_per_s']:>9,.0f} pulses/s  raw embreex {r['raw_embreex_pulses_per_s']:>9,.0f}"
+              f"  ratio {r['ratio_to_raw_rays']:.2f}  cores {r['cores_used']:.2f}  peak {r['peak_rss_mb']:,.0f} MB")
+    if "large_seabed" in result:
+        big = result["large_seabed"]
+        print(f"large seabed: scene build {big['scene_build_s']:.1f} s, BVH {big['bvh_build_s']:.1f} s")
     return 0
 
 

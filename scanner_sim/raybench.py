@@ -17,7 +17,10 @@ import time
 import numpy as np
 
 
-def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: int = 19, repeat: int = 3) -> dict:
+def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: int = 19, repeat: int = 3,
+               overrides: dict | None = None) -> dict:
+    """Ray throughput of the scene ``scene_name`` (a shipped name or YAML path; ``overrides``: dotted scene keys
+    to change first, e.g. a finer seabed)."""
     from embreex import rtcore_scene
     from embreex.mesh_construction import TriangleMesh
 
@@ -29,7 +32,7 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
     from .scene import build_scene
     from .setup_checks import build_trajectory
 
-    cfg = load_scene(scene_name)
+    cfg = load_scene(scene_name).with_overrides(overrides or {})
     inst = cfg.instrument_model()
     scene = build_scene(cfg)
     traj = build_trajectory(cfg, scene)

@@ -1,6 +1,10 @@
 """The ray-throughput benchmark reports both figures on the same rays (its speed goals are read from
 `scanner-sim bench-rays`, not asserted in a timed test: on a shared 2-core machine the ratio swings by 25 %)."""
 
+import pytest
+
+from scanner_sim.bench import bench_pass
+from scanner_sim.fidelity import FIDELITY_LEVELS
 from scanner_sim.raybench import bench_rays
 
 
@@ -9,3 +13,15 @@ def test_bench_reports_both_throughputs():
     assert result["primary_rays"] == 1400 and result["hits"] == 1400
     assert result["raw_embreex_rays_per_s"] > 0 and result["pipeline_rays_per_s"] > 0
     assert 0 < result["ratio"]
+
+
+@pytest.mark.slow
+def test_pass_bench_reports_every_level_with_cores_and_memory():
+    """Each level in a fresh process: pulses/s, cores used and peak memory, in the same keys every run."""
+    result = bench_pass("pool_panel", pulses=600, repeat=1, large_seabed=False)
+    assert list(result) == ["scene", "pulses", "repeat", "cpu_count", "load_avg_1min", *FIDELITY_LEVELS,
+                            "load_avg_1min_after"]
+    for name in FIDELITY_LEVELS:
+        level = result[name]
+        assert level["pulses_per_s"] > 0 and 0 < level["cores_used"] <= result["cpu_count"] + 0.5
+        assert level["peak_rss_mb"] > 50 and level["raw_embreex_pulses_per_s"] > level["pulses_per_s"]
