@@ -7,6 +7,10 @@ skips it). Bad arguments give one line on stderr naming the option and what is a
 
 The command-line plumbing it shares with ``scanner-sim`` (argument types, one-line errors, exit codes) is in
 :mod:`muls.command`.
+
+It is longer than the other modules on purpose: it holds only the subcommands' parsers and the thin functions
+that print each study's result, one pair per subcommand; the studies themselves live in :mod:`muls.studies`,
+:mod:`muls.budget`, :mod:`muls.experiments` and :mod:`muls.montecarlo`.
 """
 
 from __future__ import annotations
