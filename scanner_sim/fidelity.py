@@ -42,7 +42,7 @@ class FidelityLevel:
 FIDELITY_LEVELS: dict[str, FidelityLevel] = {
     "fast": FidelityLevel("fast", subrays=7, shadow_rays=True, record_mode="windowed", column_cut="pulse"),
     "balanced": FidelityLevel("balanced", subrays=19, shadow_rays=True, record_mode="windowed", column_cut="pulse"),
-    "reference": FidelityLevel("reference", subrays=91, shadow_rays=True, record_mode="full", column_cut="pulse"),
+    "reference": FidelityLevel("reference", subrays=91, shadow_rays=True, record_mode="full", column_cut="subray"),
 }
 
 
