@@ -314,6 +314,8 @@ def _add_bench(sub):
     p.add_argument("--pulses", type=positive_int(), default=60000, help="pulses per fidelity level")
     p.add_argument("--repeat", type=positive_int(), default=2, help="timed passes per level (the best is kept)")
     p.add_argument("--no-large-seabed", action="store_true", help="skip the two-million-triangle seabed case")
+    p.add_argument("--profile", choices=list(FIDELITY_LEVELS), metavar="LEVEL",
+                   help="instead: CPU seconds per stage of one pass at LEVEL on one numba thread (scanner_sim.profiling)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench)
 
@@ -321,6 +323,8 @@ def _add_bench(sub):
 def _cmd_bench(args) -> int:
     from .bench import bench_pass
 
+    if args.profile:
+        return _print_profile(args)
     result = bench_pass(args.scene, args.pulses, args.repeat, large_seabed=not args.no_large_seabed)
     if args.json:
         print(json.dumps(result))
@@ -335,6 +339,21 @@ def _cmd_bench(args) -> int:
     if "large_seabed" in result:
         big = result["large_seabed"]
         print(f"large seabed: scene build {big['scene_build_s']:.1f} s, BVH {big['bvh_build_s']:.1f} s")
+    return 0
+
+
+def _print_profile(args) -> int:
+    from .profiling import stage_profile
+
+    result = stage_profile(args.scene, args.profile, args.pulses)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(f"{result['fidelity']} on {result['scene']}, {result['pulses']:,} pulses, one numba thread, stage after stage:")
+    for stage, r in result["stages"].items():
+        print(f"  {stage:32s} {r['cpu_s']:7.3f} s  {r['us_per_pulse']:6.2f} us/pulse  {100 * r['share']:5.1f} %")
+    print(f"  {'total':32s} {result['cpu_s_one_thread']:7.3f} s")
+    print(f"the ordinary pass: {result['pass_pulses_per_s']:,.0f} pulses/s on {result['pass_cores_used']:.2f} cores")
     return 0
 
 
@@ -356,6 +375,8 @@ def _add_tradeoff(sub):
     p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /tradeoff)")
     p.add_argument("--json", action="store_true", help="print tradeoff.json instead of the table")
     p.add_argument("--no-render", action="store_true", help="no chart")
+    p.add_argument("--no-convergence", action="store_true",
+                   help="skip the reference run at 217 sub-rays that shows the reference has converged")
     p.set_defaults(func=_cmd_tradeoff)
 
 
@@ -368,7 +389,8 @@ def _cmd_tradeoff(args) -> int:
     config = load_scene(args.scene)
     out = Path(args.out or Path(config.output_dir) / "tradeoff")
     progress = None if args.json else (lambda name: print(f"running {name}", file=sys.stderr, flush=True))
-    result = tradeoff(config, tuple(args.levels), tuple(args.knobs), args.pulses, args.waveform_pulses, progress)
+    result = tradeoff(config, tuple(args.levels), tuple(args.knobs), args.pulses, args.waveform_pulses, progress,
+                      convergence=not args.no_convergence)
     path = write_tradeoff(result, out, render=not args.no_render)
     print(json.dumps(result) if args.json else markdown_table(result) + str(path))
     return 0

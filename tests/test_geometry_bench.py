@@ -5,6 +5,7 @@ import pytest
 
 from scanner_sim.bench import bench_pass
 from scanner_sim.fidelity import FIDELITY_LEVELS
+from scanner_sim.profiling import stage_profile
 from scanner_sim.raybench import bench_rays
 
 
@@ -25,3 +26,14 @@ def test_pass_bench_reports_every_level_with_cores_and_memory():
         level = result[name]
         assert level["pulses_per_s"] > 0 and 0 < level["cores_used"] <= result["cpu_count"] + 0.5
         assert level["peak_rss_mb"] > 50 and level["raw_embreex_pulses_per_s"] > level["pulses_per_s"]
+
+
+@pytest.mark.slow
+def test_stage_profile_accounts_for_the_whole_chunk_loop():
+    """Every stage of a pass over a seabed takes time, and the stages add up to the loop's CPU seconds."""
+    result = stage_profile("cable_survey", "balanced", pulses=4000)
+    stages = result["stages"]
+    assert set(stages) >= {"rays (Embree)", "digitise", "ranging", "truth", "georeference", "coverage", "LAS"}
+    assert all(r["cpu_s"] > 0 for name, r in stages.items() if name != "other")
+    assert sum(r["cpu_s"] for r in stages.values()) == pytest.approx(result["cpu_s_one_thread"], abs=5e-3)
+    assert result["pulses"] == 4000 and result["pass_cores_used"] > 0
