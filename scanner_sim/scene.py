@@ -66,7 +66,6 @@ class Scene:
 
     vertices (n_v, 3) float64 world [m]; faces (n_f, 3) int64; face_object (n_f,) int32; face_label (n_f,)
     int16 (LAS code); face_reflectance (n_f,) float64; face_normal (n_f, 3) float64 unit (right-hand winding);
-    face_plane_m (n_f,) float64: dot(normal, vertex0 - local_origin), the plane offset in the local frame;
     local_origin (3,) float64 world [m]; heightfield: the seabed's, or None; objects: list of SceneObject.
     """
 
@@ -94,8 +93,6 @@ class Scene:
         self.objects = [SceneObject(i, p.name, p.kind, p.label, p.reflectance, int(ends[i - 1]) if i else 0,
                                     int(ends[i]), p.centreline) for i, p in enumerate(parts)]
         self.heightfield = heightfield
-        a = local[self.faces[:, 0]]
-        self.face_plane_m = np.einsum("ij,ij->i", self.face_normal, a)
         self.local_extent_m = float(np.abs(local).max())
 
     @property
