@@ -140,6 +140,24 @@ figcaption { font-size: 0.85em; color: #555; }
 """
 
 
+#: Where ``scanner-sim tradeoff`` writes by default (the scene's output.dir + /tradeoff), from the study's folder
+#: (the scene's output.dir + /coverage).
+TRADEOFF_DIR = "../tradeoff"
+
+
+def tradeoff_section(study: dict, out: Path) -> str:
+    """The page's pointer to the speed-against-accuracy chart of the scene's fidelity levels: the chart itself,
+    embedded, when ``scanner-sim tradeoff`` has written it beside the study, else the command that writes it."""
+    scene = html.escape(str(study["scene"]))
+    chart = out / TRADEOFF_DIR / "tradeoff.png"
+    text = (f"<h2>Speed against accuracy</h2><p>How far each fidelity level lies from the truth and from the "
+            f"reference level, against its speed: <code>scanner-sim tradeoff {scene}</code> writes tradeoff.png, "
+            f"tradeoff.md and tradeoff.json in {html.escape(TRADEOFF_DIR)}/ from this folder.</p>")
+    if chart.exists():
+        text += f"<figure>{_image(chart, 'speed against accuracy')}<figcaption>speed against accuracy</figcaption></figure>"
+    return text
+
+
 def report_html(study: dict, out_dir: str | Path) -> str:
     """report.html: the tables, the coverage-against-altitude chart, and per combination its coverage map and
     rendered point cloud, every picture embedded. Pictures are read from ``out_dir`` as run_study writes them."""
@@ -154,6 +172,7 @@ def report_html(study: dict, out_dir: str | Path) -> str:
                      "<figcaption>coverage against altitude</figcaption></figure>")
     for heading, (header, rows) in _sections(study):
         parts.append(f"<h2>{html.escape(heading)}</h2>" + html_table(header, rows))
+    parts.append(tradeoff_section(study, out))
     parts.append("<h2>Maps and point clouds</h2>")
     for r in study["records"]:
         parts.append(f"<h3>{html.escape(r['dir'])}</h3>")

@@ -33,6 +33,9 @@ KNOBS: dict[str, tuple[str, object]] = {
     "subrays=91": ("subrays", 91), "shadow_rays=off": ("shadow_rays", False), "record_mode=full": ("record_mode", "full"),
     "column_cut=subray": ("column_cut", "subray"),
 }
+#: Sub-rays of the reference run again at a finer resolution to show the reference has converged (the densest
+#: ring layout, beams.SUBRAY_COUNTS: 8 rings against the reference's 5).
+CONVERGENCE_SUBRAYS = 217
 #: Pulses each run simulates, by default, and of those, pulses whose waveforms are compared. On 2 shared cores
 #: ``scanner-sim tradeoff cable_survey`` (3 levels and 7 knobs) then takes about 3 minutes (docs/fidelity.md).
 DEFAULT_PULSES = 30000
@@ -136,13 +139,17 @@ def level_metrics(run: LevelRun, reference: LevelRun) -> dict:
 
 
 def tradeoff(config: SceneConfig, levels=tuple(FIDELITY_LEVELS), knobs=tuple(KNOBS), pulses: int = DEFAULT_PULSES,
-             waveform_pulses: int = DEFAULT_WAVEFORM_PULSES, progress=None) -> dict:
+             waveform_pulses: int = DEFAULT_WAVEFORM_PULSES, progress=None, convergence: bool = True) -> dict:
     """Every level of ``levels`` and knob of ``knobs`` on the scene's first ``pulses`` pulses, against the
     reference level run on the same pulses and seed. Returns the JSON-ready result (:func:`write_tradeoff`).
-    ``progress``: called with each run's name as it starts."""
+    ``convergence``: also run the reference at :data:`CONVERGENCE_SUBRAYS` sub-rays and compare it with the
+    reference (``reference_convergence``). ``progress``: called with each run's name as it starts."""
     base = PassSetup.build(config, PassOptions(max_pulses=pulses), build_scene(config))
     plan = [(name, FIDELITY_LEVELS[name]) for name in dict.fromkeys([REFERENCE, *levels])]
     plan += [(name, knob_level(name)) for name in knobs]
+    finer = f"reference, {CONVERGENCE_SUBRAYS} sub-rays"
+    if convergence:
+        plan.append((finer, replace(FIDELITY_LEVELS[REFERENCE], name=finer, subrays=CONVERGENCE_SUBRAYS)))
     runs = {}
     for name, level in plan:
         if progress:
@@ -155,6 +162,8 @@ def tradeoff(config: SceneConfig, levels=tuple(FIDELITY_LEVELS), knobs=tuple(KNO
               "match_tolerance_m": accuracy.MATCH_TOLERANCE_M,
               "levels": {n: level_metrics(runs[n], reference) for n in levels},
               "knobs": {n: level_metrics(runs[n], reference) for n in knobs}}
+    if convergence:
+        result["reference_convergence"] = level_metrics(runs[finer], reference)
     result["metrics_s"] = round(time.time() - started, 1)
     return result
 
@@ -200,6 +209,12 @@ def write_tradeoff(result: dict, out_dir: str | Path, render: bool = True) -> Pa
     intro = (f"# Speed against accuracy: {result['scene']}\n\n{result['pulses']:,} pulses per run (seed "
              f"{result['seed']}), waveforms over the first {result['waveform_pulses']:,}; against the truth mesh "
              f"and against the `{result['reference']}` level on the same pulses.\n\n")
+    converged = result.get("reference_convergence")
+    if converged:
+        ref = converged["vs_reference"]
+        intro += (f"Reference converged: at {converged['subrays']} sub-rays its returns differ from the reference's by "
+                  f"{_cell(converged, 'vs_reference', 'p95_position_diff_m', '{:.4f}')} m (95th percentile), "
+                  f"{ref['missing_per_pulse']:.4f} missing and {ref['extra_per_pulse']:.4f} extra per pulse.\n\n")
     io.write_text(out / "tradeoff.md", intro + markdown_table(result) + ("\n![chart](tradeoff.png)\n" if render else ""))
     io.write_summary_json(out / "tradeoff.json", result)
     return out / "tradeoff.json"
