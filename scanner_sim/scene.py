@@ -290,8 +290,6 @@ def panel_mesh(center_m, size_m, normal, up):
 
 def build_scene(config) -> Scene:
     """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds)."""
-    import trimesh
-
     parts: list[Part] = []
     hf = None
     sb = config.seabed
@@ -321,6 +319,8 @@ def build_scene(config) -> Scene:
         elif isinstance(obj, MooredMineObject):
             ground = _ground_z(obj.position_m, hf)
             x, y = obj.position_m[:2]
+            import trimesh  # here only: importing it takes about a second that other scenes need not pay
+
             sphere = trimesh.creation.icosphere(subdivisions=3, radius=obj.radius_m)
             sv = sphere.vertices + [x, y, ground + obj.height_m]
             tv, tf = frustum(0.5 * obj.tether_diameter_m, 0.5 * obj.tether_diameter_m,
