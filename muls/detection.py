@@ -250,9 +250,15 @@ def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, ech
                 if cut_w[p, c] != 0.0:
                     power += cut_w[p, c] * column_value(t, cut_tau[p, c], col)
             for j in range(n_pairs):
-                normals[2 * j], normals[2 * j + 1] = normal_pair_at(bases[j], index)
+                if 2 * j + 1 < n_chan:
+                    normals[2 * j], normals[2 * j + 1] = normal_pair_at(bases[j], index)
+                else:  # an odd channel count: the pair's second normal would go unused (same first one)
+                    normals[2 * j] = normal_at(bases[j], index)
             for j in range(n_shot_pairs):
-                shot_normals[2 * j], shot_normals[2 * j + 1] = normal_pair_at(shot_bases[j], index)
+                if 2 * j + 1 < n_detectors:
+                    shot_normals[2 * j], shot_normals[2 * j + 1] = normal_pair_at(shot_bases[j], index)
+                else:
+                    shot_normals[2 * j] = normal_at(shot_bases[j], index)
             for c in range(n_chan):
                 gated = power if chans.gate_open_s[c] <= t < chans.gate_close_s[c] else 0.0
                 level = chans.lsb_per_w[c] * gated  # MULS Eq. 12 in LSB (Eq. 13 without noise)
