@@ -16,9 +16,10 @@ from muls.errors import ParameterError
 #: Where the water column stops: ``"pulse"`` once per pulse, at the energy-weighted mean hit range for the share
 #: of the beam that hits; ``"subray"`` where each sub-ray stops (hits within :data:`SUBRAY_CUT_BIN_M` share a cut).
 COLUMN_CUTS = ("pulse", "subray")
-#: [m] Sub-ray hit ranges closer than this share one column cut: a twentieth of the 0.15 m range of one 1 ns sample,
-#: so the cut's error is far below what the digitiser resolves, and a footprint on one facet keeps a few cuts.
-SUBRAY_CUT_BIN_M = 0.0075
+#: [m] Sub-ray hit ranges closer than this share one column cut: under half the 0.11 m of range one 1 ns sample
+#: spans, so a footprint at moderate incidence keeps one or two cuts (measured: no cost over the single cut on
+#: cable_survey) while a footprint stretched over metres at grazing incidence is cut where its parts stop.
+SUBRAY_CUT_BIN_M = 0.05
 
 
 @dataclass(frozen=True)
@@ -41,7 +42,7 @@ class FidelityLevel:
 
 FIDELITY_LEVELS: dict[str, FidelityLevel] = {
     "fast": FidelityLevel("fast", subrays=7, shadow_rays=True, record_mode="windowed", column_cut="pulse"),
-    "balanced": FidelityLevel("balanced", subrays=19, shadow_rays=True, record_mode="windowed", column_cut="pulse"),
+    "balanced": FidelityLevel("balanced", subrays=19, shadow_rays=True, record_mode="windowed", column_cut="subray"),
     "reference": FidelityLevel("reference", subrays=91, shadow_rays=True, record_mode="full", column_cut="subray"),
 }
 

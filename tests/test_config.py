@@ -198,7 +198,7 @@ def test_sections_are_frozen():
 
 def test_fidelity_table():
     assert {name: (lv.subrays, lv.shadow_rays, lv.record_mode, lv.column_cut) for name, lv in FIDELITY_LEVELS.items()} \
-        == {"fast": (7, True, "windowed", "pulse"), "balanced": (19, True, "windowed", "pulse"),
+        == {"fast": (7, True, "windowed", "pulse"), "balanced": (19, True, "windowed", "subray"),
             "reference": (91, True, "full", "subray")}
     for name, level in FIDELITY_LEVELS.items():
         assert level.name == name and level.subrays in SUBRAY_COUNTS and level.record_mode in RECORD_MODES
