@@ -31,13 +31,14 @@ REFERENCE = "reference"
 KNOBS: dict[str, tuple[str, object]] = {
     "subrays=1": ("subrays", 1), "subrays=7": ("subrays", 7), "subrays=37": ("subrays", 37),
     "subrays=91": ("subrays", 91), "shadow_rays=off": ("shadow_rays", False), "record_mode=full": ("record_mode", "full"),
-    "column_cut=subray": ("column_cut", "subray"),
+    "column_cut=pulse": ("column_cut", "pulse"),
 }
 #: Sub-rays of the reference run again at a finer resolution to show the reference has converged (the densest
 #: ring layout, beams.SUBRAY_COUNTS: 8 rings against the reference's 5).
 CONVERGENCE_SUBRAYS = 217
 #: Pulses each run simulates, by default, and of those, pulses whose waveforms are compared. On 2 shared cores
-#: ``scanner-sim tradeoff cable_survey`` (3 levels and 7 knobs) then takes about 3 minutes (docs/fidelity.md).
+#: ``scanner-sim tradeoff cable_survey`` (3 levels, 7 knobs and the convergence run) then takes 1-3 minutes
+#: (docs/fidelity.md).
 DEFAULT_PULSES = 30000
 DEFAULT_WAVEFORM_PULSES = 500
 WARM_UP_PULSES = 200
