@@ -162,7 +162,7 @@ class PassSetup:
                           self.model.instrument.geometry, self.level.shadow_rays)
         batch = pulse_batch(hits, slots, self.model, self.config.water.background_radiance_w_m2_sr_nm,
                             self.level.column_cut)
-        return RayStage(slots, hits, batch, self.lines_of_sight(slots, times),
+        return RayStage(slots, hits, batch, self.lines_of_sight(slots, times, hits),
                         nominal_footprint(hits) if footprint else None)
 
     def finish_chunk(self, stage: RayStage, record_mode: str | None = None) -> Chunk:
@@ -178,14 +178,20 @@ class PassSetup:
         that coverage needs (None otherwise)."""
         return self.finish_chunk(self.cast_chunk(slots, footprint), record_mode)
 
-    def lines_of_sight(self, slots: np.ndarray, times: np.ndarray) -> LinesOfSight:
-        """Each pulse's estimated beam, with the first truth surface along it."""
+    def lines_of_sight(self, slots: np.ndarray, times: np.ndarray, hits: Hits) -> LinesOfSight:
+        """Each pulse's estimated beam, with the first truth surface along it. Without navigation noise the
+        estimated beam is the true beam axis, whose first hit the beam cast already holds (sub-ray 0 of every
+        pattern is the axis), so only a noisy navigation needs a cast of its own."""
         origin, direction, _, _, _ = self.scanner.world_rays(self.trajectory.poses(times, estimated=True))
         true_range, first_object = np.full(slots.size, np.nan), np.full(slots.size, -1)
-        ray, tri, dist = self.caster.first_hits((origin - self.scene.local_origin).astype(np.float32),
-                                                direction.astype(np.float32))
-        true_range[ray] = dist
-        first_object[ray] = self.scene.face_object[tri]
+        if self.trajectory.has_navigation_noise:
+            ray, tri, dist = self.caster.first_hits((origin - self.scene.local_origin).astype(np.float32),
+                                                    direction.astype(np.float32))
+            true_range[ray], first_object[ray] = dist, self.scene.face_object[tri]
+        else:
+            axis = hits.subray_index == 0
+            true_range[hits.pulse_index[axis]] = hits.range_m[axis]
+            first_object[hits.pulse_index[axis]] = hits.object_id[axis]
         return LinesOfSight(origin, direction, true_range, first_object,
                             np.degrees(self.scanner.scan_angle_rad(times)), times, slots, self.trajectory.leg(times))
 

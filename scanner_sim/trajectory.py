@@ -166,6 +166,11 @@ class Trajectory:
                           math.radians(cfg.heading_sigma_deg)])
         return np.arange(n) / cfg.rate_hz, x * sigma
 
+    @property
+    def has_navigation_noise(self) -> bool:
+        """Does the navigation's estimate differ from the truth (``poses(t, estimated=True)`` != ``poses(t)``)?"""
+        return self._noise is not None
+
     def distance_m(self, times_s) -> np.ndarray:
         """(n,) distance along the path [m] at ``times_s`` (held at the ends)."""
         return np.clip(np.asarray(times_s, float) * self.speed_m_s, 0.0, self.length_m)

@@ -141,3 +141,18 @@ def test_a_false_alarm_takes_no_hit_of_another_pulse(hits):
     assert points.classification[0] == NOISE_CLASS and points.object_id[0] == NO_OBJECT
     assert np.isnan(points.true_range_m[0]) and np.isnan(points.incidence_deg[0])
     np.testing.assert_allclose(points.xyz[0], [0.0, 0.0, -3.3])
+
+
+def test_truth_without_navigation_noise_is_what_a_cast_along_each_line_finds():
+    """Without navigation noise the truth comes from the beam cast's axis sub-ray instead of a cast of its own:
+    the same ranges and objects as casting along each estimated line (here across the step's edge)."""
+    setup = PassSetup.build(_step_scene(pulses=3000), PassOptions(progress=False))
+    assert not setup.trajectory.has_navigation_noise
+    slots = next(setup.slot_chunks())
+    sight = setup.cast_chunk(slots).sight
+    ray, tri, dist = setup.caster.first_hits((sight.origin_m - setup.scene.local_origin).astype(np.float32),
+                                             sight.direction.astype(np.float32))
+    assert ray.size == slots.size  # every line meets a panel
+    assert np.array_equal(sight.true_range_m[ray], dist.astype(float))
+    assert np.array_equal(sight.first_object[ray], setup.scene.face_object[tri])
+    assert len(np.unique(sight.first_object)) == 2  # both panels seen
