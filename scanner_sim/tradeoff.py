@@ -76,9 +76,13 @@ HIDDEN_MARGIN_M = 0.1
 
 
 def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
-    """(n,) bool: the truth surface each point ranged (``true_range_m`` along its estimated line of sight) has
-    something more than :data:`HIDDEN_MARGIN_M` from it and in front of the receiver aperture at the pulse's true
-    pose. Noise points are never hidden."""
+    """(n,) bool: the surface a point ranged has something more than :data:`HIDDEN_MARGIN_M` from it and in front
+    of the receiver aperture at the pulse's true pose.
+
+    The surface point is where the truth puts it, ``true_range_m`` along the point's estimated line of sight. Only
+    points whose ranged object is the first one along that line are judged: a return behind an edge has its truth
+    on the plane of the facet it ranged, extended under the nearer surface, where visibility means nothing. Noise
+    points are never hidden."""
     known = np.isfinite(points.true_range_m) & (points.object_id >= 0)
     out = np.zeros(len(points), bool)
     if not known.any():
@@ -86,13 +90,19 @@ def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     times = points.gps_time_s[known]
     origin, direction, _, _, _ = setup.scanner.world_rays(setup.trajectory.poses(times, estimated=True))
     _, _, _, rx_origin, _ = setup.scanner.world_rays(setup.trajectory.poses(times))
+    local = origin - setup.scene.local_origin
+    ray, tri, _ = setup.caster.first_hits(local.astype(np.float32), direction.astype(np.float32))
+    first_object = np.full(times.size, -1)
+    first_object[ray] = setup.scene.face_object[tri]
+    judged = first_object == points.object_id[known]
     surface = origin + points.true_range_m[known, None].astype(np.float64) * direction
     to_rx = rx_origin - surface
     length = np.linalg.norm(to_rx, axis=1)
     to_rx /= length[:, None]
     start = surface + HIDDEN_MARGIN_M * to_rx - setup.scene.local_origin
-    out[known] = setup.caster.occluded(start.astype(np.float32), to_rx.astype(np.float32),
-                                       (length - HIDDEN_MARGIN_M).astype(np.float32))
+    blocked = setup.caster.occluded(start.astype(np.float32), to_rx.astype(np.float32),
+                                    (length - HIDDEN_MARGIN_M).astype(np.float32))
+    out[known] = blocked & judged
     return out
 
 

@@ -87,3 +87,17 @@ def test_the_reference_has_converged_on_the_cable_survey():
     m = vs_reference(fine, coarse, slots.size)
     assert m["missing_per_pulse"] == 0.0 and m["extra_per_pulse"] == 0.0
     assert m["p95_position_diff_m"] < 0.01
+
+
+def test_points_on_a_plate_hidden_from_the_receiver_count_as_hidden():
+    """The hidden-plate failure scene without shadow rays (fast before issue 12): a point per pulse, every one on
+    the plate the visor hides from the receiver; the eight-surface staircase's returns behind edges are not."""
+    from scanner_sim.tradeoff import hidden_from_receiver
+
+    blind = replace(FIDELITY_LEVELS["fast"], shadow_rays=False)
+    for scene, hidden in (("hidden_plate", 1.0), ("eight_surfaces", 0.0)):
+        setup = with_level(PassSetup.build(load_scene(str(FAILURES / f"{scene}.yaml")), PassOptions(max_pulses=100)),
+                           blind)
+        points = setup.simulate_chunk(np.concatenate(list(setup.slot_chunks()))).points
+        assert len(points) >= 100
+        assert np.mean(hidden_from_receiver(setup, points)) == hidden
