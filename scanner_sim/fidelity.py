@@ -30,7 +30,8 @@ class FidelityLevel:
     each hit to the receiver aperture (parallax shadows); without them only the FOV cone is checked.
     record_mode: ``"windowed"`` (samples around the echoes) or ``"full"`` (every sample of every channel),
     ``muls.detection.RECORD_MODES``. column_cut: where the water column stops, one of :data:`COLUMN_CUTS`
-    (:func:`column_cuts`).
+    (:func:`column_cuts`). adaptive: decide per pulse (:mod:`scanner_sim.auto_level`): one echo where a probe of
+    the beam finds one surface seen alike across it, ``subrays`` elsewhere.
     """
 
     name: str
@@ -38,11 +39,14 @@ class FidelityLevel:
     shadow_rays: bool
     record_mode: str
     column_cut: str
+    adaptive: bool = False
 
 
 FIDELITY_LEVELS: dict[str, FidelityLevel] = {
     "fast": FidelityLevel("fast", subrays=7, shadow_rays=True, record_mode="windowed", column_cut="pulse"),
     "balanced": FidelityLevel("balanced", subrays=19, shadow_rays=True, record_mode="windowed", column_cut="subray"),
+    "auto": FidelityLevel("auto", subrays=19, shadow_rays=True, record_mode="windowed", column_cut="subray",
+                          adaptive=True),
     "reference": FidelityLevel("reference", subrays=91, shadow_rays=True, record_mode="full", column_cut="subray"),
 }
 

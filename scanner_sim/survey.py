@@ -25,6 +25,7 @@ from muls.simulate import simulate
 from muls.waveform import OpticalModel, PulseBatch
 
 from . import io, sinks, viz
+from .auto_level import cast_auto
 from .beams import BeamPattern, beam_pattern
 from .config import SceneConfig
 from .coverage import CoverageSettings, Footprint, nominal_footprint
@@ -158,8 +159,9 @@ class PassSetup:
         in a thread beside the physics of the chunk before (:func:`pass_chunks`)."""
         times = slots / self.scanner.pulse_rate_hz
         beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(self.trajectory.poses(times))
-        hits = cast_beams(self.caster, self.scene, beam_o, beam_d, shaft, rx_o, rx_d, self.pattern,
-                          self.model.instrument.geometry, self.level.shadow_rays)
+        cast = cast_auto if self.level.adaptive else cast_beams
+        hits = cast(self.caster, self.scene, beam_o, beam_d, shaft, rx_o, rx_d, self.pattern,
+                    self.model.instrument.geometry, self.level.shadow_rays)
         batch = pulse_batch(hits, slots, self.model, self.config.water.background_radiance_w_m2_sr_nm,
                             self.level.column_cut)
         return RayStage(slots, hits, batch, self.lines_of_sight(slots, times, hits),

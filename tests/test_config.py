@@ -199,13 +199,14 @@ def test_sections_are_frozen():
 def test_fidelity_table():
     assert {name: (lv.subrays, lv.shadow_rays, lv.record_mode, lv.column_cut) for name, lv in FIDELITY_LEVELS.items()} \
         == {"fast": (7, True, "windowed", "pulse"), "balanced": (19, True, "windowed", "subray"),
+            "auto": (19, True, "windowed", "subray"),
             "reference": (91, True, "full", "subray")}
     for name, level in FIDELITY_LEVELS.items():
         assert level.name == name and level.subrays in SUBRAY_COUNTS and level.record_mode in RECORD_MODES
     assert fidelity_level("fast") is FIDELITY_LEVELS["fast"]
     with pytest.raises(ParameterError) as exc:
         fidelity_level("fastest")
-    assert str(exc.value) == "fidelity = 'fastest': must be one of 'fast', 'balanced', 'reference'"
+    assert str(exc.value) == "fidelity = 'fastest': must be one of 'fast', 'balanced', 'auto', 'reference'"
 
 
 def test_survey_level_applies_the_scene_overrides():

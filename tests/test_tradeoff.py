@@ -23,7 +23,7 @@ FAILURES = Path(__file__).resolve().parent.parent / "scenes" / "failures"
 def step_edges(tmp_path_factory):
     """The step-edge failure scene through the command line: 400 pulses, one knob; returns (out dir, JSON)."""
     out = tmp_path_factory.mktemp("tradeoff")
-    code = main(["tradeoff", str(FAILURES / "step_edges.yaml"), "--pulses", "400", "--waveform-pulses", "60",
+    code = main(["tradeoff", str(FAILURES / "step_edges.yaml"), "--pulses", "400", "--waveform-pulses", "400",
                  "--knobs", "subrays=1", "--out", str(out), "--no-convergence"])
     assert code == 0
     return out, json.loads((out / "tradeoff.json").read_text())
