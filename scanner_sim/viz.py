@@ -729,8 +729,8 @@ def plot_tradeoff(path_png, result: Mapping) -> None:
                 ax.annotate(name, (x, y), textcoords="offset points", xytext=(4, 3), fontsize=size,
                             color=style["color"])
         ax.set_xscale("log")
-        ax.xaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
-        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:,.0f}"))
+        ax.xaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 3.0)))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 1000:g}k" if v >= 1000 else f"{v:g}"))
         ax.xaxis.set_minor_formatter(NullFormatter())
         lo, hi = ax.get_xlim()
         ax.set_xlim(lo, hi * 1.8)  # room for the labels of the fastest runs
