@@ -134,7 +134,7 @@ def test_a_weak_echo_on_a_strong_column_is_ranged_early_by_the_documented_amount
     """The instrument's real behaviour, not a fault of the simulation: the processor subtracts the calibrated
     open-water record, but behind the plate the real column stops, so the residual falls below zero behind the
     echo and the three-point fit leans early. docs/fidelity.md gives its size: a black plate (reflectance 0.1) 5 m
-    down is ranged 2.3 cm early in turbid harbour water (1.1-2.7 cm over 3-7 m, up to c = 5 per m), under
+    down is ranged 2.3 cm early in turbid harbour water (1.1-2.7 cm over 3-7 m in c 2.2-3 per m), under
     0.5 cm in the pool. The issue's 15-24 cm is not what this code does at 5 m in any water tried."""
     plate = _panel("plate", (0, 0, LIDAR_Z - 5.0), (3, 3), material="black_painted_aluminium")
     points = _points(_static_scene([plate], water=water, pulses=400))
