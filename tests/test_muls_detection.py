@@ -326,6 +326,34 @@ def test_digitise_defaults_and_records():
         digitise(model, batch, seed=3, mode="sparse")
 
 
+@pytest.mark.parametrize("mode", ["windowed", "full"])
+def test_noise_free_records_of_a_single_pulse_are_its_codes_before_rounding(mode):
+    """With noise off, each code is its noise-free level rounded and clipped to [0, 1023] (Eq. 13), for CH0
+    and every channel, also for a batch of one pulse in one window (what muls waveform and muls experiment
+    draw their noise-free curves from)."""
+    from muls.detection import digitise
+
+    model = _model()
+    for n in (1, 3):
+        rec = digitise(model, PulseBatch.flat_target(model.instrument, np.full(n, 3.0)), seed=2, mode=mode,
+                       keep_noise_free=True, noise=False)
+        for clean, codes in ((rec.noise_free_lsb, rec.codes), (rec.reference_noise_free_lsb, rec.reference)):
+            np.testing.assert_array_equal(np.clip(np.floor(clean.astype(float) + 0.5), 0, 1023), codes)
+        assert rec.noise_free_lsb.max() > 1023  # CH1 clips on the 3 m panel: the clean level runs on above it
+        assert rec.reference_noise_free_lsb.max() > 600  # CH0 sees the emitted pulse (600 LSB over its dark level)
+
+
+def test_an_echo_that_brings_no_light_gets_no_window():
+    """A black panel (reflectance 0) sends no echo: the windowed record has no window for it, only CH0's
+    record (an empty window would cost samples and carry only noise)."""
+    from muls.detection import digitise
+
+    model = _model()
+    batch = PulseBatch.flat_target(model.instrument, np.array([5.0, 5.0, 5.0]), reflectance=np.array([0.1, 0.0, 0.1]))
+    rec = digitise(model, batch, seed=1)
+    assert rec.window_pulse.tolist() == [0, 2] and rec.reference.shape[0] == 3
+
+
 @pytest.mark.parametrize("near_m, gap_ns", [((4.0, 9.0), 12.0), ((4.0, 9.0), 30.0), ((12.0, 16.0), 30.0),
                                              ((12.0, 16.0), 45.0), ((12.0, 16.0), 60.0)])
 def test_regression_windowed_records_hold_chained_echoes_whole(near_m, gap_ns):
