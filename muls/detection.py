@@ -27,7 +27,7 @@ from .noise import (
     stream_base,
     uniform_at,
 )
-from .waveform import Echoes, OpticalModel, PulseBatch, column_value, pulse_value
+from .waveform import Echoes, OpticalModel, PulseBatch, column_integrals_at, column_value, pulse_value
 
 RECORD_MODES = ("windowed", "full")
 
@@ -226,11 +226,28 @@ def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, ech
             shot_bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + n_pairs + j)
         normals = np.empty(2 * n_pairs)
         shot_normals = np.empty(2 * n_shot_pairs)
+        cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
         # Echoes of pulse p (by delay) as three running sums over those started by time t:
         # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
         # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
         sa, s1, sb = 0.0, 0.0, 0.0
         nxt = offsets[p]
+        # The column's cuts by two-way time (insertion sort: a handful). Before a cut its share of the beam
+        # sees the full column; from the cut on, its share is the module doc's tail of waveform.py, of the same
+        # form as an echo, so it joins the three sums; ``ahead[i]``: the share of cuts i and later.
+        n_cut = 0
+        for c in range(cut_tau.shape[1]):
+            if cut_w[p, c] != 0.0:
+                i = n_cut
+                while i > 0 and cut_t[i - 1] > cut_tau[p, c]:
+                    cut_t[i], cut_s[i] = cut_t[i - 1], cut_s[i - 1]
+                    i -= 1
+                cut_t[i], cut_s[i] = cut_tau[p, c], cut_w[p, c]
+                n_cut += 1
+        ahead[n_cut] = 0.0
+        for i in range(n_cut - 1, -1, -1):
+            ahead[i] = ahead[i + 1] + cut_s[i]
+        next_cut = 0
         for k in range(n_samples):
             index = window_start[w] + k
             t = sampling.t0_s + index * dt + sampling.phase_s[p]
@@ -245,10 +262,17 @@ def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, ech
                 s1 += u * ea
                 sb += energy[nxt] * math.exp(-basis[1] * u)
                 nxt += 1
+            while next_cut < n_cut and cut_t[next_cut] <= t:
+                u = t - cut_t[next_cut]
+                v0a, v1a, v0b = column_integrals_at(max(cut_t[next_cut], 0.0), col)
+                ea = cut_s[next_cut] * math.exp(-basis[0] * u)
+                sa += v0a * ea
+                s1 += (u * v0a + v1a) * ea
+                sb += cut_s[next_cut] * v0b * math.exp(-basis[1] * u)
+                next_cut += 1
             power = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
-            for c in range(cut_tau.shape[1]):
-                if cut_w[p, c] != 0.0:
-                    power += cut_w[p, c] * column_value(t, cut_tau[p, c], col)
+            if next_cut < n_cut:
+                power += ahead[next_cut] * column_value(t, np.inf, col)
             for j in range(n_pairs):
                 if 2 * j + 1 < n_chan:
                     normals[2 * j], normals[2 * j + 1] = normal_pair_at(bases[j], index)

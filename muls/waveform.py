@@ -263,21 +263,26 @@ def pulse_value(u, basis):
 
 
 @numba.njit(cache=True, inline="always")
+def column_integrals_at(tau, col):
+    """(S0a, S1a, S0b) of the module doc at two-way time tau [s], interpolated in the tables; zeros past them."""
+    s0a, s1a, s0b = col.s0a, col.s1a, col.s0b
+    x = tau / col.step_s
+    i = int(x)
+    if i >= s0a.shape[0] - 1:
+        return 0.0, 0.0, 0.0
+    f = x - i
+    return s0a[i] + f * (s0a[i + 1] - s0a[i]), s1a[i] + f * (s1a[i + 1] - s1a[i]), s0b[i] + f * (s0b[i + 1] - s0b[i])
+
+
+@numba.njit(cache=True, inline="always")
 def column_value(t, cut_tau, col):
     """Column power [W] at time t [s] of a beam cut at two-way time cut_tau [s] (exact cut, see module doc);
     ``col`` a :class:`ColumnKernel`."""
     if t <= 0.0:
         return 0.0
-    basis, s0a, s1a, s0b = col.basis, col.s0a, col.s1a, col.s0b
+    basis = col.basis
     tau = t if t < cut_tau else cut_tau
-    x = tau / col.step_s
-    i = int(x)
-    if i >= s0a.shape[0] - 1:
-        return 0.0
-    f = x - i
-    v0a = s0a[i] + f * (s0a[i + 1] - s0a[i])
-    v1a = s1a[i] + f * (s1a[i + 1] - s1a[i])
-    v0b = s0b[i] + f * (s0b[i + 1] - s0b[i])
+    v0a, v1a, v0b = column_integrals_at(tau, col)
     if t < cut_tau:  # before the cut's echo: the full column, u = 0
         return basis[2] * v1a + basis[3] * v0a + basis[4] * v0b
     u = t - tau
