@@ -201,7 +201,10 @@ def test_coverage_falls_with_turbidity_and_altitude_and_multichannel_wins(scene,
     for inst in ("mul2023",):
         for clearer, murkier in zip(waters, waters[1:]):
             for a in ALTITUDES_M:
-                assert frac(clearer, inst, a) >= frac(murkier, inst, a) - TIE, (clearer, murkier, inst, a)
+                # A combination's count varies with the seed by one cell (docs/coverage.md): two cells are a tie.
+                r = cov[(clearer, inst, a)]
+                tie = max(TIE, 2 * r["settings"]["cell_m"] ** 2 / r["reached_area_m2"])
+                assert frac(clearer, inst, a) >= frac(murkier, inst, a) - tie, (clearer, murkier, inst, a)
             assert density(clearer, inst) > density(murkier, inst), (clearer, murkier, inst)
         mean = [np.mean([frac(w, inst, a) for a in ALTITUDES_M]) for w in waters]
         assert mean[0] >= mean[1] - TIE and mean[1] > mean[2] + 0.05
