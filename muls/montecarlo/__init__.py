@@ -1,0 +1,47 @@
+"""A semi-analytic Monte Carlo reference for the lidar return: multiple scattering, exact transceiver geometry.
+
+MULS, like every lidar-equation model, counts single scattering only (Eqs. 4 and 7) and folds forward
+scattering into an attenuation coefficient (Eq. 6). This package traces photon packets through the water
+instead, with the instrument's own beam, aperture, offset and field of view, and says where the lidar
+equation holds and by how much it misses (docs/multiple-scattering.md).
+
+- :mod:`.sampling`: per-packet random streams, directions, aperture points (compiled);
+- :mod:`.estimators`: what a scattering event and a target hit send to the receiver (compiled);
+- :mod:`.transport`: beam packets with their ghosts, receiver packets (compiled);
+- :mod:`.reciprocity`: the target's scattered return from the receiver's field;
+- :mod:`.run`: :class:`TargetPlanes`, :func:`run_monte_carlo`, :class:`MonteCarloResult`;
+- :mod:`.power`: tallies as received power through the pulse and optics, beside MULS's;
+- :mod:`.correction`: :class:`MultipleScatteringCorrection`, the tabulated correction;
+- :mod:`.study`: ``muls multiscatter`` (one plate) and ``muls multiscatter-study`` (waters and ranges).
+"""
+
+from .correction import MultipleScatteringCorrection
+from .power import (
+    effective_attenuation_per_m,
+    geometry_factor,
+    mc_power_w,
+    muls_power_w,
+    pulse_kernel,
+    to_power_w,
+    two_way_transmission,
+)
+from .run import BATCHES, ENERGY_KEYS, TAIL_S, TIME_STEP_S, MonteCarloResult, TargetPlanes, run_monte_carlo
+from .study import (
+    ATTENUATION_RULES,
+    CHECK_RANGES_M,
+    DEFAULT_PACKETS,
+    DETECTION_FACTORS,
+    STUDY_PACKETS,
+    STUDY_RANGES_M,
+    STUDY_WATERS,
+    multiscatter_study,
+    multiscatter_waters_study,
+)
+
+__all__ = [
+    "ATTENUATION_RULES", "BATCHES", "CHECK_RANGES_M", "DEFAULT_PACKETS", "DETECTION_FACTORS", "ENERGY_KEYS",
+    "STUDY_PACKETS", "STUDY_RANGES_M", "STUDY_WATERS", "TAIL_S", "TIME_STEP_S", "MonteCarloResult",
+    "MultipleScatteringCorrection", "TargetPlanes", "effective_attenuation_per_m", "geometry_factor",
+    "mc_power_w", "multiscatter_study", "multiscatter_waters_study", "muls_power_w", "pulse_kernel",
+    "run_monte_carlo", "to_power_w", "two_way_transmission",
+]

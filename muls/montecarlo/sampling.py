@@ -1,0 +1,85 @@
+"""Compiled sampling helpers of the Monte Carlo: per-packet random streams, directions, aperture points.
+
+Every packet draws from its own counter-based stream (SplitMix64 of the seed, the stream and the packet
+number, with :mod:`muls.noise`'s finaliser and Weyl constant), so a seed fixes the result whatever the
+number of threads.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..noise import GAMMA, splitmix64
+
+#: Odd 64-bit constant separating the streams (0 beam, 1 receiver) and the streams of split copies.
+STREAM_KEY = np.uint64(0xD1B54A32D192ED03)
+_INV53 = 1.0 / 9007199254740992.0
+
+
+@numba.njit(cache=True, inline="always")
+def packet_stream(seed_key, stream, packet):
+    """Initial state of packet ``packet`` of stream ``stream`` (0 beam, 1 receiver)."""
+    return splitmix64(seed_key ^ splitmix64(np.uint64(packet) * GAMMA + np.uint64(stream) * STREAM_KEY))
+
+
+@numba.njit(cache=True, inline="always")
+def uniform(state):
+    """(next state, uniform in [0, 1))."""
+    state = state + GAMMA
+    return state, float(splitmix64(state) >> np.uint64(11)) * _INV53
+
+
+@numba.njit(cache=True, inline="always")
+def scatter(ux, uy, uz, theta, phi):
+    """Direction turned by polar angle ``theta`` and azimuth ``phi`` from the unit vector (ux, uy, uz)."""
+    st, ct = math.sin(theta), math.cos(theta)
+    sp, cp = math.sin(phi), math.cos(phi)
+    if abs(uz) > 1.0 - 1e-12:
+        return st * cp, st * sp, ct if uz > 0.0 else -ct
+    tmp = math.sqrt(1.0 - uz * uz)
+    nx = st * (ux * uz * cp - uy * sp) / tmp + ux * ct
+    ny = st * (uy * uz * cp + ux * sp) / tmp + uy * ct
+    nz = -st * cp * tmp + uz * ct
+    norm = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+    return nx * norm, ny * norm, nz * norm
+
+
+@numba.njit(cache=True, inline="always")
+def angle(ax, ay, az, bx, by, bz):
+    """Angle [rad] between two vectors (atan2 of |a x b| and a . b: exact at small angles)."""
+    cx = ay * bz - az * by
+    cy = az * bx - ax * bz
+    cz = ax * by - ay * bx
+    return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz)
+
+
+@numba.njit(cache=True)
+def aperture_point(state, px, py, pz, ap_x, ap_r, fov_tan):
+    """A point q of the aperture that sees (px, py, pz) within its field of view, and the area it stands for.
+
+    The aperture points whose field contains the point form a disc of radius pz tan(theta_r/2) around
+    (px, py); q is drawn on the smaller of that disc and the aperture, and kept if it lies in the other.
+    Returns (state, area [m^2] or 0 when q does not see the point, qx, qy).
+    """
+    rf = pz * fov_tan
+    dx, dy = px - ap_x, py
+    if dx * dx + dy * dy > (rf + ap_r) * (rf + ap_r):
+        return state, 0.0, 0.0, 0.0
+    state, u1 = uniform(state)
+    state, u2 = uniform(state)
+    rr = math.sqrt(u1)
+    ca, sa = math.cos(2.0 * math.pi * u2), math.sin(2.0 * math.pi * u2)
+    if rf < ap_r:
+        qx, qy = px + rf * rr * ca, py + rf * rr * sa
+        ex, ey = qx - ap_x, qy
+        if ex * ex + ey * ey > ap_r * ap_r:
+            return state, 0.0, 0.0, 0.0
+        return state, math.pi * rf * rf, qx, qy
+    qx, qy = ap_x + ap_r * rr * ca, ap_r * rr * sa
+    ex, ey = qx - px, qy - py
+    if ex * ex + ey * ey > rf * rf:
+        return state, 0.0, 0.0, 0.0
+    return state, math.pi * ap_r * ap_r, qx, qy
