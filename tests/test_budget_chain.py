@@ -122,12 +122,14 @@ def test_record_noise_is_dark_plus_hand_shot_plus_rounding():
 
 def test_one_pmt_one_shot_noise_draw_split_between_its_outputs():
     """Two outputs of one tube carry the same shot noise, so their residuals correlate as
-    <s_a s_b> / sqrt(<s_a^2 + 1/12> <s_b^2 + 1/12>) (shot sigmas s, rounding 1/12, no dark noise); a channel
-    of another tube does not correlate."""
+    <s_a s_b> / sqrt(<s_a^2 + 1/12> <s_b^2 + 1/12>) (shot sigmas s, rounding 1/12, no dark noise); channels
+    of other tubes (two more, so the draws of a second pair of tubes are used too) do not correlate, and each
+    carries its own tube's full shot variance."""
     base = mul2023()
     chans = (Channel("a", "pmt1", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=0.0),
              Channel("b", "pmt1", split_ratio=0.02, voltage_ratio=0.3, gain=2000.0, dark_std_lsb=0.0),
-             Channel("c", "pmt2", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=0.0))
+             Channel("c", "pmt2", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=0.0),
+             Channel("d", "pmt3", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=0.0))
     ins = replace(base, channels=chans)
     model = OpticalModel.build(ins, water_preset("pond"))
     batch = PulseBatch.flat_target(ins, np.full(300, 30.0), pulse_id=np.arange(300))
@@ -137,14 +139,15 @@ def test_one_pmt_one_shot_noise_draw_split_between_its_outputs():
     keep = (level > 200.0) & (clean[:, 0, :] < 1000.0)
     assert keep.sum() > 2000
     resid = rec.codes.astype(float) - clean
-    a, b, c = (resid[:, j, :][keep] for j in range(3))
+    a, b, c, d = (resid[:, j, :][keep] for j in range(4))
     # shot variance of an output: 2 e B_n F M xi_v R_L x 1024 per LSB of its level (CH1's value scaled by xi_v)
     s_a = np.sqrt(CH1_SHOT_LSB2_PER_LSB * (0.6 / 0.9) * level[keep])
     s_b = np.sqrt(CH1_SHOT_LSB2_PER_LSB * (0.3 / 0.9) * 0.5 * level[keep])  # half a's level
     expected = np.mean(s_a * s_b) / math.sqrt(np.mean(s_a**2 + 1 / 12) * np.mean(s_b**2 + 1 / 12))
     assert np.corrcoef(a, b)[0, 1] == pytest.approx(expected, abs=0.02)
-    assert a.var() == pytest.approx(np.mean(s_a**2 + 1 / 12), rel=0.05)
-    assert abs(np.corrcoef(a, c)[0, 1]) < 0.03
+    for other in (a, c, d):  # c and d see what a sees, through tubes of their own
+        assert other.var() == pytest.approx(np.mean(s_a**2 + 1 / 12), rel=0.05)
+    assert max(abs(np.corrcoef(a, c)[0, 1]), abs(np.corrcoef(a, d)[0, 1]), abs(np.corrcoef(c, d)[0, 1])) < 0.03
 
 
 # --- the photon budget of the study points (muls budget) ------------------------------------------------------
