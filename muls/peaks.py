@@ -34,10 +34,10 @@ class Peaks:
     range_m: Eq. 14 range from the CH0 peak; amplitude_lsb: residual over the baseline at the peak;
     snr: amplitude over the local noise; saturated: the run touched the top code; peak_power_w: the
     amplitude as optical power at the receiver [W] (Eqs. 12-13 inverted for the channel).
-    echo_index: the :class:`PulseBatch` return whose echo dominates the noise-free signal at the peak (the
-    way trimesh returns ``index_ray``), or -1 where no echo explains the peak (noise, the water column, the
-    window): the echoes together must reach half the detection threshold there, the level at which a run
-    starts.
+    echo_index: the :class:`PulseBatch` return whose echo explains the peak (the way trimesh returns
+    ``index_ray``): the most noise-free power at the peak among the echoes that can make a peak there (see
+    :func:`dominant_echo`), or -1 where no echo explains the peak (noise, the water column, the window): the
+    echoes together must reach half the detection threshold there, the level at which a run starts.
     """
 
     pulse: np.ndarray
@@ -128,28 +128,50 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes:
     power_w = amp / chans.lsb_per_w[c]  # MULS Eqs. 12-13 inverted
     # The echoes behind a peak must reach half the threshold (k sigma, sigma = amp / snr) there together.
     need_w = 0.5 * proc.threshold_sigma * (amp / snr) / chans.lsb_per_w[c]
-    echo = dominant_echo(pulse, time_s, need_w, echoes, model.basis, ins.pulse.duration_s)
+    echo = dominant_echo(pulse, time_s, need_w, echoes, model.basis, ins.pulse)
     peaks = Peaks(pulse, c, time_s, range_m[order], amp, snr, out.saturated[slot][order], power_w, echo)
     return peaks, ref_time
 
 
-def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, extent_s: float) -> np.ndarray:
-    """(n,) int64: the :class:`PulseBatch` return whose echo gives the most noise-free power at each peak
-    (``pulse`` (n,) batch index, ``time_s`` (n,) [s]), or -1 where the echoes together give less than
-    ``need_w`` (n,) [W] there (a footprint's sub-ray echoes add up: one of them alone may be faint)."""
+def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, shape) -> np.ndarray:
+    """(n,) int64: the :class:`PulseBatch` return whose echo explains each peak (``pulse`` (n,) batch index,
+    ``time_s`` (n,) [s]; ``shape`` the instrument's :class:`muls.pulse.PulseShape`), or -1 where the echoes together
+    give less than ``need_w`` (n,) [W] there (a footprint's sub-ray echoes add up: one of them alone may be faint).
+
+    The echo that explains a peak is the one giving the most noise-free power there among the echoes that can
+    make a peak there: those still rising or within half their maximum past it (:func:`fall_to_half_s`). At a
+    peak the signal's slope is zero, so an echo further down its tail, whose slope is negative, cannot have
+    made it, however much power it still gives (a clipped echo's tail 10 ns on still gives more than a weak
+    echo's peak). Where those echoes together give less than ``need_w``, the most powerful echo of all is
+    taken."""
     best = _dominant(np.asarray(pulse, np.int64), np.asarray(time_s, float), np.asarray(need_w, float),
-                     echoes.offsets, echoes.delay_s, echoes.energy_j, basis, extent_s)
+                     echoes.offsets, echoes.delay_s, echoes.energy_j, basis, shape.duration_s,
+                     shape.peak_delay_s + fall_to_half_s(shape))
     out = np.full(best.shape, -1, np.int64)
     out[best >= 0] = echoes.source[best[best >= 0]]
     return out
 
 
+def fall_to_half_s(shape) -> float:
+    """[s] Time from a pulse's maximum to half of it on its falling side (6.9 ns for the mul2023 pulse)."""
+    peak = shape.peak_delay_s
+    top = float(shape(peak))
+    lo, hi = peak, shape.duration_s
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if float(shape(mid)) > 0.5 * top else (lo, mid)
+    return 0.5 * (lo + hi) - peak
+
+
 @numba.njit(cache=True, nogil=True)
-def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent):
+def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent, making):
+    """Index into the echoes of the echo explaining each peak, -1 for none (see :func:`dominant_echo`); an echo
+    can make a peak up to ``making`` [s] after its start."""
     out = np.full(pulse.shape[0], -1, np.int64)
     for i in range(pulse.shape[0]):
         p = pulse[i]
         total, top, best = 0.0, 0.0, -1
+        near, near_top, near_best = 0.0, 0.0, -1
         for j in range(offsets[p], offsets[p + 1]):
             u = time_s[i] - delay[j]
             if 0.0 <= u < extent:
@@ -157,8 +179,12 @@ def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent):
                 total += power
                 if power > top:
                     top, best = power, j
+                if u <= making:
+                    near += power
+                    if power > near_top:
+                        near_top, near_best = power, j
         if total >= need_w[i]:
-            out[i] = best
+            out[i] = near_best if near >= need_w[i] else best
     return out
 
 

@@ -140,3 +140,22 @@ def test_a_weak_echo_on_a_strong_column_is_ranged_early_by_the_documented_amount
     points = _points(_static_scene([plate], water=water, pulses=400))
     early = -float(np.median(points.range_error_m[points.object_id >= 0]))
     assert early_m[0] < early < early_m[1]
+
+
+# -- 7. a clipped echo's tail and the next return -------------------------------------------------------------
+def test_regression_a_clipped_echos_tail_does_not_take_the_next_returns_truth():
+    """Root cause: a peak's echo (muls ``Peaks.echo_index``) was the echo giving the most noise-free power at the
+    peak time. With the staircase's top surface 1.8 m down in coastal water its echo clips every channel, and
+    10 ns on, where the 3.0 m surface's echo peaks, its tail (0.28 of its peak) still gives more power than the
+    second echo does: the second return, ranged correctly at 2.97 m, got the first surface's class, object and
+    truth, a +1.17 m range error (300 of 600 points). At a peak the signal's slope is zero, so an echo well down
+    its tail cannot have made it; the peak's echo is now the most powerful of those still rising or within half
+    their maximum past it (muls.peaks.dominant_echo). Each point of the two surfaces ranged on every pulse lies on
+    the surface it is attributed to (a few weak returns of the deepest, 10.2 m down, scatter by up to 0.3 m)."""
+    objects = _staircase(1.8, 1.2)
+    points = _points(_static_scene(objects, fidelity="reference", pulses=300))
+    ranged = (points.object_id == 0) | (points.object_id == 1)
+    surface_z = np.array([o["center_m"][2] for o in objects])
+    assert np.count_nonzero(points.object_id == 0) >= 250 and np.count_nonzero(points.object_id == 1) >= 250
+    np.testing.assert_array_less(np.abs(points.xyz[ranged, 2] - surface_z[points.object_id[ranged]]), 0.25)
+    assert np.count_nonzero(points.object_id > 1) < 10
