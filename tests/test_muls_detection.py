@@ -422,16 +422,21 @@ def test_a_shut_gate_leaves_only_dark_noise():
 
 def test_dark_noise_is_independent_per_channel_and_on_ch0():
     """Far from any signal every channel, CH0 included, reads its dark level with 1 LSB of dark noise and the
-    rounding's 1/12 LSB^2; the channels' dark noises do not correlate (only their shot noise is shared)."""
-    model = _model("pool", (150e-9, 400e-9))
+    rounding's 1/12 LSB^2; the channels' dark noises do not correlate (only their shot noise is shared). The
+    MUL gets a fourth channel (a copy of CH2) so that a second pair of dark-noise draws is used too."""
+    from dataclasses import replace
+
+    base = _model("pool", (150e-9, 400e-9))
+    ins = replace(base.instrument, channels=base.instrument.channels + (replace(base.instrument.channels[1], name="ch4"),))
+    model = OpticalModel.build(ins, base.water)
     rec, _ = simulate(model, PulseBatch.flat_target(model.instrument, np.full(300, np.inf)), seed=9, mode="full",
                       keep_noise_free=True)
     t_ns = rec.sample_times_s(model)[0] * 1e9
     quiet = t_ns > 700.0  # the pool's column has faded far below 0.01 LSB
-    resid = [rec.codes[:, j, quiet].astype(float).ravel() - 8.0 for j in range(3)]
+    resid = [rec.codes[:, j, quiet].astype(float).ravel() - 8.0 for j in range(4)]
     for r in resid:
         assert r.var() == pytest.approx(1.0 + 1.0 / 12.0, rel=0.05)
-    for a, b in ((0, 1), (0, 2), (1, 2)):
+    for a, b in ((0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3)):
         assert abs(np.corrcoef(resid[a], resid[b])[0, 1]) < 0.02
     ref_times = rec.reference_times_s(model)[0] * 1e9
     ch0 = rec.reference[:, ref_times < -2.0].astype(float).ravel() - 8.0  # before the laser fires
