@@ -85,14 +85,14 @@ def _rule(energy, delay, nodes, share):
 
 @numba.njit(cache=True, nogil=True)
 def _collapse(first, m, weight, reflectance, incidence, seen, range_m, rx_m, nodes, share, beam, rho_mean, cosine,
-              half_gap):
+              mean_range):
     """Per simple pulse (its rows ``first[i]`` to ``first[i] + m``): its two echoes' delays ``nodes`` and energy
-    ``share`` (:func:`_rule` over echo range), beam share, beam-weighted reflectance, effective cosine and the mean
-    half difference of the outgoing and return legs; ``beam`` 0 where no light comes back."""
+    ``share`` (:func:`_rule` over echo range), beam share, beam-weighted reflectance, effective cosine and
+    beam-weighted mean range; ``beam`` 0 where no light comes back."""
     energy = np.empty(m)
     tau = np.empty(m)
     for i in range(first.shape[0]):
-        total, w_sum, rho_sum, gap = 0.0, 0.0, 0.0, 0.0
+        total, w_sum, rho_sum, r_sum = 0.0, 0.0, 0.0, 0.0
         for k in range(m):
             r = first[i] + k
             energy[k] = weight[r] * reflectance[r] * math.cos(incidence[r]) * seen[r]
@@ -100,7 +100,7 @@ def _collapse(first, m, weight, reflectance, incidence, seen, range_m, rx_m, nod
             total += energy[k]
             w_sum += weight[r]
             rho_sum += weight[r] * reflectance[r]
-            gap += energy[k] * 0.5 * (range_m[r] - rx_m[r])
+            r_sum += weight[r] * range_m[r]
         if total <= 0.0:
             beam[i] = 0.0
             continue
@@ -108,7 +108,7 @@ def _collapse(first, m, weight, reflectance, incidence, seen, range_m, rx_m, nod
         beam[i] = w_sum
         rho_mean[i] = rho_sum / w_sum
         cosine[i] = min(1.0, total / rho_sum)
-        half_gap[i] = gap / total
+        mean_range[i] = r_sum / w_sum
 
 
 def collapse_simple(hits: Hits) -> Hits:
@@ -116,8 +116,9 @@ def collapse_simple(hits: Hits) -> Hits:
     no energy share (sub-ray 0, weight 0) and two echoes (sub-rays 1 and 2) of its :func:`two_point_rule` over
     echo range, weighted by energy (weight x reflectance x cosine of incidence x receiver weight, the echo
     weight of survey.pulse_batch). Each echo carries its share of the footprint's beam share, the footprint's
-    beam-weighted reflectance, and the cosine that gives it its share of the energy; its outgoing and return
-    legs keep the footprint's mean difference between them. Other pulses keep their rows. ``hits`` as
+    beam-weighted reflectance, and the cosine that gives it its share of the energy; its outgoing leg is the
+    footprint's beam-weighted mean range (where a footprint within one 5 cm bin cuts the water column,
+    fidelity.column_cuts), its return leg what makes up its delay. Other pulses keep their rows. ``hits`` as
     :func:`scanner_sim.raycast.cast_beams` gives them: pulse-major, sub-rays ascending; the result too."""
     m = hits.n_subrays
     simple = simple_pulses(hits)
@@ -125,9 +126,9 @@ def collapse_simple(hits: Hits) -> Hits:
     first = np.flatnonzero(rows)[::m]  # each simple pulse's axis row; its m rows follow
     k = first.size
     nodes, share = np.empty((k, 2)), np.empty((k, 2))
-    beam, rho_mean, cosine, half_gap = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+    beam, rho_mean, cosine, mean_range = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
     _collapse(first, m, hits.weight, hits.reflectance, hits.incidence_rad, hits.receiver_weight, hits.range_m,
-              hits.rx_distance_m, nodes, share, beam, rho_mean, cosine, half_gap)
+              hits.rx_distance_m, nodes, share, beam, rho_mean, cosine, mean_range)
     lit = beam > 0.0
     # Rows kept: every row of the other pulses; of a simple pulse its axis row, three times over if it has light.
     repeat = np.where(rows, 0, 1)
@@ -143,8 +144,8 @@ def collapse_simple(hits: Hits) -> Hits:
     out["reflectance"][at] = np.repeat(rho_mean[lit], 2)
     out["incidence_rad"][at] = np.repeat(np.arccos(cosine[lit]), 2)
     out["receiver_weight"][at] = 1.0
-    out["range_m"][at] = (nodes[lit] + half_gap[lit, None]).ravel()
-    out["rx_distance_m"][at] = (nodes[lit] - half_gap[lit, None]).ravel()
+    out["range_m"][at] = np.repeat(mean_range[lit], 2)
+    out["rx_distance_m"][at] = (2.0 * nodes[lit] - mean_range[lit, None]).ravel()
     return Hits(**out, n_pulses=hits.n_pulses, n_subrays=m)
 
 
