@@ -263,8 +263,9 @@ def _geometry(name: str) -> str:
 
 
 #: The keys ``muls multiscatter --json`` prints (the study returns more, for the picture and the table).
-MULTISCATTER_KEYS = ("time_ns", "mc_w", "mc_rel_err", "muls_w", "target", "column_peak_ratio",
-                     "effective_attenuation_per_m", "packets", "seconds")
+MULTISCATTER_KEYS = ("time_ns", "mc_w", "mc_rel_err", "muls_w", "mc_column_w", "mc_column_rel_err", "mc_target_w",
+                     "mc_target_rel_err", "target", "column_peak_ratio", "effective_attenuation_per_m", "packets",
+                     "seconds")
 
 
 def _cmd_multiscatter(args):

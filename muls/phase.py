@@ -229,6 +229,28 @@ def sample_angle(sample_theta, u):
     return sample_theta[i] + (x - i) * (sample_theta[i + 1] - sample_theta[i])
 
 
+@numba.njit(cache=True)
+def cumulative_at(sample_theta, theta):
+    """Probability of a scattering angle below ``theta`` [rad]: the exact inverse of :func:`sample_angle`.
+
+    ``sample_angle(sample_theta, u * cumulative_at(sample_theta, theta))`` for u uniform in [0, 1) draws
+    an angle from p restricted to angles below theta.
+    """
+    m = sample_theta.shape[0] - 1
+    if theta >= sample_theta[m]:
+        return 1.0
+    if theta <= sample_theta[0]:
+        return 0.0
+    lo, hi = 0, m
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if sample_theta[mid] <= theta:
+            lo = mid
+        else:
+            hi = mid
+    return (lo + (theta - sample_theta[lo]) / (sample_theta[lo + 1] - sample_theta[lo])) / m
+
+
 @numba.njit(cache=True, inline="always")
 def value_at(ln_p, ln_theta0, inv_step, theta):
     """p(theta) [1/sr] from the ln p table (linear in ln theta; clamped to the grid's ends)."""
@@ -254,4 +276,5 @@ def check_phase(phase) -> PhaseFunction:
 
 
 __all__ = ["PHASE_FUNCTIONS", "PETZOLD_ANGLES_DEG", "PETZOLD_VALUES_PER_SR", "PhaseFunction", "check_phase",
-           "fournier_forand", "henyey_greenstein", "petzold", "phase_function", "sample_angle", "value_at"]
+           "cumulative_at", "fournier_forand", "henyey_greenstein", "petzold", "phase_function", "sample_angle",
+           "value_at"]

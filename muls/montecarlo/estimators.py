@@ -5,15 +5,16 @@
   directions beyond theta_c of the incident one. q is drawn on the smaller of two discs (the aperture, or
   the disc of aperture points whose field holds the event) and A is that disc's area, which bounds the
   estimate by pi tan^2(theta_r/2) next to the window.
+- **Column, forward cone** (directions within theta_c of the incident one, where p reaches 10^3 to 10^10
+  per sr and a local estimate would be rare and unbounded): one direction drawn from p restricted to the
+  cone; if its straight flight lands in the aperture within the field of view it adds w F(theta_c)
+  exp(-c s), F the share of p inside the cone and s the flight. Its expectation is the light that leaves
+  the event inside the cone and reaches the receiver unscattered, so the two cover every direction once.
 - **Target, unscattered return** at a hit of a Lambertian plane: w (rho/pi) cos(theta_e) A cos(theta_r) /
   d^2 exp(-c d) (MULS Eq. 7 for one hit); the hit is also binned for the scattered return
   (:mod:`.reciprocity`).
 
-Arguments shared by the kernels: ``geo`` (see :mod:`.transport`), ``phase`` = (sampling table, ln p table,
-ln theta of its first point, 1 / its step), ``scene`` = (plane normal n towards the instrument, in-plane
-axes e1, e2, penetration depth of each plane (K,), grid origins (K, 3), ring edges (K, n_r + 1), grid start
-times (K,), azimuth sectors, reflectance), ``times`` = (histogram step, histogram length, grid step, grid
-length, end of the run).
+The arrays and tuples the kernels share (geo, water, times, scene, phase) are described in :mod:`.layout`.
 """
 
 from __future__ import annotations
@@ -22,33 +23,52 @@ import math
 
 import numba
 
-from ..phase import value_at
+from ..phase import cumulative_at, sample_angle, value_at
+from .layout import (
+    APERTURE_RADIUS,
+    APERTURE_X,
+    CONE_APERTURE,
+    CONE_APERTURES,
+    CONE_FOV,
+    CONE_MAX,
+    FOV_COS,
+    FOV_HALF,
+    FOV_TAN,
+    WIDE_RAD,
+)
 from .reciprocity import grid_cell
-from .sampling import angle, aperture_point
+from .sampling import angle, aperture_point, scatter, uniform
 
 
 @numba.njit(cache=True, inline="always")
 def cones(x, y, z, geo):
-    """At an event (x, y, z): the unit vector to the aperture centre, the ghost cone's half-angle and theta_c.
+    """At an event (x, y, z): the direction to the aperture centre and the cones around it and the beam.
 
-    theta_c = min(CONE_MAX_RAD, CONE_APERTURES r_ap / d): the forward cone the local estimate leaves out;
-    the ghost cone: GHOST_CONE_FOV tan(theta_r/2) + GHOST_CONE_APERTURE r_ap / d (see :mod:`.transport`).
+    Returns (unit vector to the aperture centre (3), distance d to it [m], the ghosts' aiming cone
+    alpha = CONE_FOV tan(theta_r/2) + CONE_APERTURE r_ap / d, their wide cone max(alpha, WIDE_RAD), and
+    theta_c = min(CONE_MAX, CONE_APERTURES r_ap / d), the forward cone of the estimates) [rad].
     """
-    ex, ey, ez = geo[2] - x, -y, -z
+    ex, ey, ez = geo[APERTURE_X] - x, -y, -z
     d = math.sqrt(ex * ex + ey * ey + ez * ez)
-    theta_c = min(geo[7], geo[6] * geo[3] / d)
-    alpha = min(0.5 * math.pi, geo[11] * geo[4] + geo[13] * geo[3] / d)
-    return ex / d, ey / d, ez / d, alpha, theta_c
+    theta_c = min(geo[CONE_MAX], geo[CONE_APERTURES] * geo[APERTURE_RADIUS] / d)
+    alpha = min(0.5 * math.pi, geo[CONE_FOV] * geo[FOV_TAN] + geo[CONE_APERTURE] * geo[APERTURE_RADIUS] / d)
+    return ex / d, ey / d, ez / d, d, alpha, max(alpha, geo[WIDE_RAD]), theta_c
 
 
 @numba.njit(cache=True)
 def column_estimate(state, batch, world, first_order, x, y, z, dx, dy, dz, w, t, theta_c, geo, c, speed, phase,
                     times, column, column1):
-    """Local estimate of a scattering event towards the aperture, for directions beyond theta_c.
+    """Light a scattering event sends to the receiver unscattered: local estimate beyond theta_c, forward cone.
 
-    Adds to column[batch, world] (and column1 for a first scattering) at the arrival time bin.
+    (dx, dy, dz): the incident direction; w [1]: the weight; t [s]: the time of the event. Adds to
+    column[batch, world] (and column1 for a first scattering) at the arrival time bins.
     """
-    state, area, qx, qy = aperture_point(state, x, y, z, geo[2], geo[3], geo[4])
+    ap_x, ap_r = geo[APERTURE_X], geo[APERTURE_RADIUS]
+    rf = z * geo[FOV_TAN]
+    if (x - ap_x) * (x - ap_x) + y * y > (rf + ap_r) * (rf + ap_r):
+        return state  # no aperture point has the event in its field of view
+    dt, n_t = times[0], int(times[1])
+    state, area, qx, qy = aperture_point(state, x, y, z, ap_x, ap_r, geo[FOV_TAN])
     if area > 0.0:
         vx, vy, vz = qx - x, qy - y, -z
         d = math.sqrt(vx * vx + vy * vy + vz * vz)
@@ -56,11 +76,26 @@ def column_estimate(state, batch, world, first_order, x, y, z, dx, dy, dz, w, t,
         if theta >= theta_c:
             # local estimate: w p(Theta) A cos(theta_r) / d^2 exp(-c d) (MULS Eq. 4 for one event)
             est = w * value_at(phase[1], phase[2], phase[3], theta) * area * (z / d) / (d * d) * math.exp(-c * d)
-            i = int((t + d / speed) / times[0])
-            if i < int(times[1]):
+            i = int((t + d / speed) / dt)
+            if i < n_t:
                 column[batch, world, i] += est
                 if first_order:
                     column1[batch, world, i] += est
+    if -dz >= math.cos(geo[FOV_HALF] + theta_c):  # else no direction of the cone is inside the field of view
+        f = cumulative_at(phase[0], theta_c)
+        state, u1 = uniform(state)
+        state, u2 = uniform(state)
+        fx, fy, fz = scatter(dx, dy, dz, sample_angle(phase[0], u1 * f), 2.0 * math.pi * u2)
+        if -fz >= geo[FOV_COS]:
+            s = -z / fz
+            hx, hy = x + s * fx - ap_x, y + s * fy
+            if hx * hx + hy * hy <= ap_r * ap_r:
+                est = w * f * math.exp(-c * s)  # the cone's share of p, unscattered over s
+                i = int((t + s / speed) / dt)
+                if i < n_t:
+                    column[batch, world, i] += est
+                    if first_order:
+                        column1[batch, world, i] += est
     return state
 
 
@@ -72,7 +107,7 @@ def target_hit(state, batch, k, x, y, z, t, w, direct, geo, c, speed, scene, tim
     scattered either); hits (B, K, cells, G): (rho/pi) w by receiver-field cell and grid time.
     """
     n, e1, e2, _, origin, edges, grid_start, n_phi, reflectance = scene
-    state, area, qx, qy = aperture_point(state, x, y, z, geo[2], geo[3], geo[4])
+    state, area, qx, qy = aperture_point(state, x, y, z, geo[APERTURE_X], geo[APERTURE_RADIUS], geo[FOV_TAN])
     if area > 0.0:
         vx, vy, vz = qx - x, qy - y, -z
         d = math.sqrt(vx * vx + vy * vy + vz * vz)

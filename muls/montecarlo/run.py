@@ -21,6 +21,7 @@ from ..instrument import Instrument
 from ..phase import PhaseFunction, check_phase
 from ..water import Water
 from . import transport
+from .layout import geo_vector
 from .reciprocity import GRID_TIME_STEP_S, TILTED_SECTORS, ring_edges, scattered_return
 
 #: Time step of the Monte Carlo histograms [s] (the digitiser samples at 1 ns).
@@ -156,15 +157,16 @@ def run_monte_carlo(instrument: Instrument, water: Water, targets: TargetPlanes 
                     phase: str | PhaseFunction = "petzold", packets: int = 200_000,
                     receiver_packets: int | None = None, seed: int = 0, batches: int = BATCHES,
                     time_step_s: float = TIME_STEP_S, tail_s: float = TAIL_S,
-                    end_s: float | None = None, peak_truncation_rad: float = 0.0,
-                    cone_apertures: float = transport.CONE_APERTURES, cone_max_rad: float = transport.CONE_MAX_RAD,
-                    ghosts: bool = True, first_packet: int = 0) -> MonteCarloResult:
+                    end_s: float | None = None, peak_truncation_rad: float = 0.0, devices: dict | None = None,
+                    first_packet: int = 0) -> MonteCarloResult:
     """Trace ``packets`` beam packets (and ``receiver_packets``, default a quarter as many, from the receiver).
 
     instrument: its beam diameter and divergence, aperture area, offset and field of view are used;
     water: a, b and its group velocity; phase: a :class:`muls.phase.PhaseFunction` or its name;
     end_s: end of the simulated time [s] (default: the farthest target's echo plus ``tail_s``; required
-    without targets). Packets are rounded up to a multiple of ``batches``.
+    without targets); devices: changes to the variance-reduction settings
+    :data:`muls.montecarlo.transport.DEVICES` (e.g. ``{"ghosts": False}``, for tests of the estimators).
+    Packets are rounded up to a multiple of ``batches``.
     """
     phase = check_phase(phase)
     if isinstance(batches, bool) or int(batches) != batches or batches < 2:
@@ -190,10 +192,8 @@ def run_monte_carlo(instrument: Instrument, water: Water, targets: TargetPlanes 
     g = instrument.geometry
     r_ap = 0.5 * g.receiver_diameter_m
     half = 0.5 * g.fov_full_rad
-    geo = np.array([0.5 * g.beam_diameter_m, math.tan(0.5 * g.beam_divergence_full_rad), g.offset_m, r_ap,
-                    math.tan(half), math.cos(half), cone_apertures, cone_max_rad, 1.0 if ghosts else 0.0,
-                    transport.GHOST_MIX, transport.GHOST_SURVIVAL, transport.GHOST_CONE_FOV, 0.0,
-                    transport.GHOST_CONE_APERTURE])
+    geo = geo_vector(g.beam_diameter_m, g.beam_divergence_full_rad, g.offset_m, r_ap, g.fov_full_rad,
+                     transport.devices(**(devices or {})))
     b = water.scattering_per_m
     if peak_truncation_rad > 0.0:
         b *= 1.0 - phase.forward_fraction(peak_truncation_rad)
@@ -227,7 +227,7 @@ def run_monte_carlo(instrument: Instrument, water: Water, targets: TargetPlanes 
     field_r = np.zeros((batches, K, cells, n_g))
     t0 = time.perf_counter()
     transport.trace_beam(key, first_packet, packets, geo, wat, scene, tables, times,
-                         (column, column1, target, target_direct, hits, counted, energy))
+                         (column, column1, target, target_direct, hits, counted, energy), transport.split_stack(batches))
     if K:
         transport.trace_receiver(key, first_packet, receiver_packets, geo, wat, scene, phase.sample_theta_rad, times,
                                  field_r)

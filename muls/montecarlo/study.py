@@ -22,7 +22,7 @@ from .run import TargetPlanes, run_monte_carlo
 
 #: Beam packets of ``muls multiscatter`` by default: the pond at 10 m then has every bin within 100 times
 #: of the column's and of the echo's peak below 5 % relative error (docs/multiple-scattering.md).
-DEFAULT_PACKETS = 4_000_000
+DEFAULT_PACKETS = 2_000_000
 
 
 def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geometry: str = "mul2023",
@@ -33,8 +33,9 @@ def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geome
     water: preset name or Water (MULS uses it as configured: its attenuation and backscatter rules, the
     attenuation replaced by ``attenuation_model`` when given); geometry: ``mul2023`` (receiver 130 mm beside
     the beam) or ``coaxial``. Returns the keys of the JSON output (``time_ns``, ``mc_w``, ``mc_rel_err``,
-    ``muls_w``, ``target``, ``column_peak_ratio``, ``effective_attenuation_per_m``, ``packets``, ``seconds``)
-    and ``details`` (parts, rules, budget).
+    ``muls_w``, the Monte Carlo's column and target apart (``mc_column_w``, ``mc_column_rel_err``,
+    ``mc_target_w``, ``mc_target_rel_err``), ``target``, ``column_peak_ratio``,
+    ``effective_attenuation_per_m``, ``packets``, ``seconds``) and ``details`` (parts, rules, budget).
     """
     w = water if isinstance(water, Water) else water_preset(water)
     if attenuation_model is not None:
@@ -65,8 +66,12 @@ def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geome
     return {
         "time_ns": _round(t * 1e9, 4),
         "mc_w": _round(total),
-        "mc_rel_err": [None if v <= 0.0 else round(float(e / v), 5) for v, e in zip(total, total_err)],
+        "mc_rel_err": _relative(total, total_err),
         "muls_w": _round(muls_total),
+        "mc_column_w": _round(col_mc),
+        "mc_column_rel_err": _relative(col_mc, mc["column"][1][keep]),
+        "mc_target_w": _round(mc["target"][0][keep]),
+        "mc_target_rel_err": _relative(mc["target"][0][keep], mc["target"][1][keep]),
         "target": {"mc_energy_j": mc_energy, "muls_energy_j": muls["target_energy_j"],
                    "ratio": mc_energy / muls["target_energy_j"] if muls["target_energy_j"] > 0 else None},
         "column_peak_ratio": float(col_mc.max() / col_muls.max()) if col_muls.max() > 0 else None,
@@ -89,6 +94,11 @@ def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geome
             "energy_budget": result.energy,
         },
     }
+
+
+def _relative(mean, err) -> list:
+    """Standard error over the value per bin (None where the value is 0)."""
+    return [None if v <= 0.0 else round(float(e / v), 5) for v, e in zip(mean, err)]
 
 
 def _round(a, digits: int | None = None) -> list:
