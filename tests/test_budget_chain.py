@@ -124,11 +124,11 @@ def test_one_pmt_one_shot_noise_draw_split_between_its_outputs():
     """Two outputs of one tube carry the same shot noise, so their residuals correlate as
     <s_a s_b> / sqrt(<s_a^2 + 1/12> <s_b^2 + 1/12>) (shot sigmas s, rounding 1/12, no dark noise); channels
     of other tubes (two more, so the draws of a second pair of tubes are used too) do not correlate, and each
-    carries its own tube's full shot variance."""
+    carries its own tube's full shot variance, independent of the channels' dark noise (c has 1 LSB of it)."""
     base = mul2023()
     chans = (Channel("a", "pmt1", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=0.0),
              Channel("b", "pmt1", split_ratio=0.02, voltage_ratio=0.3, gain=2000.0, dark_std_lsb=0.0),
-             Channel("c", "pmt2", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=0.0),
+             Channel("c", "pmt2", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=1.0),
              Channel("d", "pmt3", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=0.0))
     ins = replace(base, channels=chans)
     model = OpticalModel.build(ins, water_preset("pond"))
@@ -145,8 +145,8 @@ def test_one_pmt_one_shot_noise_draw_split_between_its_outputs():
     s_b = np.sqrt(CH1_SHOT_LSB2_PER_LSB * (0.3 / 0.9) * 0.5 * level[keep])  # half a's level
     expected = np.mean(s_a * s_b) / math.sqrt(np.mean(s_a**2 + 1 / 12) * np.mean(s_b**2 + 1 / 12))
     assert np.corrcoef(a, b)[0, 1] == pytest.approx(expected, abs=0.02)
-    for other in (a, c, d):  # c and d see what a sees, through tubes of their own
-        assert other.var() == pytest.approx(np.mean(s_a**2 + 1 / 12), rel=0.05)
+    for other, dark in ((a, 0.0), (c, 1.0), (d, 0.0)):  # c and d see what a sees, through tubes of their own
+        assert other.var() == pytest.approx(np.mean(s_a**2 + 1 / 12) + dark, rel=0.05)
     assert max(abs(np.corrcoef(a, c)[0, 1]), abs(np.corrcoef(a, d)[0, 1]), abs(np.corrcoef(c, d)[0, 1])) < 0.03
 
 

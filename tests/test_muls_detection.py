@@ -392,6 +392,8 @@ def test_regression_windowed_records_hold_chained_echoes_whole(near_m, gap_ns):
     assert np.array_equal(windowed.peaks.channel, full.peaks.channel)
     assert np.allclose(windowed.peaks.range_m, full.peaks.range_m, rtol=0, atol=1e-9)
     assert records.window_pulse.size == n  # one window per pulse: the two echoes chain
+    # and that window runs from 8 ns before the first echo to 56 ns after the second one's start, no further
+    assert 64 + gap_ns <= records.codes.shape[2] <= 65 + gap_ns
 
 
 @pytest.mark.parametrize("peak_fit", ["pulse", "sample_maximum"])
@@ -436,8 +438,9 @@ def test_a_shut_gate_leaves_only_dark_noise():
 
 def test_dark_noise_is_independent_per_channel_and_on_ch0():
     """Far from any signal every channel, CH0 included, reads its dark level with 1 LSB of dark noise and the
-    rounding's 1/12 LSB^2; the channels' dark noises do not correlate (only their shot noise is shared). The
-    MUL gets a fourth channel (a copy of CH2) so that a second pair of dark-noise draws is used too."""
+    rounding's 1/12 LSB^2; the channels' dark noises do not correlate with each other or with CH0's at the same
+    sample (only their shot noise is shared). The MUL gets a fourth channel (a copy of CH2) so that a second
+    pair of dark-noise draws is used too."""
     from dataclasses import replace
 
     base = _model("pool", (150e-9, 400e-9))
@@ -455,6 +458,9 @@ def test_dark_noise_is_independent_per_channel_and_on_ch0():
     ref_times = rec.reference_times_s(model)[0] * 1e9
     ch0 = rec.reference[:, ref_times < -2.0].astype(float).ravel() - 8.0  # before the laser fires
     assert ch0.size > 3000 and ch0.var() == pytest.approx(1.0 + 1.0 / 12.0, rel=0.08)
+    ch0_late = rec.reference[:, quiet].astype(float).ravel() - 8.0  # CH0 long after the emitted pulse
+    for r in resid:
+        assert abs(np.corrcoef(ch0_late, r)[0, 1]) < 0.02
 
 
 def test_sample_and_reference_times_are_the_free_running_clock():
