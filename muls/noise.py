@@ -83,12 +83,18 @@ def _inverse_normal_cdf(p):
 
 
 @numba.njit(cache=True, inline="always")
+def centred_unit(bits32):
+    """A 32-bit integer k to (k + 1/2) / 2^32: the centres of 2^32 equal cells of (0, 1), never 0 or 1 and
+    symmetric about 1/2 (k and 2^32 - 1 - k give p and 1 - p), so the normals are finite and symmetric."""
+    return (float(bits32) + 0.5) * _INV_2_32
+
+
+@numba.njit(cache=True, inline="always")
 def normal_pair_at(base, index):
     """Two independent standard normals at position ``index`` of a stream (one per 32-bit half, |x| < 6.3)."""
     h = splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
-    u1 = (float(h >> np.uint64(32)) + 0.5) * _INV_2_32
-    u2 = (float(h & np.uint64(0xFFFFFFFF)) + 0.5) * _INV_2_32
-    return _inverse_normal_cdf(u1), _inverse_normal_cdf(u2)
+    return (_inverse_normal_cdf(centred_unit(h >> np.uint64(32))),
+            _inverse_normal_cdf(centred_unit(h & np.uint64(0xFFFFFFFF))))
 
 
 @numba.njit(cache=True, inline="always")

@@ -45,6 +45,18 @@ def test_inverse_normal_cdf_is_the_exact_one_to_acklams_accuracy_tails_included(
     np.testing.assert_allclose(x, ndtri(p), rtol=1.2e-9, atol=1e-12)
 
 
+def test_the_uniforms_behind_the_normals_stay_inside_0_1_and_are_symmetric():
+    """Each 32-bit half of a draw maps to the centre of one of 2^32 equal cells of (0, 1): the extreme halves
+    give 2^-33 and 1 - 2^-33 (never 0 or 1, where the inverse normal CDF is infinite), and k and 2^32 - 1 - k
+    give p and 1 - p exactly, so the normals are symmetric. Cases sampling cannot reach (4e9 draws apart)."""
+    from muls.noise import centred_unit
+
+    top = 2**32 - 1
+    assert centred_unit(np.uint64(0)) == 2.0**-33 and centred_unit(np.uint64(top)) == 1.0 - 2.0**-33
+    for k in (0, 1, 12345, 2**31 - 1, top):
+        assert centred_unit(np.uint64(k)) + centred_unit(np.uint64(top - k)) == 1.0
+
+
 def test_quantisation_rounds_and_clipping_saturates():
     model = _model()
     batch = PulseBatch.flat_target(model.instrument, [3.0, 25.0])
