@@ -17,8 +17,9 @@ import numpy as np
 
 # Positions in ``geo``.
 (BEAM_RADIUS, BEAM_SLOPE, APERTURE_X, APERTURE_RADIUS, FOV_TAN, FOV_COS, FOV_HALF, CONE_APERTURES, CONE_MAX,
- GHOSTS_ON, MIX_P, MIX_WIDE, WIDE_RAD, SURVIVAL, CONE_FOV, CONE_APERTURE, GHOST_LENGTH, SPLIT_MAX) = range(18)
-GEO_SIZE = 18
+ GHOSTS_ON, MIX_P, MIX_WIDE, WIDE_RAD, SURVIVAL, CONE_FOV, CONE_APERTURE, GHOST_LENGTH, SPLIT_MAX,
+ SPLIT_REACH) = range(19)
+GEO_SIZE = 19
 
 
 def geo_vector(beam_diameter_m: float, beam_divergence_full_rad: float, offset_m: float, aperture_radius_m: float,
@@ -44,4 +45,5 @@ def geo_vector(beam_diameter_m: float, beam_divergence_full_rad: float, offset_m
     geo[CONE_APERTURE] = devices["ghost_cone_aperture"]
     geo[GHOST_LENGTH] = devices["ghost_length_m"]
     geo[SPLIT_MAX] = devices["split_max"]
+    geo[SPLIT_REACH] = devices["split_reach_m"]
     return geo

@@ -117,7 +117,7 @@ CHECK_RANGES_M = (2.125, 2.625, 3.25, 6.0, 8.75, 17.5)
 DETECTION_FACTORS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
 ATTENUATION_RULES = ("k_lidar", "c", "kd", "small_angle")
 #: Beam packets per water of the study by default (docs/multiple-scattering.md gives the errors).
-STUDY_PACKETS = 600_000
+STUDY_PACKETS = 400_000
 
 
 def _detection_range(ranges, mc_peak, level):

@@ -17,18 +17,20 @@ ghosts take over the light scattered into a wide cone around the direction to th
   the aperture stays in the receiver's view). Directions outside the wide cone are dropped; a ghost's
   weight is w p / (mixture density), at most w / ``ghost_mix``. (Keys of :data:`DEVICES`.)
 - **How many.** An event at distance d from the aperture sends n = min(GHOST_MAX_PER_EVENT,
-  max(1, floor(``ghost_length_m`` / d))) ghosts of weight 1/n each: a ghost's path is about d long, so each
-  event gets about the same tracing effort, and the near field, where the column rises, more samples.
+  max(1, floor(``ghost_length_m`` / d))) ghosts, each with 1/n of the weight: a ghost's path is about d
+  long, so near events get more samples for little time, and the near field is where the column rises.
 - **The packet** still scatters by p; if it goes into the wide cone it stops estimating (that share
   belongs to the ghosts) but is still traced for the energy budget and for counting.
 - **A ghost** makes every estimate a packet makes, spawns no ghost, ends at the farthest target, and
   survives each scattering out of the wide cone with probability ``ghost_survival`` (Russian roulette,
   weight divided by it).
 - **Splitting.** A ghost's excess is its weight over that of a ghost sent straight at the aperture from
-  the same event (1 for most; about 30 for the wide cone's, more after roulette). Whenever a ghost is
-  aimed at the aperture (inside the aiming cone) with an excess of 2 or more, it is split into
-  min(floor(excess), ``split_max``) copies of equal weight, each traced on its own stream: the rare
-  heavy ghost that finds the aperture no longer brings one large estimate but many small ones.
+  the same event (1 for most; about 30 for the wide cone's in the MUL's geometry, more after roulette).
+  Whenever a ghost within ``split_reach_m`` of the aperture is aimed at it (inside the aiming cone) with an
+  excess of 2 or more, it is split into min(floor(excess), ``split_max``) copies of equal weight, each
+  traced on its own stream: the rare heavy ghost that finds the aperture no longer brings one large
+  estimate but many small ones. Farther out copies would only sharpen bins more than 100 times below the
+  column's peak in the turbid waters where splitting matters (8 m is 72 ns), at the cost of tracing them.
 
 Russian roulette and splitting keep every estimator unbiased; ghosts and packets together count every
 path once.
@@ -57,6 +59,7 @@ from .layout import (
     MIX_P,
     MIX_WIDE,
     SPLIT_MAX,
+    SPLIT_REACH,
     SURVIVAL,
 )
 from .reciprocity import grid_cell
@@ -77,6 +80,7 @@ DEVICES = {
     "ghost_cone_aperture": 4.0,
     "ghost_length_m": 2.0,  # ghosts per event: floor(ghost_length_m / d), at least 1
     "split_max": 32,  # most copies of one split (1: no splitting)
+    "split_reach_m": 8.0,  # split only within this distance of the aperture [m] (0: anywhere)
 }
 #: Most ghosts one event sends.
 GHOST_MAX_PER_EVENT = 16
@@ -104,6 +108,7 @@ def devices(**changes) -> dict:
     for key in ("cone_apertures", "cone_max_rad", "ghost_cone_fov", "ghost_cone_aperture"):
         check_positive(key, out[key])
     check_non_negative("ghost_length_m", out["ghost_length_m"])
+    check_non_negative("split_reach_m", out["split_reach_m"])
     if isinstance(out["split_max"], bool) or int(out["split_max"]) != out["split_max"] or out["split_max"] < 1:
         raise ParameterError(f"split_max = {out['split_max']!r}: must be an integer >= 1")
     return out
@@ -184,7 +189,7 @@ def ghost_path(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, excess, geo
         z += step * dz
         t += step / speed
         n_scat += 1
-        ax, ay, az, _, alpha, alpha_w, theta_c = cones(x, y, z, geo)
+        ax, ay, az, d, alpha, alpha_w, theta_c = cones(x, y, z, geo)
         state = column_estimate(state, batch, nxt, n_scat == 1, x, y, z, dx, dy, dz, w, t, theta_c, geo, c, speed,
                                 phase, times, tallies[0], tallies[1])
         state, dx, dy, dz = turn(state, dx, dy, dz, phase[0])
@@ -196,7 +201,7 @@ def ghost_path(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, excess, geo
             w /= geo[SURVIVAL]
             excess /= geo[SURVIVAL]
         aimed = off <= alpha
-        if aimed and excess >= 2.0:
+        if aimed and excess >= 2.0 and (geo[SPLIT_REACH] == 0.0 or d < geo[SPLIT_REACH]):
             copies = min(int(excess), int(geo[SPLIT_MAX]), fields.shape[1] - top + 1)
             if copies >= 2:
                 w /= copies
