@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from muls.errors import ParameterError
@@ -80,20 +81,59 @@ def column_cuts(pulse_index: np.ndarray, range_m: np.ndarray, weight: np.ndarray
         mean_range = np.divide(mean_range, hit_share, out=np.full(n_pulses, np.inf), where=hit_share > 0)
         cuts = np.stack([mean_range, np.full(n_pulses, np.inf)], axis=1)
         return cuts, np.clip(np.stack([hit_share, miss], axis=1), 0.0, 1.0)
-    bins = np.round(np.asarray(range_m) / SUBRAY_CUT_BIN_M).astype(np.int64)
-    order = np.lexsort((bins, pulse_index))
-    p, b = pulse_index[order], bins[order]
-    new = np.ones(p.size, bool)
-    new[1:] = (p[1:] != p[:-1]) | (b[1:] != b[:-1])
-    group = np.cumsum(new) - 1
-    share = np.bincount(group, weights=weight[order])
-    at = np.bincount(group, weights=(weight * range_m)[order]) / np.where(share > 0, share, 1.0)
-    owner = p[new]
-    first = np.searchsorted(owner, owner, "left")
-    column = np.arange(owner.size) - first  # rank of the cut within its pulse
-    k = int(column.max()) + 2 if owner.size else 1
-    cuts = np.full((n_pulses, k), np.inf)
-    shares = np.zeros((n_pulses, k))
-    cuts[owner, column], shares[owner, column] = at, share
+    cuts, shares = _subray_cuts(np.asarray(pulse_index, np.int64), np.asarray(range_m, np.float64),
+                                np.asarray(weight, np.float64), n_pulses, SUBRAY_CUT_BIN_M)
     shares[:, -1] = miss
     return cuts, np.clip(shares, 0.0, 1.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _subray_cuts(pulse_index, range_m, weight, n_pulses, bin_m):
+    """Per pulse, the hits grouped by range bin (rounded half to even), bins ascending: (cuts (n_pulses, k) [m],
+    shares (n_pulses, k)), a group's cut the weighted mean range of its hits, its share their summed weight; the
+    last column is left for the caller. Sums run in hit order, the order a stable sort would leave them in."""
+    h = pulse_index.shape[0]
+    start = np.zeros(n_pulses + 1, np.int64)
+    for i in range(h):
+        start[pulse_index[i] + 1] += 1
+    for p in range(n_pulses):
+        start[p + 1] += start[p]
+    order = np.empty(h, np.int64)  # hits by pulse, in hit order within a pulse (a counting sort)
+    fill = start[:-1].copy()
+    for i in range(h):
+        order[fill[pulse_index[i]]] = i
+        fill[pulse_index[i]] += 1
+    widest = 0
+    for p in range(n_pulses):
+        widest = max(widest, start[p + 1] - start[p])
+    bins = np.empty(widest, np.int64)  # one pulse's distinct bins, ascending
+    share = np.empty(widest)
+    moment = np.empty(widest)
+    group_cut = np.full((n_pulses, widest), np.inf)
+    group_share = np.zeros((n_pulses, widest))
+    n_groups = np.zeros(n_pulses, np.int64)
+    for p in range(n_pulses):
+        m = 0
+        for j in range(start[p], start[p + 1]):
+            i = order[j]
+            b = np.int64(np.rint(range_m[i] / bin_m))
+            g = 0
+            while g < m and bins[g] < b:
+                g += 1
+            if g == m or bins[g] != b:  # a new bin: open its group at g
+                for q in range(m, g, -1):
+                    bins[q], share[q], moment[q] = bins[q - 1], share[q - 1], moment[q - 1]
+                bins[g], share[g], moment[g] = b, 0.0, 0.0
+                m += 1
+            share[g] += weight[i]
+            moment[g] += weight[i] * range_m[i]
+        for g in range(m):
+            group_cut[p, g] = moment[g] / (share[g] if share[g] > 0.0 else 1.0)
+            group_share[p, g] = share[g]
+        n_groups[p] = m
+    k = n_groups.max() + 1 if h else 1
+    cuts = np.full((n_pulses, k), np.inf)
+    shares = np.zeros((n_pulses, k))
+    cuts[:, : k - 1] = group_cut[:, : k - 1]
+    shares[:, : k - 1] = group_share[:, : k - 1]
+    return cuts, shares

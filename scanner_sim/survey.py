@@ -217,12 +217,12 @@ def pulse_batch(hits: Hits, slots: np.ndarray, model: OpticalModel, background_r
     n = slots.shape[0]
     echo_range = hit_echo_range_m(hits)
     weight = hits.weight * hits.reflectance / np.pi * np.cos(hits.incidence_rad) * hits.receiver_weight
-    hit_share = np.bincount(hits.pulse_index, weights=hits.weight, minlength=n)
-    mean_range = np.bincount(hits.pulse_index, weights=hits.weight * hits.range_m, minlength=n)
-    mean_range = np.divide(mean_range, hit_share, out=np.full(n, np.inf), where=hit_share > 0)
     cuts, shares = column_cuts(hits.pulse_index, hits.range_m, hits.weight, n, column_cut)
     background = np.zeros(n)
     if background_radiance > 0.0:
+        hit_share = np.bincount(hits.pulse_index, weights=hits.weight, minlength=n)
+        mean_range = np.bincount(hits.pulse_index, weights=hits.weight * hits.range_m, minlength=n)
+        mean_range = np.divide(mean_range, hit_share, out=np.full(n, np.inf), where=hit_share > 0)
         rho = np.bincount(hits.pulse_index, weights=hits.weight * hits.reflectance, minlength=n)
         rho = np.divide(rho, hit_share, out=np.zeros(n), where=hit_share > 0)
         background = background_power_w(model.instrument, model.water, background_radiance, mean_range, rho)

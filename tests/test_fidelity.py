@@ -39,3 +39,13 @@ def test_one_surface_gives_the_same_column_whichever_the_cut():
 def test_an_unknown_cut_is_refused_naming_the_choices():
     with pytest.raises(ParameterError, match="column_cut = 'beam'.*'pulse', 'subray'"):
         column_cuts(np.zeros(0, np.int64), np.zeros(0), np.zeros(0), 1, "beam")
+
+
+def test_per_subray_cuts_do_not_need_the_hits_sorted_by_pulse():
+    """Hits of three pulses interleaved (an adaptive pass reorders its rows): each pulse's cuts come out in
+    range order with its own shares. Pulse 2: 0.1 at 7 m, 0.1 and 0.2 at 3 m (one cut), 0.6 misses; pulse 0
+    nothing; pulse 1: 1.0 at 4 m."""
+    cuts, shares = column_cuts(np.array([2, 1, 2, 2]), np.array([7.0, 4.0, 3.0, 3.0]),
+                               np.array([0.1, 1.0, 0.1, 0.2]), 3, "subray")
+    np.testing.assert_allclose(cuts, [[np.inf] * 3, [4.0, np.inf, np.inf], [3.0, 7.0, np.inf]])
+    np.testing.assert_allclose(shares, [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.3, 0.1, 0.6]], atol=1e-15)
