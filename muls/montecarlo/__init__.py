@@ -5,14 +5,17 @@ scattering into an attenuation coefficient (Eq. 6). This package traces photon p
 instead, with the instrument's own beam, aperture, offset and field of view, and says where the lidar
 equation holds and by how much it misses (docs/multiple-scattering.md).
 
-- :mod:`.sampling`: per-packet random streams, directions, aperture points (compiled);
+- :mod:`.layout`: the settings the compiled kernels share, as arrays with named positions;
+- :mod:`.sampling`: per-packet random streams, free paths, directions, aperture points (compiled);
 - :mod:`.estimators`: what a scattering event and a target hit send to the receiver (compiled);
-- :mod:`.transport`: beam packets with their ghosts, receiver packets (compiled);
-- :mod:`.reciprocity`: the target's scattered return from the receiver's field;
+- :mod:`.transport`: beam packets and their ghosts, and the variance-reduction settings (compiled);
+- :mod:`.reciprocity`: the target's scattered return: receiver packets (compiled), the receiver's field
+  on the target planes, its convolution with the beam hits;
 - :mod:`.run`: :class:`TargetPlanes`, :func:`run_monte_carlo`, :class:`MonteCarloResult`;
 - :mod:`.power`: tallies as received power through the pulse and optics, beside MULS's;
 - :mod:`.correction`: :class:`MultipleScatteringCorrection`, the tabulated correction;
-- :mod:`.study`: ``muls multiscatter`` (one plate) and ``muls multiscatter-study`` (waters and ranges).
+- :mod:`.study`: ``muls multiscatter`` (one plate) and ``muls multiscatter-study`` (waters and ranges);
+- :mod:`.check`: the acceptance check of ``muls multiscatter --json`` (``python3 -m muls.montecarlo.check``).
 """
 
 from .correction import MultipleScatteringCorrection

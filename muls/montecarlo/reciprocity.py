@@ -7,7 +7,8 @@ the aperture (uniform over it, uniform in projected solid angle within the field
 the etendue A pi sin^2(theta_r/2)), and where the scattered ones first reach a plane they give the
 receiver's field E_R(x, t2) on a radial grid around the receiver axis (with azimuth sectors when the plane
 is tilted). A Lambertian patch of radiance L delivers L E_R dA to the detector, so a beam hit of weight w
-at time t1 adds w (rho/pi) E_R(x, t - t1): the two grids are convolved in time here.
+at time t1 adds w (rho/pi) E_R(x, t - t1): the two grids are convolved in time here. The receiver packets
+are traced here (compiled); the beam hits come from :mod:`.transport`.
 """
 
 from __future__ import annotations
@@ -16,6 +17,9 @@ import math
 
 import numba
 import numpy as np
+
+from .layout import APERTURE_RADIUS, APERTURE_X, FOV_TAN
+from .sampling import flight, packet_stream, turn, uniform
 
 #: Time step of the reciprocity grids (beam hits, receiver field) [s].
 GRID_TIME_STEP_S = 1e-9
@@ -63,6 +67,65 @@ def grid_cell(k, x, y, z, origin, e1, e2, edges, n_phi):
     f = (math.atan2(v, u) + math.pi) / (2.0 * math.pi)
     j = min(int(f * n_phi), n_phi - 1)
     return lo * n_phi + j
+
+
+@numba.njit(cache=True, parallel=True)
+def trace_receiver(seed_key, first_packet, n_packets, geo, water, scene, sample_theta, times, field):
+    """Trace receiver packets (unit weight each) to the planes; tally the scattered ones' first arrivals.
+
+    field (B, K, cells, G): sum of packet weights over the cell's area [1/m^2] by arrival time from the
+    grid start of plane k; the caller scales by the etendue per packet.
+    """
+    n, e1, e2, depth, origin, edges, grid_start, n_phi, _ = scene
+    n_batches = field.shape[0]
+    n_planes = depth.shape[0]
+    ap_x, ap_r, fov_tan = geo[APERTURE_X], geo[APERTURE_RADIUS], geo[FOV_TAN]
+    a, b, speed = water[0], water[1], water[3]
+    gdt, n_g = times[2], int(times[3])
+    t_end = grid_start[n_planes - 1] + n_g * gdt
+    sin2 = fov_tan * fov_tan / (1.0 + fov_tan * fov_tan)
+    for batch in numba.prange(n_batches):
+        first = batch * n_packets // n_batches
+        last = (batch + 1) * n_packets // n_batches
+        for pid in range(first_packet + first, first_packet + last):
+            state = packet_stream(seed_key, 1, pid)
+            state, u1 = uniform(state)
+            state, u2 = uniform(state)
+            state, u3 = uniform(state)
+            state, u4 = uniform(state)
+            rr = ap_r * math.sqrt(u1)
+            x, y, z = ap_x + rr * math.cos(2.0 * math.pi * u2), rr * math.sin(2.0 * math.pi * u2), 0.0
+            st = math.sqrt(u3 * sin2)  # uniform in projected solid angle within the field of view
+            ct = math.sqrt(1.0 - st * st)
+            dx, dy, dz = st * math.cos(2.0 * math.pi * u4), st * math.sin(2.0 * math.pi * u4), ct
+            w, t = 1.0, 0.0
+            n_scat = 0
+            nxt = 0
+            while True:
+                state, s_free, s_time, s_exit, sd, sp = flight(state, x, y, z, dx, dy, dz, t, b, speed, t_end, n)
+                step = min(s_free, s_time, s_exit)
+                while nxt < n_planes and sd > 0.0 and sp + sd * step >= depth[nxt]:
+                    sk = max(0.0, (depth[nxt] - sp) / sd)
+                    if n_scat > 0:
+                        hx, hy, hz = x + sk * dx, y + sk * dy, z + sk * dz
+                        cell = grid_cell(nxt, hx, hy, hz, origin, e1, e2, edges, n_phi)
+                        j = int(math.floor((t + sk / speed - grid_start[nxt]) / gdt))
+                        if cell >= 0 and 0 <= j < n_g:
+                            ring = cell // n_phi
+                            ring_area = math.pi * (edges[nxt, ring + 1] ** 2 - edges[nxt, ring] ** 2) / n_phi
+                            field[batch, nxt, cell, j] += w * math.exp(-a * sk) / ring_area
+                    nxt += 1
+                if nxt >= n_planes:
+                    break
+                w *= math.exp(-a * step)
+                x += step * dx
+                y += step * dy
+                z += step * dz
+                t += step / speed
+                if step == s_time or step == s_exit:
+                    break
+                n_scat += 1
+                state, dx, dy, dz = turn(state, dx, dy, dz, sample_theta)
 
 
 def scattered_return(hits, field_r, grid_start, dt, n_t):

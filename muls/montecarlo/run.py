@@ -22,7 +22,7 @@ from ..phase import PhaseFunction, check_phase
 from ..water import Water
 from . import transport
 from .layout import geo_vector
-from .reciprocity import GRID_TIME_STEP_S, TILTED_SECTORS, ring_edges, scattered_return
+from .reciprocity import GRID_TIME_STEP_S, TILTED_SECTORS, ring_edges, scattered_return, trace_receiver
 
 #: Time step of the Monte Carlo histograms [s] (the digitiser samples at 1 ns).
 TIME_STEP_S = 0.5e-9
@@ -229,8 +229,7 @@ def run_monte_carlo(instrument: Instrument, water: Water, targets: TargetPlanes 
     transport.trace_beam(key, first_packet, packets, geo, wat, scene, tables, times,
                          (column, column1, target, target_direct, hits, counted, energy), transport.split_stack(batches))
     if K:
-        transport.trace_receiver(key, first_packet, receiver_packets, geo, wat, scene, phase.sample_theta_rad, times,
-                                 field_r)
+        trace_receiver(key, first_packet, receiver_packets, geo, wat, scene, phase.sample_theta_rad, times, field_r)
     seconds = time.perf_counter() - t0
 
     per_beam = packets // batches

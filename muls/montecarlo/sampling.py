@@ -1,4 +1,5 @@
-"""Compiled sampling helpers of the Monte Carlo: per-packet random streams, directions, aperture points.
+"""Compiled sampling helpers of the Monte Carlo: per-packet random streams, free paths, directions,
+aperture points.
 
 Every packet draws from its own counter-based stream (SplitMix64 of the seed, the stream and the packet
 number, with :mod:`muls.noise`'s finaliser and Weyl constant), so a seed fixes the result whatever the
@@ -13,6 +14,7 @@ import numba
 import numpy as np
 
 from ..noise import GAMMA, splitmix64
+from ..phase import sample_angle
 
 #: Odd 64-bit constant separating the streams (0 beam, 1 receiver) and the streams of split copies.
 STREAM_KEY = np.uint64(0xD1B54A32D192ED03)
@@ -83,3 +85,28 @@ def aperture_point(state, px, py, pz, ap_x, ap_r, fov_tan):
     if ex * ex + ey * ey > rf * rf:
         return state, 0.0, 0.0, 0.0
     return state, math.pi * ap_r * ap_r, qx, qy
+
+
+@numba.njit(cache=True, inline="always")
+def flight(state, x, y, z, dx, dy, dz, t, b, speed, t_end, n):
+    """A free path and the distances to the flight's other ends.
+
+    Returns (state, s_free (drawn with b), s_time (to the end of the run), s_exit (to the plane z = 0),
+    the speed of approach to the target planes sd = -n . direction, and the penetration sp = -n . position).
+    """
+    state, u = uniform(state)
+    s_free = -math.log(1.0 - u) / b if b > 0.0 else math.inf
+    s_time = (t_end - t) * speed
+    s_exit = -z / dz if dz < 0.0 else math.inf
+    sd = -(n[0] * dx + n[1] * dy + n[2] * dz)
+    sp = -(n[0] * x + n[1] * y + n[2] * z)
+    return state, s_free, s_time, s_exit, sd, sp
+
+
+@numba.njit(cache=True, inline="always")
+def turn(state, dx, dy, dz, sample_theta):
+    """Scatter the direction (dx, dy, dz) by an angle drawn from p and a uniform azimuth."""
+    state, v1 = uniform(state)
+    state, v2 = uniform(state)
+    nx, ny, nz = scatter(dx, dy, dz, sample_angle(sample_theta, v1), 2.0 * math.pi * v2)
+    return state, nx, ny, nz

@@ -1,4 +1,4 @@
-"""Compiled packet transport: beam packets with their ghosts, and receiver packets.
+"""Compiled packet transport: beam packets and their ghosts.
 
 Free paths are drawn with the scattering coefficient b (every event scatters); absorption is the packet's
 weight, exp(-a s) over a path s. Scattering angles come from the phase function's inverse CDF, the
@@ -53,7 +53,6 @@ from .layout import (
     BEAM_RADIUS,
     BEAM_SLOPE,
     FOV_COS,
-    FOV_TAN,
     GHOST_LENGTH,
     GHOSTS_ON,
     MIX_P,
@@ -62,8 +61,7 @@ from .layout import (
     SPLIT_REACH,
     SURVIVAL,
 )
-from .reciprocity import grid_cell
-from .sampling import STREAM_KEY, angle, packet_stream, scatter, uniform
+from .sampling import STREAM_KEY, angle, flight, packet_stream, scatter, turn, uniform
 
 #: The variance-reduction settings (see the module doc and muls.montecarlo.estimators); every choice keeps
 #: the estimators unbiased. Chosen on the pond at 10 m, where the column's error was largest: among the
@@ -117,31 +115,6 @@ def devices(**changes) -> dict:
 def split_stack(batches: int) -> tuple[np.ndarray, np.ndarray]:
     """Empty per-batch stacks of ghost copies: (fields (B, SPLIT_STACK, 11), stream states (B, SPLIT_STACK))."""
     return np.zeros((batches, SPLIT_STACK, _SPLIT_FIELDS)), np.zeros((batches, SPLIT_STACK), np.uint64)
-
-
-@numba.njit(cache=True, inline="always")
-def flight(state, x, y, z, dx, dy, dz, t, b, speed, t_end, n):
-    """A free path and the distances to the flight's other ends.
-
-    Returns (state, s_free (drawn with b), s_time (to the end of the run), s_exit (to the plane z = 0),
-    the speed of approach to the target planes sd = -n . direction, and the penetration sp = -n . position).
-    """
-    state, u = uniform(state)
-    s_free = -math.log(1.0 - u) / b if b > 0.0 else math.inf
-    s_time = (t_end - t) * speed
-    s_exit = -z / dz if dz < 0.0 else math.inf
-    sd = -(n[0] * dx + n[1] * dy + n[2] * dz)
-    sp = -(n[0] * x + n[1] * y + n[2] * z)
-    return state, s_free, s_time, s_exit, sd, sp
-
-
-@numba.njit(cache=True, inline="always")
-def turn(state, dx, dy, dz, sample_theta):
-    """Scatter the direction (dx, dy, dz) by an angle drawn from p and a uniform azimuth."""
-    state, v1 = uniform(state)
-    state, v2 = uniform(state)
-    nx, ny, nz = scatter(dx, dy, dz, sample_angle(sample_theta, v1), 2.0 * math.pi * v2)
-    return state, nx, ny, nz
 
 
 @numba.njit(cache=True)
@@ -356,62 +329,3 @@ def trace_beam(seed_key, first_packet, n_packets, geo, water, scene, phase, time
                                                                    stack)
                         if angle(dx, dy, dz, ax, ay, az) <= alpha_w:
                             estimating = False  # this share of the light belongs to the ghosts
-
-
-@numba.njit(cache=True, parallel=True)
-def trace_receiver(seed_key, first_packet, n_packets, geo, water, scene, sample_theta, times, field):
-    """Trace receiver packets (unit weight each) to the planes; tally the scattered ones' first arrivals.
-
-    field (B, K, cells, G): sum of packet weights over the cell's area [1/m^2] by arrival time from the
-    grid start of plane k; the caller scales by the etendue per packet.
-    """
-    n, e1, e2, depth, origin, edges, grid_start, n_phi, _ = scene
-    n_batches = field.shape[0]
-    n_planes = depth.shape[0]
-    ap_x, ap_r, fov_tan = geo[APERTURE_X], geo[APERTURE_RADIUS], geo[FOV_TAN]
-    a, b, speed = water[0], water[1], water[3]
-    gdt, n_g = times[2], int(times[3])
-    t_end = grid_start[n_planes - 1] + n_g * gdt
-    sin2 = fov_tan * fov_tan / (1.0 + fov_tan * fov_tan)
-    for batch in numba.prange(n_batches):
-        first = batch * n_packets // n_batches
-        last = (batch + 1) * n_packets // n_batches
-        for pid in range(first_packet + first, first_packet + last):
-            state = packet_stream(seed_key, 1, pid)
-            state, u1 = uniform(state)
-            state, u2 = uniform(state)
-            state, u3 = uniform(state)
-            state, u4 = uniform(state)
-            rr = ap_r * math.sqrt(u1)
-            x, y, z = ap_x + rr * math.cos(2.0 * math.pi * u2), rr * math.sin(2.0 * math.pi * u2), 0.0
-            st = math.sqrt(u3 * sin2)  # uniform in projected solid angle within the field of view
-            ct = math.sqrt(1.0 - st * st)
-            dx, dy, dz = st * math.cos(2.0 * math.pi * u4), st * math.sin(2.0 * math.pi * u4), ct
-            w, t = 1.0, 0.0
-            n_scat = 0
-            nxt = 0
-            while True:
-                state, s_free, s_time, s_exit, sd, sp = flight(state, x, y, z, dx, dy, dz, t, b, speed, t_end, n)
-                step = min(s_free, s_time, s_exit)
-                while nxt < n_planes and sd > 0.0 and sp + sd * step >= depth[nxt]:
-                    sk = max(0.0, (depth[nxt] - sp) / sd)
-                    if n_scat > 0:
-                        hx, hy, hz = x + sk * dx, y + sk * dy, z + sk * dz
-                        cell = grid_cell(nxt, hx, hy, hz, origin, e1, e2, edges, n_phi)
-                        j = int(math.floor((t + sk / speed - grid_start[nxt]) / gdt))
-                        if cell >= 0 and 0 <= j < n_g:
-                            ring = cell // n_phi
-                            ring_area = math.pi * (edges[nxt, ring + 1] ** 2 - edges[nxt, ring] ** 2) / n_phi
-                            field[batch, nxt, cell, j] += w * math.exp(-a * sk) / ring_area
-                    nxt += 1
-                if nxt >= n_planes:
-                    break
-                w *= math.exp(-a * step)
-                x += step * dx
-                y += step * dy
-                z += step * dz
-                t += step / speed
-                if step == s_time or step == s_exit:
-                    break
-                n_scat += 1
-                state, dx, dy, dz = turn(state, dx, dy, dz, sample_theta)
