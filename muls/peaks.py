@@ -163,12 +163,12 @@ def fall_to_half_s(shape) -> float:
     return 0.5 * (lo + hi) - peak
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, parallel=True, nogil=True)
 def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent, making):
     """Index into the echoes of the echo explaining each peak, -1 for none (see :func:`dominant_echo`); an echo
     can make a peak up to ``making`` [s] after its start."""
     out = np.full(pulse.shape[0], -1, np.int64)
-    for i in range(pulse.shape[0]):
+    for i in numba.prange(pulse.shape[0]):
         p = pulse[i]
         total, top, best = 0.0, 0.0, -1
         near, near_top, near_best = 0.0, 0.0, -1
