@@ -348,6 +348,9 @@ def test_digitise_defaults_and_records():
     assert full.mode == "full" and full.reference.shape == (4, ins.digitizer.n_samples)
     assert full.reference_noise_free_lsb.shape == full.reference.shape and full.noise_free_lsb.shape == full.codes.shape
     assert full.reference_noise_free_lsb[:, :5] == pytest.approx(20.0)  # before the pulse: CH0's own dark level
+    # and after it: the emitted pulse has ended (a level left there survived the mutation run)
+    after = full.reference_times_s(model)[0] >= ins.pulse.duration_s
+    assert after.sum() > 100 and np.all(full.reference_noise_free_lsb[:, after] == 20.0)
     with pytest.raises(ValueError, match="record_mode"):
         digitise(model, batch, seed=3, mode="sparse")
 
