@@ -234,6 +234,11 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
     out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts = out
     for w in numba.prange(n_windows):
         p = window_pulse[w]
+        may_run = False
+        for c in range(n_chan):
+            may_run = may_run or _may_run(codes, w, c, dark_mean, dark_std, k_sigma)
+        if not may_run:
+            continue  # noise only (a dropout): no baseline needed
         times = np.empty(n_samples)
         base_w = np.empty(n_samples)
         for k in range(n_samples):
@@ -246,12 +251,7 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
         blind = np.empty(n_samples, np.bool_)
         for c in range(n_chan):
             slot = w * n_chan + c
-            # No sample over half the threshold above the dark level: no run can start (the baseline and
-            # its noise only raise the bar).
-            highest = 0
-            for k in range(n_samples):
-                highest = max(highest, codes[w, c, k])
-            if highest - dark_mean[c] <= 0.5 * k_sigma * math.sqrt(dark_std[c] ** 2 + 1.0 / 12.0):
+            if not _may_run(codes, w, c, dark_mean, dark_std, k_sigma):
                 continue
             for k in range(n_samples):
                 open_[k] = gate_open[c] <= times[k] < gate_close[c]
@@ -338,6 +338,16 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
                 out_snr[j] = amp / sigma[top]
                 out_sat[j] = clipped_first >= 0
                 counts[slot] += 1
+
+
+@numba.njit(cache=True, inline="always")
+def _may_run(codes, w, c, dark_mean, dark_std, k_sigma):
+    """Whether channel ``c`` of window ``w`` has a sample over half the threshold above its dark level, where a run
+    may start (the baseline and its noise only raise the bar)."""
+    highest = 0
+    for k in range(codes.shape[2]):
+        highest = max(highest, codes[w, c, k])
+    return highest - dark_mean[c] > 0.5 * k_sigma * math.sqrt(dark_std[c] ** 2 + 1.0 / 12.0)
 
 
 @numba.njit(cache=True, inline="always")
