@@ -116,3 +116,198 @@ def test_auto_keeps_each_pulses_echo_energy_and_mean_delay_and_the_axis_hit(scen
         mine, theirs = np.isin(auto.pulse_index, np.flatnonzero(kept)), np.isin(balanced.pulse_index, np.flatnonzero(kept))
         np.testing.assert_array_equal(auto.range_m[mine], balanced.range_m[theirs])
         np.testing.assert_array_equal(auto.weight[mine], balanced.weight[theirs])
+
+
+# -- analytic seabed hits: Embree is the oracle -------------------------------------------------------------------
+
+from muls.presets import mul2023  # noqa: E402
+from scanner_sim import auto_level  # noqa: E402
+from scanner_sim.beams import beam_pattern  # noqa: E402
+from scanner_sim.raycast import RayCaster  # noqa: E402
+from scanner_sim.scene import LABELS, Part, Scene, panel_mesh, tube  # noqa: E402
+from scanner_sim.terrain import HeightField  # noqa: E402
+
+GEOMETRY = mul2023().geometry
+
+
+class CountingCaster:
+    """A RayCaster that counts the rays Embree is asked about."""
+
+    def __init__(self, caster):
+        self._caster, self.rays, self.shadow_rays = caster, 0, 0
+
+    def first_hits_raw(self, origins, directions):
+        self.rays += len(origins)
+        return self._caster.first_hits_raw(origins, directions)
+
+    def occluded_raw(self, origins, directions, lengths):
+        self.shadow_rays += int(np.count_nonzero(np.asarray(lengths) > 0))
+        return self._caster.occluded_raw(origins, directions, lengths)
+
+    def __getattr__(self, name):
+        return getattr(self._caster, name)
+
+
+def _field(ridges=False):
+    x = np.arange(101) * 0.05
+    gx, gy = np.meshgrid(x, x)
+    heights = -20.0 + 0.15 * gx + 0.08 * np.sin(7.0 * gx) * np.cos(5.0 * gy) + 0.02 * np.sin(23.0 * gy)
+    if ridges:  # ridges 25 cm high across x and y, their flanks up to about 4 steep
+        for c in (1.6, 2.2, 2.8, 3.4):
+            heights += 0.25 * (np.exp(-((gx - c) / 0.05) ** 2) + np.exp(-((gy - c - 0.3) / 0.05) ** 2))
+    return HeightField(100.0, 200.0, 0.05, heights)
+
+
+def _seabed_scene(objects=(), ridges=False):
+    """A 5 m x 5 m sloped, rippled height field (5 cm nodes; slopes up to about 1), with ``objects`` (name, (v, f))."""
+    hf = _field(ridges)
+    v, f = hf.mesh()
+    parts = [Part("seabed", "seabed", v, f, LABELS["seabed"], 0.2)]
+    parts += [Part(name, "panel", ov, of, LABELS["panel"], 0.5) for name, (ov, of) in objects]
+    return Scene(parts, heightfield=hf)
+
+
+def _pulses(n, seed, spread_deg=40.0):
+    """n beams from 1-2 m over the field's middle, up to ``spread_deg`` off nadir; receiver 13 cm aside, parallel."""
+    rng = np.random.default_rng(seed)
+    origin = np.c_[101.7 + 1.6 * rng.random(n), 201.7 + 1.6 * rng.random(n), -18.0 + 0.3 * rng.random(n)]
+    tilt, azimuth = np.radians(spread_deg) * np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
+    direction = np.c_[np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), -np.cos(tilt)]
+    shaft = np.tile([1.0, 0.0, 0.0], (n, 1))
+    return origin, direction, shaft, origin + [0.0, GEOMETRY.offset_m, 0.0], direction
+
+
+def _both(scene, pulses, shadow_rays=True):
+    caster = CountingCaster(RayCaster.for_scene(scene))
+    pattern = beam_pattern(19)
+    proven = auto_level.cast_seabed_analytic(caster, scene, *pulses, pattern, GEOMETRY, shadow_rays)
+    embree = cast_beams(caster._caster, scene, *pulses, pattern, GEOMETRY, shadow_rays)
+    return proven, embree, caster
+
+
+def _assert_same_hits(proven, embree):
+    np.testing.assert_array_equal(proven.pulse_index, embree.pulse_index)
+    np.testing.assert_array_equal(proven.subray_index, embree.subray_index)
+    np.testing.assert_array_equal(proven.object_id, embree.object_id)
+    np.testing.assert_array_equal(proven.receiver_weight, embree.receiver_weight)
+    # Float32 distances along the ray (Embree's and the ray-plane intersection): a few float32 steps at 3 m.
+    np.testing.assert_allclose(proven.range_m, embree.range_m, rtol=0, atol=2e-5)
+    np.testing.assert_allclose(proven.point, embree.point, rtol=0, atol=2e-5)
+    # The same facet: a hit within float32 rounding of a shared edge may name either neighbour.
+    other_facet = np.any(proven.normal != embree.normal, axis=1)
+    assert other_facet.sum() <= max(2, 1e-4 * len(embree))
+
+
+def test_analytic_seabed_hits_are_embrees_hits_with_far_fewer_rays():
+    """On a sloped, rippled height field with nothing else, every sub-ray hit, its facet, range, point and receiver
+    check equal Embree's for the same rays (to float32 precision), while Embree casts the axes and a few pulses'
+    sub-rays and no shadow rays for the proven pulses."""
+    scene = _seabed_scene()
+    pulses = _pulses(3000, seed=1)
+    proven, embree, caster = _both(scene, pulses)
+    assert len(embree) > 0.99 * 3000 * 19  # a sub-ray or two may leave the field
+    _assert_same_hits(proven, embree)
+    assert caster.rays < 0.25 * 3000 * 19, caster.rays  # the axes plus the unproven pulses' sub-rays
+    assert caster.shadow_rays < 0.25 * 3000 * 19, caster.shadow_rays
+
+
+def test_analytic_hits_leave_blocked_and_shadowed_pulses_to_embree():
+    """Small plates 20-40 cm over the seabed and a cable lying on it cut some footprints and some paths to the
+    receiver: hits on them, hits the plates hide from the receiver and hits beside them all equal Embree's."""
+    rng = np.random.default_rng(3)
+    hf, plates = _field(), []
+    for i in range(60):
+        x, y = 101.9 + 1.2 * rng.random(), 201.9 + 1.2 * rng.random()
+        z = float(hf.height(x, y)) + 0.2 + 0.2 * rng.random()
+        plates.append((f"plate{i}", panel_mesh([x, y, z], (0.04 + 0.1 * rng.random(), 0.03), (0, 0, 1), (0, 1, 0))))
+    line = np.c_[np.linspace(100.2, 104.8, 90), np.full(90, 202.5), np.zeros(90)]
+    line[:, 2] = hf.height(line[:, 0], line[:, 1]) + 0.03
+    scene = _seabed_scene(plates + [("cable", tube(line, 0.04))])
+    pulses = _pulses(4000, seed=2)
+    proven, embree, caster = _both(scene, pulses)
+    on_objects = embree.object_id > 0
+    assert on_objects.sum() > 200  # the footprints the plates and the cable cut
+    seen_by_cone = _seen_without_shadow_rays(scene, pulses)
+    shadowed = (embree.receiver_weight == 0) & (seen_by_cone == 1)
+    assert shadowed.sum() > 20  # hits an object hides from the receiver
+    _assert_same_hits(proven, embree)
+    assert caster.rays < 0.5 * 4000 * 19
+
+
+def test_analytic_hits_leave_pulses_the_relief_can_hide_to_embree():
+    """Steep ridges and beams up to 60 degrees off nadir: footprints the ridges hide in part, and paths to the
+    receiver they cut, need the seabed's own occlusion; every hit and receiver check equals Embree's."""
+    scene = _seabed_scene(ridges=True)
+    pulses = _pulses(4000, seed=4, spread_deg=60.0)
+    proven, embree, caster = _both(scene, pulses)
+    shadowed = (embree.receiver_weight == 0) & (_seen_without_shadow_rays(scene, pulses) == 1)
+    assert shadowed.sum() > 20  # hits a ridge hides from the receiver
+    _assert_same_hits(proven, embree)
+    assert caster.rays < 0.6 * 4000 * 19
+
+
+def _seen_without_shadow_rays(scene, pulses):
+    hits = cast_beams(RayCaster.for_scene(scene), scene, *pulses, beam_pattern(19), GEOMETRY, shadow_rays=False)
+    return hits.receiver_weight
+
+
+def test_a_scene_without_a_height_field_is_cast_as_balanced_casts_it():
+    scene = Scene([Part("plate", "panel", *panel_mesh([0, 0, -5.0], (4.0, 4.0), (0, 0, 1), (0, 1, 0)),
+                        LABELS["panel"], 0.3)])
+    n = 200
+    origin = np.zeros((n, 3))
+    direction = np.tile([0.0, 0.0, -1.0], (n, 1))
+    pulses = (origin, direction, np.tile([1.0, 0, 0], (n, 1)), origin + [0, GEOMETRY.offset_m, 0], direction)
+    assert auto_level.seabed_grid(scene, RayCaster.for_scene(scene)) is None
+    proven, embree, _ = _both(scene, pulses)
+    for f in auto_level._FIELDS:
+        np.testing.assert_array_equal(getattr(proven, f), getattr(embree, f))
+
+
+def test_the_seabed_bounds_hold_every_triangle():
+    """The coarse cells' gradient box holds each seabed triangle's dz/dx, dz/dy (from its vertices, not its
+    normal), their top its highest vertex, and the object tops the plates' heights."""
+    plate = panel_mesh([101.03, 201.03, -19.5], (0.02, 0.02), (0, 0, 1), (0, 1, 0))
+    scene = _seabed_scene([("plate", plate)])
+    caster = RayCaster.for_scene(scene)
+    grid = auto_level.seabed_grid(scene, caster)
+    v = scene.vertices - scene.local_origin
+    tri = v[scene.faces[:2 * 100 * 100]]
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    gx = (e1[:, 2] * e2[:, 1] - e2[:, 2] * e1[:, 1]) / det
+    gy = (e2[:, 2] * e1[:, 0] - e1[:, 2] * e2[:, 0]) / det
+    centre = tri.mean(axis=1)
+    size = grid.k * grid.spacing
+    i = ((centre[:, 1] - grid.y0) // size).astype(int)
+    j = ((centre[:, 0] - grid.x0) // size).astype(int)
+    g = grid.gradient[i, j]
+    assert np.all(g[:, 0] <= gx + 1e-6) and np.all(gx <= g[:, 1] + 1e-6)
+    assert np.all(g[:, 2] <= gy + 1e-6) and np.all(gy <= g[:, 3] + 1e-6)
+    assert np.all(tri[:, :, 2].max(axis=1) <= grid.seabed_top[i, j] + 1e-6)
+    at = (np.asarray(plate[0])[:, :2] - scene.local_origin[:2] - [grid.x0, grid.y0]) // size
+    for cj, ci in at.astype(int):
+        assert grid.object_top[ci, cj] == pytest.approx(-19.5 - scene.local_origin[2], abs=1e-5)
+    assert np.isinf(grid.object_top).sum() > 0.9 * grid.object_top.size
+
+
+def test_auto_on_a_seabed_keeps_each_pulses_echo_energy_and_mean_delay():
+    """cable_survey's first pulses: auto's echoes (analytic hits, collapsed) bring balanced's energy per pulse
+    and its energy-weighted mean echo range to the float32 precision of the distances."""
+    setup = with_level(PassSetup.build(load_scene("cable_survey"), PassOptions(max_pulses=3000)),
+                       FIDELITY_LEVELS["auto"])
+    slots = np.concatenate(list(setup.slot_chunks()))
+    rays = setup.scanner.world_rays(setup.trajectory.poses(slots / setup.scanner.pulse_rate_hz))
+    geometry = setup.model.instrument.geometry
+    auto = cast_auto(setup.caster, setup.scene, *rays, setup.pattern, geometry)
+    balanced = cast_beams(setup.caster, setup.scene, *rays, setup.pattern, geometry)
+    n = balanced.n_pulses
+    ea = np.bincount(auto.pulse_index, weights=_energy(auto), minlength=n)
+    eb = np.bincount(balanced.pulse_index, weights=_energy(balanced), minlength=n)
+    np.testing.assert_allclose(ea, eb, rtol=1e-6)
+    lit = eb > 0
+    mean_a = np.bincount(auto.pulse_index, weights=_energy(auto) * hit_echo_range_m(auto), minlength=n)[lit] / ea[lit]
+    mean_b = np.bincount(balanced.pulse_index, weights=_energy(balanced) * hit_echo_range_m(balanced),
+                         minlength=n)[lit] / eb[lit]
+    np.testing.assert_allclose(mean_a, mean_b, rtol=0, atol=2e-5)
+    assert np.bincount(auto.pulse_index, minlength=n).mean() < 4  # mostly three rows a pulse
