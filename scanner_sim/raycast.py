@@ -269,16 +269,8 @@ def cast_beams(caster: RayCaster, scene, beam_origin: np.ndarray, beam_dir: np.n
     """
     n_pulses, m = beam_origin.shape[0], pattern.count
     kernels = _kernels()
-    beam_dir = np.ascontiguousarray(beam_dir, dtype=np.float64)
-    u, v = perpendicular_basis(beam_dir, np.asarray(shaft_dir, float))
-    rays = kernels.PulseRays(np.ascontiguousarray(beam_origin - scene.local_origin), beam_dir, u, v,
-                             np.ascontiguousarray(rx_origin - scene.local_origin),
-                             np.ascontiguousarray(rx_dir, dtype=np.float64))
-    layout = kernels.SubrayLayout(np.ascontiguousarray(pattern.xy), pattern.weight, 0.5 * geometry.beam_diameter_m,
-                                  math.tan(0.5 * geometry.beam_divergence_full_rad))
-    faces = kernels.SceneFaces(scene.face_normal, scene.face_reflectance, scene.face_label, scene.face_object,
-                               scene.local_origin, shadow_offset_m(scene.local_extent_m))
-    cone = ReceiverCone.from_geometry(geometry)
+    rays, layout, faces, cone = kernel_inputs(scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern,
+                                              geometry)
     rows = kernels.HitRows.empty(n_pulses * m)  # sized for every sub-ray hitting; only rows written are kept
 
     # Blocks of pulses small enough that each block's rays, Embree answers and shadow rays stay in cache.
@@ -309,6 +301,22 @@ def cast_beams(caster: RayCaster, scene, beam_origin: np.ndarray, beam_dir: np.n
                 reflectance=rows.reflectance[:k], label=rows.label[:k], object_id=rows.object_id[:k],
                 receiver_weight=rows.seen[:k], weight=rows.weight[:k], rx_distance_m=rows.rx_dist[:k],
                 n_pulses=n_pulses, n_subrays=m)
+
+
+def kernel_inputs(scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern: BeamPattern, geometry):
+    """What the ray-stage kernels take, from :func:`cast_beams`' arguments: the pulses' rays in the local frame,
+    the sub-ray layout, the scene's faces and the receiver cone (scanner_sim._raykernels' named tuples)."""
+    kernels = _kernels()
+    beam_dir = np.ascontiguousarray(beam_dir, dtype=np.float64)
+    u, v = perpendicular_basis(beam_dir, np.asarray(shaft_dir, float))
+    rays = kernels.PulseRays(np.ascontiguousarray(beam_origin - scene.local_origin), beam_dir, u, v,
+                             np.ascontiguousarray(rx_origin - scene.local_origin),
+                             np.ascontiguousarray(rx_dir, dtype=np.float64))
+    layout = kernels.SubrayLayout(np.ascontiguousarray(pattern.xy), pattern.weight, 0.5 * geometry.beam_diameter_m,
+                                  math.tan(0.5 * geometry.beam_divergence_full_rad))
+    faces = kernels.SceneFaces(scene.face_normal, scene.face_reflectance, scene.face_label, scene.face_object,
+                               scene.local_origin, shadow_offset_m(scene.local_extent_m))
+    return rays, layout, faces, ReceiverCone.from_geometry(geometry)
 
 
 #: Rays per block inside :func:`cast_beams` (measured: 16k-64k keep a block's working set in cache).

@@ -1,16 +1,23 @@
-"""The ``auto`` level: balanced's cast, each simple footprint's sub-ray echoes replaced by the two-point Gauss
-quadrature of their delays, the rest kept."""
+"""The ``auto`` level: balanced's hits, the seabed's found on its height field where that is proven exact, and
+each simple footprint's sub-ray echoes replaced by the two-point Gauss quadrature of their delays
+(scanner_sim.echo_collapse), the rest kept."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from scanner_sim.auto_level import SIMPLE_SPREAD_M, cast_auto, simple_pulses, two_point_rule
+from muls.presets import mul2023
+from scanner_sim import auto_level
+from scanner_sim.auto_level import cast_auto
+from scanner_sim.beams import beam_pattern
 from scanner_sim.config import load_scene
+from scanner_sim.echo_collapse import HIT_FIELDS, SIMPLE_SPREAD_M, simple_pulses, two_point_rule
 from scanner_sim.fidelity import FIDELITY_LEVELS
-from scanner_sim.raycast import Hits, cast_beams
+from scanner_sim.raycast import Hits, RayCaster, cast_beams
+from scanner_sim.scene import LABELS, Part, Scene, panel_mesh, tube
 from scanner_sim.survey import PassOptions, PassSetup, hit_echo_range_m
+from scanner_sim.terrain import HeightField
 from scanner_sim.tradeoff import with_level
 
 FAILURES = Path(__file__).resolve().parent.parent / "scenes" / "failures"
@@ -119,13 +126,6 @@ def test_auto_keeps_each_pulses_echo_energy_and_mean_delay_and_the_axis_hit(scen
 
 
 # -- analytic seabed hits: Embree is the oracle -------------------------------------------------------------------
-
-from muls.presets import mul2023  # noqa: E402
-from scanner_sim import auto_level  # noqa: E402
-from scanner_sim.beams import beam_pattern  # noqa: E402
-from scanner_sim.raycast import RayCaster  # noqa: E402
-from scanner_sim.scene import LABELS, Part, Scene, panel_mesh, tube  # noqa: E402
-from scanner_sim.terrain import HeightField  # noqa: E402
 
 GEOMETRY = mul2023().geometry
 
@@ -260,7 +260,7 @@ def test_a_scene_without_a_height_field_is_cast_as_balanced_casts_it():
     pulses = (origin, direction, np.tile([1.0, 0, 0], (n, 1)), origin + [0, GEOMETRY.offset_m, 0], direction)
     assert auto_level.seabed_grid(scene, RayCaster.for_scene(scene)) is None
     proven, embree, _ = _both(scene, pulses)
-    for f in auto_level._FIELDS:
+    for f in HIT_FIELDS:
         np.testing.assert_array_equal(getattr(proven, f), getattr(embree, f))
 
 
