@@ -89,8 +89,8 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     in_record = np.zeros(batch.n_pulses, bool)
     lit = np.zeros(batch.n_pulses, bool)
     pulse_of = np.repeat(np.arange(batch.n_pulses), np.diff(offsets))
-    np.logical_or.at(in_record, pulse_of, delay < record_end)
-    np.logical_or.at(lit, pulse_of, (energy > 0.0) & (delay < record_end))
+    in_record[pulse_of[delay < record_end]] = True
+    lit[pulse_of[(energy > 0.0) & (delay < record_end)]] = True
     cause[missing & ~in_record] = DROPOUT_CAUSES.index("no_hit")
     cause[missing & in_record & ~lit] = DROPOUT_CAUSES.index("blind_zone")
     sat = np.zeros(batch.n_pulses, bool)
