@@ -139,28 +139,17 @@ def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, shape) -> np.nda
     give less than ``need_w`` (n,) [W] there (a footprint's sub-ray echoes add up: one of them alone may be faint).
 
     The echo that explains a peak is the one giving the most noise-free power there among the echoes that can
-    make a peak there: those still rising or within half their maximum past it (:func:`fall_to_half_s`). At a
+    make a peak there: those still rising or within half their maximum past it (``PulseShape.fall_to_half_s``). At a
     peak the signal's slope is zero, so an echo further down its tail, whose slope is negative, cannot have
     made it, however much power it still gives (a clipped echo's tail 10 ns on still gives more than a weak
     echo's peak). Where those echoes together give less than ``need_w``, the most powerful echo of all is
     taken."""
     best = _dominant(np.asarray(pulse, np.int64), np.asarray(time_s, float), np.asarray(need_w, float),
                      echoes.offsets, echoes.delay_s, echoes.energy_j, basis, shape.duration_s,
-                     shape.peak_delay_s + fall_to_half_s(shape))
+                     shape.peak_delay_s + shape.fall_to_half_s)
     out = np.full(best.shape, -1, np.int64)
     out[best >= 0] = echoes.source[best[best >= 0]]
     return out
-
-
-def fall_to_half_s(shape) -> float:
-    """[s] Time from a pulse's maximum to half of it on its falling side (6.9 ns for the mul2023 pulse)."""
-    peak = shape.peak_delay_s
-    top = float(shape(peak))
-    lo, hi = peak, shape.duration_s
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if float(shape(mid)) > 0.5 * top else (lo, mid)
-    return 0.5 * (lo + hi) - peak
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
@@ -234,11 +223,11 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
     out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts = out
     for w in numba.prange(n_windows):
         p = window_pulse[w]
-        may_run = False
-        for c in range(n_chan):
-            may_run = may_run or _may_run(codes, w, c, dark_mean, dark_std, k_sigma)
-        if not may_run:
-            continue  # noise only (a dropout): no baseline needed
+        first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
+        while first < n_chan and not _may_run(codes, w, first, dark_mean, dark_std, k_sigma):
+            first += 1
+        if first == n_chan:
+            continue
         times = np.empty(n_samples)
         base_w = np.empty(n_samples)
         for k in range(n_samples):
@@ -249,9 +238,9 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
         echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
         open_ = np.empty(n_samples, np.bool_)
         blind = np.empty(n_samples, np.bool_)
-        for c in range(n_chan):
+        for c in range(first, n_chan):
             slot = w * n_chan + c
-            if not _may_run(codes, w, c, dark_mean, dark_std, k_sigma):
+            if c > first and not _may_run(codes, w, c, dark_mean, dark_std, k_sigma):
                 continue
             for k in range(n_samples):
                 open_[k] = gate_open[c] <= times[k] < gate_close[c]
