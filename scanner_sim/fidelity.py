@@ -109,9 +109,9 @@ def _subray_cuts(pulse_index, range_m, weight, n_pulses, bin_m):
     bins = np.empty(widest, np.int64)  # one pulse's distinct bins, ascending
     share = np.empty(widest)
     moment = np.empty(widest)
-    group_cut = np.full((n_pulses, widest), np.inf)
-    group_share = np.zeros((n_pulses, widest))
-    n_groups = np.zeros(n_pulses, np.int64)
+    cuts = np.full((n_pulses, widest + 1), np.inf)  # trimmed to the most groups a pulse has, plus one
+    shares = np.zeros((n_pulses, widest + 1))
+    k = 1
     for p in range(n_pulses):
         m = 0
         for j in range(start[p], start[p + 1]):
@@ -128,12 +128,7 @@ def _subray_cuts(pulse_index, range_m, weight, n_pulses, bin_m):
             share[g] += weight[i]
             moment[g] += weight[i] * range_m[i]
         for g in range(m):
-            group_cut[p, g] = moment[g] / (share[g] if share[g] > 0.0 else 1.0)
-            group_share[p, g] = share[g]
-        n_groups[p] = m
-    k = n_groups.max() + 1 if h else 1
-    cuts = np.full((n_pulses, k), np.inf)
-    shares = np.zeros((n_pulses, k))
-    cuts[:, : k - 1] = group_cut[:, : k - 1]
-    shares[:, : k - 1] = group_share[:, : k - 1]
-    return cuts, shares
+            cuts[p, g] = moment[g] / (share[g] if share[g] > 0.0 else 1.0)
+            shares[p, g] = share[g]
+        k = max(k, m + 1)
+    return np.ascontiguousarray(cuts[:, :k]), np.ascontiguousarray(shares[:, :k])
