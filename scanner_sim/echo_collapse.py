@@ -22,26 +22,39 @@ from .raycast import Hits
 SIMPLE_SPREAD_M = 0.05
 
 
-def _echo_range(hits: Hits) -> np.ndarray:
-    return 0.5 * (hits.range_m + hits.rx_distance_m)  # survey.hit_echo_range_m
-
-
 def simple_pulses(hits: Hits) -> np.ndarray:
     """(n_pulses,) bool: every sub-ray of the pulse hit, all on one object, their echo ranges within
-    :data:`SIMPLE_SPREAD_M` (``hits`` in scan order, pulse-major)."""
-    n = hits.n_pulses
-    simple = np.bincount(hits.pulse_index, minlength=n) == hits.n_subrays
-    if not simple.any():
-        return simple
-    starts = np.flatnonzero(np.r_[True, hits.pulse_index[1:] != hits.pulse_index[:-1]])
-    owner = hits.pulse_index[starts]
+    :data:`SIMPLE_SPREAD_M` (``hits`` in scan order, pulse-major): the test :func:`collapse_simple` applies."""
+    return _simple_flags(hits.pulse_index, hits.range_m, hits.rx_distance_m, hits.object_id, hits.n_pulses,
+                         hits.n_subrays)
 
-    def spread(values):
-        out = np.full(n, np.inf)
-        out[owner] = np.maximum.reduceat(values, starts) - np.minimum.reduceat(values, starts)
-        return out
 
-    return simple & (spread(hits.object_id.astype(np.float64)) == 0.0) & (spread(_echo_range(hits)) < SIMPLE_SPREAD_M)
+@numba.njit(cache=True, nogil=True)
+def _simple_flags(pulse, range_m, rx_m, object_id, n_pulses, m):
+    out = np.zeros(n_pulses, np.bool_)
+    start = 0
+    while start < pulse.shape[0]:
+        stop = start + 1
+        while stop < pulse.shape[0] and pulse[stop] == pulse[start]:
+            stop += 1
+        out[pulse[start]] = _is_simple(start, stop, m, range_m, rx_m, object_id)
+        start = stop
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _is_simple(start, stop, m, range_m, rx_m, object_id):
+    """Whether one pulse's rows start .. stop - 1 are all ``m`` sub-rays, on one object, their echo ranges
+    within :data:`SIMPLE_SPREAD_M`."""
+    if stop - start != m:
+        return False
+    lo, hi = np.inf, -np.inf
+    for r in range(start, stop):
+        if object_id[r] != object_id[start]:
+            return False
+        e = 0.5 * (range_m[r] + rx_m[r])  # the echo's range (survey.hit_echo_range_m)
+        lo, hi = min(lo, e), max(hi, e)
+    return hi - lo < SIMPLE_SPREAD_M
 
 
 def two_point_rule(energy: np.ndarray, delay: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -84,18 +97,10 @@ def pulse_figures(start, stop, m, fields, angles, energy, tau, nodes, share):
     """The simple-pulse figures of one pulse's rows start .. stop - 1 of ``fields`` (:data:`HIT_FIELDS` order;
     incidence angles [rad] if ``angles``, else their cosines): (beam, rho_mean, cosine, mean_range) with beam -1
     when the pulse is not simple (:func:`simple_pulses`' test) and 0 when no light comes back; for a lit simple
-    pulse its two echoes' delays ``nodes`` and energy ``share`` (:func:`_collapse`). ``energy``, ``tau``: (m,)
-    scratch."""
+    pulse its two echoes' delays ``nodes`` and energy ``share`` (:func:`two_point_rule`). ``energy``, ``tau``:
+    (m,) scratch."""
     _, _, range_m, _, _, incidence, reflectance, _, object_id, seen, weight, rx_m = fields
-    if stop - start != m:
-        return -1.0, 0.0, 0.0, 0.0
-    lo, hi = np.inf, -np.inf
-    for r in range(start, stop):
-        if object_id[r] != object_id[start]:
-            return -1.0, 0.0, 0.0, 0.0
-        e = 0.5 * (range_m[r] + rx_m[r])
-        lo, hi = min(lo, e), max(hi, e)
-    if not hi - lo < SIMPLE_SPREAD_M:
+    if not _is_simple(start, stop, m, range_m, rx_m, object_id):
         return -1.0, 0.0, 0.0, 0.0
     total, w_sum, rho_sum, r_sum = 0.0, 0.0, 0.0, 0.0
     for k in range(m):
@@ -165,14 +170,7 @@ def _collapse_rows(fields, angles, m, out):
 
 
 HIT_FIELDS = ("pulse_index", "subray_index", "range_m", "point", "normal", "incidence_rad", "reflectance", "label",
-           "object_id", "receiver_weight", "weight", "rx_distance_m")
-
-
-def _collapsed(fields: tuple, angles: bool, n: int, m: int) -> Hits:
-    """:func:`collapse_simple` of the rows ``fields`` (:data:`HIT_FIELDS` order) of ``n`` pulses, into fresh arrays."""
-    out = tuple(np.empty(a.shape, a.dtype) for a in fields)
-    k = _collapse_rows(fields, angles, m, out)
-    return Hits(**{f: a[:k].copy() for f, a in zip(HIT_FIELDS, out)}, n_pulses=n, n_subrays=m)
+              "object_id", "receiver_weight", "weight", "rx_distance_m")
 
 
 def collapse_simple(hits: Hits) -> Hits:
@@ -183,6 +181,10 @@ def collapse_simple(hits: Hits) -> Hits:
     beam-weighted reflectance, and the cosine that gives it its share of the energy; its outgoing leg is the
     footprint's beam-weighted mean range (where a footprint within one 5 cm bin cuts the water column,
     fidelity.column_cuts), its return leg what makes up its delay. Other pulses keep their rows. ``hits`` as
-    :func:`scanner_sim.raycast.cast_beams` gives them: pulse-major, sub-rays ascending; the result too. Compiled
-    (two passes over the rows); :func:`collapse_simple_numpy` is the same in numpy."""
-    return _collapsed(tuple(getattr(hits, f) for f in HIT_FIELDS), True, hits.n_pulses, hits.n_subrays)
+    :func:`scanner_sim.raycast.cast_beams` gives them: pulse-major, sub-rays ascending; the result too. Compiled,
+    in one pass over the rows."""
+    fields = tuple(getattr(hits, f) for f in HIT_FIELDS)
+    out = tuple(np.empty(a.shape, a.dtype) for a in fields)
+    k = _collapse_rows(fields, True, hits.n_subrays, out)
+    return Hits(**{f: a[:k].copy() for f, a in zip(HIT_FIELDS, out)}, n_pulses=hits.n_pulses,
+                n_subrays=hits.n_subrays)
