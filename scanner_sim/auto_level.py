@@ -33,7 +33,6 @@ AUTO_BLOCK_RAYS = 32768
 def seabed_grid(scene, caster):
     """The :class:`scanner_sim._seabed_kernels.SeabedGrid` of ``scene``'s seabed in ``caster``'s local frame, or None
     where the scene has no height field or its seabed faces are not the height field's own, in its order."""
-
     hf = scene.heightfield
     seabeds = [o for o in scene.objects if o.kind == "seabed"]
     if hf is None or len(seabeds) != 1:
@@ -50,17 +49,12 @@ def seabed_grid(scene, caster):
     k = max(1, round(COARSE_CELL_M / hf.spacing_m))
     cy, cx = -(-(ny - 1) // k), -(-(nx - 1) // k)
 
-    def coarse_max(fine):  # (ny - 1, nx - 1) -> (cy, cx)
-        padded = np.full((cy * k, cx * k), -np.inf)
-        padded[:ny - 1, :nx - 1] = fine
-        return padded.reshape(cy, k, cx, k).max(axis=(1, 3))
-
     normal = scene.face_normal[sb.face_start:sb.face_stop]
     gradient = np.empty((cy, cx, 4))
     for axis in (0, 1):  # dz/dx, dz/dy of each seabed triangle: -n_x / n_z, -n_y / n_z
         g = (-normal[:, axis] / normal[:, 2]).reshape(2, ny - 1, nx - 1)
-        gradient[:, :, 2 * axis] = -coarse_max(-g.min(axis=0))
-        gradient[:, :, 2 * axis + 1] = coarse_max(g.max(axis=0))
+        gradient[:, :, 2 * axis] = -_block_max(-g.min(axis=0), k)
+        gradient[:, :, 2 * axis + 1] = _block_max(g.max(axis=0), k)
     z = caster.vertices[faces.min():faces.min() + nx * ny, 2].astype(np.float64).reshape(ny, nx)
     node_top = np.maximum(np.maximum(z[:-1, :-1], z[:-1, 1:]), np.maximum(z[1:, :-1], z[1:, 1:]))
     x0, y0 = hf.x0_m - scene.local_origin[0], hf.y0_m - scene.local_origin[1]
@@ -68,17 +62,22 @@ def seabed_grid(scene, caster):
     size = k * hf.spacing_m
     rasterise_tops(caster.vertices, caster.faces, 0, sb.face_start, x0, y0, size, object_top)
     rasterise_tops(caster.vertices, caster.faces, sb.face_stop, caster.faces.shape[0], x0, y0, size, object_top)
-    top = np.maximum(coarse_max(node_top), object_top)
+    seabed_top = _block_max(node_top, k)
     sk = max(1, round(SUPER_CELL_M / (k * hf.spacing_m)))
-    sy, sx = -(-cy // sk), -(-cx // sk)
-    padded = np.full((sy * sk, sx * sk), -np.inf)
-    padded[:cy, :cx] = top
-    super_top = padded.reshape(sy, sk, sx, sk).max(axis=(1, 3))
+    super_top = _block_max(np.maximum(seabed_top, object_top), sk)
     plane = np.empty((2 * cells, 4))
     seabed_planes(caster.vertices, caster.faces, sb.face_start, sb.face_stop, plane)
     return SeabedGrid(float(x0), float(y0), float(hf.spacing_m), int(nx), int(ny), int(sb.face_start), int(k),
-                      gradient, coarse_max(node_top), object_top, float(caster.vertices[:, 2].max()) + 1e-3, plane,
+                      gradient, seabed_top, object_top, float(caster.vertices[:, 2].max()) + 1e-3, plane,
                       int(sk), super_top)
+
+
+def _block_max(a: np.ndarray, k: int) -> np.ndarray:
+    """The maximum of each k x k block of the 2-D ``a`` (the last blocks padded with -inf)."""
+    by, bx = -(-a.shape[0] // k), -(-a.shape[1] // k)
+    padded = np.full((by * k, bx * k), -np.inf)
+    padded[:a.shape[0], :a.shape[1]] = a
+    return padded.reshape(by, k, bx, k).max(axis=(1, 3))
 
 
 def _grid_of(caster, scene):
