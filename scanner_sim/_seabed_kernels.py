@@ -63,17 +63,19 @@ def rasterise_tops(vertices, faces, first, stop, x0, y0, size, top):
                     top[i, j] = zmax
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, inline="always")
 def seabed_face_at(grid, x, y):
-    """The seabed face under local (x, y) (HeightField.height's choice of triangle), -1 off the height field."""
-    fx = (x - grid.x0) / grid.spacing
-    fy = (y - grid.y0) / grid.spacing
+    """The height field's face under local (x, y), numbered from ``grid.face0`` (terrain.HeightField.height's choice
+    of triangle), -1 off the height field."""
+    inv_spacing = 1.0 / grid.spacing
+    fx = (x - grid.x0) * inv_spacing
+    fy = (y - grid.y0) * inv_spacing
     if not (fx >= 0.0 and fy >= 0.0):
         return -1
     j, i = int(fx), int(fy)
     if j > grid.nx - 2 or i > grid.ny - 2:
         return -1
-    f = grid.face0 + i * (grid.nx - 1) + j
+    f = i * (grid.nx - 1) + j
     if fy - i > fx - j:  # upper triangle (a, d, c): v > u
         f += (grid.nx - 1) * (grid.ny - 1)
     return f
@@ -185,12 +187,11 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
     rising: then no shadow ray of the pulse can be blocked, and none is cast."""
     n = axis_prim.shape[0]
     m = origins.shape[0] // n
-    plane, face0, x0, y0, spacing = grid.plane, grid.face0, grid.x0, grid.y0, grid.spacing
-    row, cells = grid.nx - 1, (grid.nx - 1) * (grid.ny - 1)
+    plane, face0 = grid.plane, grid.face0
+    cells = (grid.nx - 1) * (grid.ny - 1)
     # Segments to test: the m sub-rays back up from their hits, then (shadow) the m hits up to the receiver.
     hx, hy, hz = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
     z_end, wx, wy, rise = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
-    inv_spacing = 1.0 / spacing
     for q in range(n):
         f0 = axis_prim[q]
         prim[q * m] = f0
@@ -213,14 +214,9 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
                 for _ in range(8):
                     t = (plane[f, 3] - (plane[f, 0] * ox + plane[f, 1] * oy + plane[f, 2] * oz)) / (
                         plane[f, 0] * dx + plane[f, 1] * dy + plane[f, 2] * dz)
-                    fx = (ox + t * dx - x0) * inv_spacing
-                    fy = (oy + t * dy - y0) * inv_spacing
-                    if not (t > 0.0 and fx >= 0.0 and fy >= 0.0 and fx < row and fy < grid.ny - 1):
+                    g = seabed_face_at(grid, ox + t * dx, oy + t * dy) if t > 0.0 else -1
+                    if g < 0:
                         break
-                    ci, cj = int(fy), int(fx)
-                    g = ci * row + cj
-                    if fy - ci > fx - cj:  # upper triangle (a, d, c): v > u (terrain.HeightField.height)
-                        g += cells
                     if g == f:
                         found = True
                         break

@@ -131,8 +131,8 @@ def _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, apex_behind,
             while u < unproven_pulse.shape[0] and unproven_pulse[u] == p:
                 u += 1
             if u > start:
-                beam, rho_mean, cosine, mean_range = pulse_figures(start, u, m, unproven, False, energy, tau, nodes,
-                                                              share)
+                beam, rho_mean, cosine, mean_range = pulse_figures(start, u, m, unproven, False, energy, tau,
+                                                                   nodes, share)
                 o = emit_rows(start, u, unproven, False, out, o, beam, rho_mean, cosine, mean_range, nodes, share)
     return o
 
@@ -194,9 +194,9 @@ def cast_seabed_analytic(caster, scene, beam_origin, beam_dir, shaft_dir, rx_ori
     d32_all = caster.workspace("dirs32", (size, 3), np.float32)
     prim_all = caster.workspace("auto_prim", (size,), np.int32)
     tfar_all = caster.workspace("auto_tfar", (size,), np.float32)
-    shadows_all = ShadowRays(caster.workspace("shadow_origins32", (size, 3), np.float32),
-                                     caster.workspace("shadow_dirs32", (size, 3), np.float32),
-                                     caster.workspace("shadow_length32", (size,), np.float32))
+    shadows = ShadowRays(caster.workspace("shadow_origins32", (size, 3), np.float32),
+                         caster.workspace("shadow_dirs32", (size, 3), np.float32),
+                         caster.workspace("shadow_length32", (size,), np.float32))
     out = _scratch_out(caster, size) if collapse else None
     rest_sub = np.arange(1, m)
     parts = []
@@ -212,7 +212,6 @@ def cast_seabed_analytic(caster, scene, beam_origin, beam_dir, shaft_dir, rx_ori
         if cast.size:
             at = (cast[:, None] * m + rest_sub).ravel()
             prim[at], tfar[at] = caster.first_hits_raw(o32[at], d32[at])
-        shadows = shadows_all
         if collapse:
             c = _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov,
                                rows, shadows)
@@ -223,8 +222,8 @@ def cast_seabed_analytic(caster, scene, beam_origin, beam_dir, shaft_dir, rx_ori
                                  cone.cos_half_fov, _fields_of(rows, c), out)
             parts.append(Hits(**{f: a[:k].copy() for f, a in zip(HIT_FIELDS, out)}, n_pulses=p1 - p0, n_subrays=m))
             continue
-        c = hit_block(prim, tfar, p0 * m, 0, rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov,
-                              rows, shadows)
+        c = hit_block(prim, tfar, p0 * m, 0, rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov, rows,
+                      shadows)
         if shadow_rays and c:
             need = unproven_shadows(rows.pulse[:c], p0, analytic, shadows.length[:c])
             if need.size:
