@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from .layout import APERTURE_RADIUS, APERTURE_X, FOV_TAN
-from .sampling import flight, packet_stream, turn, uniform
+from .sampling import batch_packets, flight, packet_stream, turn, uniform
 
 #: Time step of the reciprocity grids (beam hits, receiver field) [s].
 GRID_TIME_STEP_S = 1e-9
@@ -85,9 +85,8 @@ def trace_receiver(seed_key, first_packet, n_packets, geo, water, scene, sample_
     t_end = grid_start[n_planes - 1] + n_g * gdt
     sin2 = fov_tan * fov_tan / (1.0 + fov_tan * fov_tan)
     for batch in numba.prange(n_batches):
-        first = batch * n_packets // n_batches
-        last = (batch + 1) * n_packets // n_batches
-        for pid in range(first_packet + first, first_packet + last):
+        lo, hi = batch_packets(batch, first_packet, n_packets, n_batches)
+        for pid in range(lo, hi):
             state = packet_stream(seed_key, 1, pid)
             state, u1 = uniform(state)
             state, u2 = uniform(state)

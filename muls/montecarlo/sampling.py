@@ -88,6 +88,13 @@ def aperture_point(state, px, py, pz, ap_x, ap_r, fov_tan):
 
 
 @numba.njit(cache=True, inline="always")
+def batch_packets(batch, first_packet, n_packets, n_batches):
+    """The packet numbers [lo, hi) that batch ``batch`` of ``n_batches`` traces, in order: a batch's share is fixed
+    by the counts alone, so a seed fixes the result whatever the thread count."""
+    return first_packet + batch * n_packets // n_batches, first_packet + (batch + 1) * n_packets // n_batches
+
+
+@numba.njit(cache=True, inline="always")
 def flight(state, x, y, z, dx, dy, dz, t, b, speed, t_end, n):
     """A free path and the distances to the flight's other ends.
 

@@ -61,7 +61,7 @@ from .layout import (
     SPLIT_REACH,
     SURVIVAL,
 )
-from .sampling import STREAM_KEY, angle, flight, packet_stream, scatter, turn, uniform
+from .sampling import STREAM_KEY, angle, batch_packets, flight, packet_stream, scatter, turn, uniform
 
 #: The variance-reduction settings (see the module doc and muls.montecarlo.estimators); every choice keeps
 #: the estimators unbiased. Chosen on the pond at 10 m, where the column's error was largest: among the
@@ -257,9 +257,8 @@ def trace_beam(seed_key, first_packet, n_packets, geo, water, scene, phase, time
     a, b, c, speed = water[0], water[1], water[2], water[3]
     dt, n_t, t_end = times[0], int(times[1]), times[4]
     for batch in numba.prange(n_batches):
-        first = batch * n_packets // n_batches
-        last = (batch + 1) * n_packets // n_batches
-        for pid in range(first_packet + first, first_packet + last):
+        lo, hi = batch_packets(batch, first_packet, n_packets, n_batches)
+        for pid in range(lo, hi):
             state = packet_stream(seed_key, 0, pid)
             state, u1 = uniform(state)
             state, u2 = uniform(state)
