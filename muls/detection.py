@@ -16,13 +16,15 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from .deciding_channels import deciding_channels
 from .errors import check_choice
 from .noise import (
     FIRST_SIGNAL_STREAM,
+    NORMAL_BOUND,
     PHASE_STREAM,
     REFERENCE_STREAM,
     normal_at,
-    normal_pair_at,
+    normal_half_at,
     seed_key,
     stream_base,
     uniform_at,
@@ -52,6 +54,8 @@ class Records:
     window_start: (n_windows,) index of the window's first sample in the full record. Sample k of the full
     record is taken at ``-pretrigger_s + k / sample_rate_hz + phase_s[pulse]``. noise_free_lsb and
     reference_noise_free_lsb: same shapes (float32, before noise, rounding and clipping) when asked for.
+    synthesised: (n_windows, n_channels) bool, the channels synthesised in each window (the others' codes are 0),
+    or None when every one was (:func:`digitise`'s ``deciding_only``).
     """
 
     reference: np.ndarray
@@ -62,6 +66,7 @@ class Records:
     mode: str
     noise_free_lsb: np.ndarray | None = None
     reference_noise_free_lsb: np.ndarray | None = None
+    synthesised: np.ndarray | None = None
 
     @property
     def n_pulses(self) -> int:
@@ -150,11 +155,14 @@ class Sampling(NamedTuple):
 
 
 def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
-             keep_noise_free: bool = False, noise: bool = True, echoes: Echoes | None = None) -> Records:
+             keep_noise_free: bool = False, noise: bool = True, echoes: Echoes | None = None,
+             deciding_only: bool = False) -> Records:
     """Digitised records of every channel for a batch of pulses (MULS Eqs. 1, 12, 13).
 
     ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
-    ``echoes``: ``model.echoes(batch)`` if already computed.
+    ``echoes``: ``model.echoes(batch)`` if already computed. ``deciding_only``: in each window, synthesise only the
+    channels that can decide a return (:mod:`muls.deciding_channels`); the others' codes are 0 and
+    ``Records.synthesised`` says which.
     """
     ins = model.instrument
     dig = ins.digitizer
@@ -170,14 +178,17 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     clean = np.empty(shape if keep_noise_free else (0, 0, 0), np.float32)
     ref_clean = np.empty(ref_shape if keep_noise_free else (0, 0), np.float32)
     pulse = ins.pulse
-    scale = 1.0 if noise else 0.0
-    _digitise(codes, clean, window_pulse, window_start, sampling, model.column, model.cuts(batch), echoes,
-              chans.signal(), float(dig.max_code), scale)
+    synthesised = np.empty(shape[:2], np.bool_)
+    settings = DigitiserSettings(float(dig.max_code), 1.0 if noise else 0.0, deciding_only,
+                                 ins.processing.threshold_sigma)
+    _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, model.column, model.cuts(batch),
+              echoes, chans.signal(), settings)
     _reference(reference, ref_clean, sampling, model.basis, pulse.duration_s,
                ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
-               chans.dark_std_lsb[0], float(dig.max_code), scale)
+               chans.dark_std_lsb[0], settings.max_code, settings.noise_scale)
     return Records(reference, codes, window_pulse, window_start, phase, mode,
-                   clean if keep_noise_free else None, ref_clean if keep_noise_free else None)
+                   clean if keep_noise_free else None, ref_clean if keep_noise_free else None,
+                   synthesised if deciding_only else None)
 
 
 @numba.njit(cache=True, inline="always")
@@ -201,8 +212,23 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
             reference[p, k] = _quantise(level + dark_mean + noise_scale * dark_std * normal_at(base, k), max_code)
 
 
+class DigitiserSettings(NamedTuple):
+    """Scalars of the digitiser kernel: the top code [LSB], the noise's scale (1, or 0 for no noise), whether only
+    the channels that can decide a return are synthesised (:mod:`muls.deciding_channels`) and the threshold
+    [sigma] that decides it."""
+
+    max_code: float
+    noise_scale: float
+    deciding_only: bool
+    k_sigma: float
+
+
+#: Windows per block of the digitiser kernel: each block allocates its work arrays once.
+WINDOW_BLOCK = 64
+
+
 @numba.njit(cache=True, parallel=True, nogil=True)
-def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, echoes, chans, max_code, noise_scale):
+def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, col, cuts, echoes, chans, settings):
     n_windows, n_chan, n_samples = codes.shape
     n_pairs = (n_chan + 1) // 2
     n_detectors = 0
@@ -214,80 +240,94 @@ def _digitise(codes, clean, window_pulse, window_start, sampling, col, cuts, ech
     offsets, delay, energy = echoes.offsets, echoes.delay_s, echoes.energy_j
     cut_tau, cut_w = cuts.cut_tau_s, cuts.cut_weight
     ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
-    for w in numba.prange(n_windows):
-        p = window_pulse[w]
-        # Dark noise: one normal per channel (streams of channel pairs); shot noise: one normal per detector
-        # (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's current).
+    max_code, noise_scale = settings.max_code, settings.noise_scale
+    for block in numba.prange((n_windows + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
         bases = np.empty(n_pairs, np.uint64)
-        for j in range(n_pairs):
-            bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + j)
         shot_bases = np.empty(n_shot_pairs, np.uint64)
-        for j in range(n_shot_pairs):
-            shot_bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + n_pairs + j)
-        normals = np.empty(2 * n_pairs)
-        shot_normals = np.empty(2 * n_shot_pairs)
+        shot_normal = np.empty((n_detectors, n_samples))
+        shot_drawn = np.empty((n_detectors, n_samples), np.bool_)
         cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
-        # Echoes of pulse p (by delay) as three running sums over those started by time t:
-        # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
-        # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
-        sa, s1, sb = 0.0, 0.0, 0.0
-        nxt = offsets[p]
-        # The column's cuts by two-way time (insertion sort: a handful). Before a cut its share of the beam
-        # sees the full column; from the cut on, its share is the module doc's tail of waveform.py, of the same
-        # form as an echo, so it joins the three sums; ``ahead[i]``: the share of cuts i and later.
-        n_cut = 0
-        for c in range(cut_tau.shape[1]):
-            if cut_w[p, c] != 0.0:
-                i = n_cut
-                while i > 0 and cut_t[i - 1] > cut_tau[p, c]:
-                    cut_t[i], cut_s[i] = cut_t[i - 1], cut_s[i - 1]
-                    i -= 1
-                cut_t[i], cut_s[i] = cut_tau[p, c], cut_w[p, c]
-                n_cut += 1
-        ahead[n_cut] = 0.0
-        for i in range(n_cut - 1, -1, -1):
-            ahead[i] = ahead[i + 1] + cut_s[i]
-        next_cut = 0
-        for k in range(n_samples):
-            index = window_start[w] + k
-            t = sampling.t0_s + index * dt + sampling.phase_s[p]
-            if k > 0:
-                s1 = (s1 + dt * sa) * ra
-                sa *= ra
-                sb *= rb
-            while nxt < offsets[p + 1] and delay[nxt] <= t:
-                u = t - delay[nxt]
-                ea = energy[nxt] * math.exp(-basis[0] * u)
-                sa += ea
-                s1 += u * ea
-                sb += energy[nxt] * math.exp(-basis[1] * u)
-                nxt += 1
-            while next_cut < n_cut and cut_t[next_cut] <= t:
-                u = t - cut_t[next_cut]
-                v0a, v1a, v0b = column_integrals_at(max(cut_t[next_cut], 0.0), col)
-                ea = cut_s[next_cut] * math.exp(-basis[0] * u)
-                sa += v0a * ea
-                s1 += (u * v0a + v1a) * ea
-                sb += cut_s[next_cut] * v0b * math.exp(-basis[1] * u)
-                next_cut += 1
-            power = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
-            if next_cut < n_cut:
-                power += ahead[next_cut] * column_value(t, np.inf, col)
+        times, power, baseline = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
+        for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
+            p = window_pulse[w]
+            # Echoes of pulse p (by delay) as three running sums over those started by time t:
+            # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
+            # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
+            sa, s1, sb = 0.0, 0.0, 0.0
+            nxt = offsets[p]
+            # The column's cuts by two-way time (insertion sort: a handful). Before a cut its share of the beam
+            # sees the full column; from the cut on, its share is the module doc's tail of waveform.py, of the same
+            # form as an echo, so it joins the three sums; ``ahead[i]``: the share of cuts i and later.
+            n_cut = 0
+            for c in range(cut_tau.shape[1]):
+                if cut_w[p, c] != 0.0:
+                    i = n_cut
+                    while i > 0 and cut_t[i - 1] > cut_tau[p, c]:
+                        cut_t[i], cut_s[i] = cut_t[i - 1], cut_s[i - 1]
+                        i -= 1
+                    cut_t[i], cut_s[i] = cut_tau[p, c], cut_w[p, c]
+                    n_cut += 1
+            ahead[n_cut] = 0.0
+            for i in range(n_cut - 1, -1, -1):
+                ahead[i] = ahead[i + 1] + cut_s[i]
+            next_cut = 0
+            for k in range(n_samples):
+                t = sampling.t0_s + (window_start[w] + k) * dt + sampling.phase_s[p]
+                times[k] = t
+                if k > 0:
+                    s1 = (s1 + dt * sa) * ra
+                    sa *= ra
+                    sb *= rb
+                while nxt < offsets[p + 1] and delay[nxt] <= t:
+                    u = t - delay[nxt]
+                    ea = energy[nxt] * math.exp(-basis[0] * u)
+                    sa += ea
+                    s1 += u * ea
+                    sb += energy[nxt] * math.exp(-basis[1] * u)
+                    nxt += 1
+                while next_cut < n_cut and cut_t[next_cut] <= t:
+                    u = t - cut_t[next_cut]
+                    v0a, v1a, v0b = column_integrals_at(max(cut_t[next_cut], 0.0), col)
+                    ea = cut_s[next_cut] * math.exp(-basis[0] * u)
+                    sa += v0a * ea
+                    s1 += (u * v0a + v1a) * ea
+                    sb += cut_s[next_cut] * v0b * math.exp(-basis[1] * u)
+                    next_cut += 1
+                power[k] = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
+                if next_cut < n_cut:
+                    power[k] += ahead[next_cut] * column_value(t, np.inf, col)
+            if settings.deciding_only:
+                for k in range(n_samples):
+                    baseline[k] = cuts.background_w[p] + column_value(times[k], np.inf, col)
+                deciding_channels(synthesised[w], power, baseline, times, chans, max_code, settings.k_sigma)
+            else:
+                synthesised[w, :] = True
+            # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per
+            # detector (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's
+            # current), drawn when a channel first needs it.
             for j in range(n_pairs):
-                if 2 * j + 1 < n_chan:
-                    normals[2 * j], normals[2 * j + 1] = normal_pair_at(bases[j], index)
-                else:  # an odd channel count: the pair's second normal would go unused (same first one)
-                    normals[2 * j] = normal_at(bases[j], index)
+                bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + j)
             for j in range(n_shot_pairs):
-                if 2 * j + 1 < n_detectors:
-                    shot_normals[2 * j], shot_normals[2 * j + 1] = normal_pair_at(shot_bases[j], index)
-                else:
-                    shot_normals[2 * j] = normal_at(shot_bases[j], index)
+                shot_bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + n_pairs + j)
+            shot_drawn[:, :] = False
             for c in range(n_chan):
-                gated = power if chans.gate_open_s[c] <= t < chans.gate_close_s[c] else 0.0
-                level = chans.lsb_per_w[c] * gated  # MULS Eq. 12 in LSB (Eq. 13 without noise)
-                noise = (chans.dark_std_lsb[c] * normals[c]
-                         + math.sqrt(chans.shot_lsb2_per_w[c] * gated) * shot_normals[chans.detector[c]])
-                if keep:
-                    clean[w, c, k] = level + chans.dark_mean_lsb[c]
-                codes[w, c, k] = _quantise(level + chans.dark_mean_lsb[c] + noise_scale * noise, max_code)  # MULS Eq. 13
+                det = chans.detector[c]
+                for k in range(n_samples):
+                    gated = power[k] if chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c] else 0.0
+                    level = chans.lsb_per_w[c] * gated + chans.dark_mean_lsb[c]  # MULS Eq. 12 in LSB
+                    if keep:
+                        clean[w, c, k] = level
+                    if not synthesised[w, c]:
+                        codes[w, c, k] = 0
+                        continue
+                    shot_std = math.sqrt(chans.shot_lsb2_per_w[c] * gated)
+                    if level - noise_scale * NORMAL_BOUND * (chans.dark_std_lsb[c] + shot_std) >= max_code - 0.5:
+                        codes[w, c, k] = max_code  # clipped whatever the draws: no need to make them
+                        continue
+                    index = window_start[w] + k
+                    if not shot_drawn[det, k]:
+                        shot_normal[det, k] = normal_half_at(shot_bases[det // 2], index, det % 2)
+                        shot_drawn[det, k] = True
+                    noise = chans.dark_std_lsb[c] * normal_half_at(bases[c // 2], index, c % 2) + shot_std * shot_normal[
+                        det, k]
+                    codes[w, c, k] = _quantise(level + noise_scale * noise, max_code)  # MULS Eq. 13

@@ -67,6 +67,10 @@ _C = (-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e00, -2.
       4.374664141464968e00, 2.938163982698783e00)
 _D = (7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e00, 3.754408661907416e00)
 _P_LOW = 0.02425
+#: Every normal drawn here is smaller than this in magnitude: the inverse CDF of the outermost cell centre,
+#: 0.5 / 2^32, is -6.3380 (:func:`centred_unit`), so a sample whose noise-free code lies further from a bound of
+#: the digitiser's range than this many sigma has a known code without a draw.
+NORMAL_BOUND = 6.34
 
 
 @numba.njit(cache=True, inline="always")
@@ -91,10 +95,19 @@ def centred_unit(bits32):
 
 @numba.njit(cache=True, inline="always")
 def normal_pair_at(base, index):
-    """Two independent standard normals at position ``index`` of a stream (one per 32-bit half, |x| < 6.3)."""
+    """Two independent standard normals at position ``index`` of a stream (one per 32-bit half, |x| <
+    :data:`NORMAL_BOUND`)."""
     h = splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
     return (_inverse_normal_cdf(centred_unit(h >> np.uint64(32))),
             _inverse_normal_cdf(centred_unit(h & np.uint64(0xFFFFFFFF))))
+
+
+@numba.njit(cache=True, inline="always")
+def normal_half_at(base, index, half):
+    """The normal of 32-bit half ``half`` (0: the high bits, 1: the low) of position ``index`` of a stream: element
+    ``half`` of :func:`normal_pair_at`, without computing the other."""
+    h = splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
+    return _inverse_normal_cdf(centred_unit(h >> np.uint64(32) if half == 0 else h & np.uint64(0xFFFFFFFF)))
 
 
 @numba.njit(cache=True, inline="always")

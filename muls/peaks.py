@@ -101,7 +101,8 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes:
     fit = FIT_CODES[proc.peak_fit]
     settings = PeakSettings(proc.threshold_sigma, proc.tail_tolerance, float(dig.max_code), fit,
                             ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)))
-    _peaks(records.codes, records.window_pulse, records.window_start, records.phase_s, -dig.pretrigger_s,
+    synthesised = records.synthesised if records.synthesised is not None else np.ones((n_windows, n_chan), np.bool_)
+    _peaks(records.codes, synthesised, records.window_pulse, records.window_start, records.phase_s, -dig.pretrigger_s,
            dig.sample_interval_s, model.column, batch.background_w, chans.signal(), settings, model.fit_table,
            model.clip_table, out)
     ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], fit, model.fit_table)
@@ -212,7 +213,7 @@ def _reference_peaks(reference, dark_mean, fit, table):
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
-def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
+def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
            clip_table, out):
     n_windows, n_chan, n_samples = codes.shape
     cap = out.window.shape[0] // max(1, n_windows * n_chan)
@@ -224,7 +225,7 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
     for w in numba.prange(n_windows):
         p = window_pulse[w]
         first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
-        while first < n_chan and not _may_run(codes, w, first, dark_mean, dark_std, k_sigma):
+        while first < n_chan and not (synthesised[w, first] and _may_run(codes, w, first, dark_mean, dark_std, k_sigma)):
             first += 1
         if first == n_chan:
             continue
@@ -240,16 +241,22 @@ def _peaks(codes, window_pulse, window_start, phase, t0, dt, col, background, ch
         blind = np.empty(n_samples, np.bool_)
         for c in range(first, n_chan):
             slot = w * n_chan + c
-            if c > first and not _may_run(codes, w, c, dark_mean, dark_std, k_sigma):
+            if c > first and not (synthesised[w, c] and _may_run(codes, w, c, dark_mean, dark_std, k_sigma)):
                 continue
+            sees = False
             for k in range(n_samples):
                 open_[k] = gate_open[c] <= times[k] < gate_close[c]
                 base = base_w[k] if open_[k] else 0.0
                 expected = dark_mean[c] + lsb_per_w[c] * base
-                sigma[k] = math.sqrt(dark_std[c] ** 2 + shot[c] * base + 1.0 / 12.0)
                 # Where the backscatter alone clips the channel, nothing can be seen in it.
                 blind[k] = expected >= max_code
-                resid[k] = 0.0 if blind[k] else codes[w, c, k] - expected
+                sees = sees or not blind[k]
+            if not sees:
+                continue  # blind in the whole window: every residual is zero
+            for k in range(n_samples):
+                base = base_w[k] if open_[k] else 0.0
+                sigma[k] = math.sqrt(dark_std[c] ** 2 + shot[c] * base + 1.0 / 12.0)
+                resid[k] = 0.0 if blind[k] else codes[w, c, k] - (dark_mean[c] + lsb_per_w[c] * base)
                 echoes[k] = 0.0
             k = 0
             while k < n_samples:

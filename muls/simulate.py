@@ -8,8 +8,10 @@ from .waveform import OpticalModel, PulseBatch
 
 
 def simulate(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
-             keep_noise_free: bool = False, noise: bool = True) -> tuple[Records, Ranging]:
-    """Digitise every channel of ``batch`` (Eqs. 1-13) and range it (Eq. 14); ``seed`` keys all noise."""
+             keep_noise_free: bool = False, noise: bool = True, deciding_only: bool = False) -> tuple[Records, Ranging]:
+    """Digitise the channels of ``batch`` (Eqs. 1-13) and range it (Eq. 14); ``seed`` keys all noise.
+    ``deciding_only``: only the channels that can decide a return (:func:`muls.detection.digitise`)."""
     echoes = model.echoes(batch)
-    records = digitise(model, batch, seed, mode=mode, keep_noise_free=keep_noise_free, noise=noise, echoes=echoes)
+    records = digitise(model, batch, seed, mode=mode, keep_noise_free=keep_noise_free, noise=noise, echoes=echoes,
+                       deciding_only=deciding_only)
     return records, range_batch(model, batch, records, echoes)

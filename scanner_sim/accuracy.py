@@ -117,9 +117,10 @@ class WaveformFit:
 
     @classmethod
     def of(cls, records: Records, reference: Records) -> WaveformFit:
-        """The sums over every signal sample ``records`` holds, against the same sample of ``reference``, a
-        ``full`` record of the same pulses (same order) and seed: the window of pulse p starting at sample s is
-        compared with samples s.. of the reference's record of pulse p, channel by channel."""
+        """The sums over every signal sample ``records`` holds (of its synthesised channels), against the same
+        sample of ``reference``, a ``full`` record of the same pulses (same order) and seed: the window of pulse p
+        starting at sample s is compared with samples s.. of the reference's record of pulse p, channel by
+        channel."""
         if reference.mode != "full":
             raise ValueError(f"reference records: mode {reference.mode!r}, expected 'full'")
         if records.n_pulses != reference.n_pulses:
@@ -129,6 +130,9 @@ class WaveformFit:
         ref = reference.codes[records.window_pulse[:, None, None], np.arange(records.codes.shape[1])[None, :, None],
                               samples[:, None, :]].astype(np.float64)
         diff = records.codes.astype(np.float64) - ref
+        if records.synthesised is not None:  # channels left out of a window hold no samples
+            held = np.broadcast_to(records.synthesised[:, :, None], ref.shape)
+            ref, diff = ref[held], diff[held]
         return cls(ref.size, float(ref.sum()), float(np.square(ref).sum()), float(np.square(diff).sum()))
 
     def __add__(self, other: WaveformFit) -> WaveformFit:

@@ -33,7 +33,8 @@ class FidelityLevel:
     ``muls.detection.RECORD_MODES``. column_cut: where the water column stops, one of :data:`COLUMN_CUTS`
     (:func:`column_cuts`). adaptive: decide per pulse (:mod:`scanner_sim.auto_level`): where all ``subrays`` hit one
     surface within 5 cm of range, two echoes with their delays' energy, mean, variance and skewness, else one per
-    sub-ray.
+    sub-ray. deciding_only: synthesise and search in each record window only the channels that can decide a return
+    (:mod:`muls.deciding_channels`).
     """
 
     name: str
@@ -42,13 +43,14 @@ class FidelityLevel:
     record_mode: str
     column_cut: str
     adaptive: bool = False
+    deciding_only: bool = False
 
 
 FIDELITY_LEVELS: dict[str, FidelityLevel] = {
     "fast": FidelityLevel("fast", subrays=7, shadow_rays=True, record_mode="windowed", column_cut="pulse"),
     "balanced": FidelityLevel("balanced", subrays=19, shadow_rays=True, record_mode="windowed", column_cut="subray"),
     "auto": FidelityLevel("auto", subrays=19, shadow_rays=True, record_mode="windowed", column_cut="subray",
-                          adaptive=True),
+                          adaptive=True, deciding_only=True),
     "reference": FidelityLevel("reference", subrays=91, shadow_rays=True, record_mode="full", column_cut="subray"),
 }
 

@@ -214,7 +214,7 @@ def waveform_slots(setup, count: int, every_n: int) -> np.ndarray:
 
 def write_waveforms(setup, path: Path, pick: np.ndarray) -> None:
     """Full records of the pulses in slots ``pick`` (same noise as in the pass itself)."""
-    records = setup.simulate_chunk(pick, record_mode="full").records
+    records = setup.simulate_chunk(pick, record_mode="full", every_channel=True).records
     time_ns = records.reference_times_s(setup.model) * 1e9  # full mode: the reference spans the record
     channels = {"ch0": records.reference}
     channels.update({ch.name: records.codes[:, i, :] for i, ch in enumerate(setup.model.instrument.channels)})

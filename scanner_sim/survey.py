@@ -167,18 +167,22 @@ class PassSetup:
         return RayStage(slots, hits, batch, self.lines_of_sight(slots, times, hits),
                         nominal_footprint(hits) if footprint else None)
 
-    def finish_chunk(self, stage: RayStage, record_mode: str | None = None) -> Chunk:
-        """The physics of a chunk after its ray stage: MULS waveforms and ranging, georeferencing, dropouts."""
-        records, ranging = simulate(self.model, stage.batch, self.seed, record_mode or self.level.record_mode)
+    def finish_chunk(self, stage: RayStage, record_mode: str | None = None, every_channel: bool = False) -> Chunk:
+        """The physics of a chunk after its ray stage: MULS waveforms and ranging, georeferencing, dropouts.
+        ``record_mode`` and ``every_channel`` override the level's record mode and its ``deciding_only`` (for
+        records kept whole, as waveforms.npz keeps them)."""
+        records, ranging = simulate(self.model, stage.batch, self.seed, record_mode or self.level.record_mode,
+                                    deciding_only=self.level.deciding_only and not every_channel)
         sight, lost = stage.sight, ranging.dropout_cause >= 0
         dropouts = DropoutRecords(pulse_index=stage.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
                                   direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
         return Chunk(stage.slots, georeference(ranging, stage.hits, sight), dropouts, records, stage.footprint)
 
-    def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, footprint: bool = False) -> Chunk:
+    def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, footprint: bool = False,
+                       every_channel: bool = False) -> Chunk:
         """One chunk of pulse slots (n,) through the whole flow; ``footprint``: also the nominal beam footprint
-        that coverage needs (None otherwise)."""
-        return self.finish_chunk(self.cast_chunk(slots, footprint), record_mode)
+        that coverage needs (None otherwise); ``record_mode``, ``every_channel``: as :meth:`finish_chunk`."""
+        return self.finish_chunk(self.cast_chunk(slots, footprint), record_mode, every_channel)
 
     def lines_of_sight(self, slots: np.ndarray, times: np.ndarray, hits: Hits) -> LinesOfSight:
         """Each pulse's estimated beam, with the first truth surface along it. Without navigation noise the

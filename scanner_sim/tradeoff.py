@@ -31,7 +31,7 @@ REFERENCE = "reference"
 KNOBS: dict[str, tuple[str, object]] = {
     "subrays=1": ("subrays", 1), "subrays=7": ("subrays", 7), "subrays=37": ("subrays", 37),
     "subrays=91": ("subrays", 91), "shadow_rays=off": ("shadow_rays", False), "record_mode=full": ("record_mode", "full"),
-    "column_cut=pulse": ("column_cut", "pulse"),
+    "column_cut=pulse": ("column_cut", "pulse"), "deciding_only=on": ("deciding_only", True),
 }
 #: Sub-rays of the reference run again at a finer resolution to show the reference has converged (the densest
 #: ring layout, beams.SUBRAY_COUNTS: 8 rings against the reference's 5).

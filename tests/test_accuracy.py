@@ -89,6 +89,19 @@ def test_waveform_r2_compares_each_window_with_the_same_samples_of_the_full_reco
     assert WaveformFit.of(wrong_place, full).r2 < 0.0
 
 
+def test_waveform_r2_counts_only_the_channels_a_window_synthesised():
+    """Two channels, one window: channel 2 was left out (its codes 0, ``synthesised`` False), so R^2 is channel 1's
+    alone, 1 when it copies the reference; without the mask the zeros would count as a misfit."""
+    from dataclasses import replace
+
+    full = _records([[[5, 10, 40, 10], [7, 9, 30, 9]]], [0], [0], "full", 1)
+    kept = replace(_records([[[5, 10, 40, 10], [0, 0, 0, 0]]], [0], [0], "windowed", 1),
+                   synthesised=np.array([[True, False]]))
+    fit = WaveformFit.of(kept, full)
+    assert fit.count == 4 and fit.r2 == 1.0
+    assert WaveformFit.of(replace(kept, synthesised=None), full).r2 < 0.5
+
+
 def test_waveform_sums_add_over_chunks_like_one_batch():
     full = _records([[[1, 2, 3, 9]], [[4, 8, 1, 0]]], [0, 1], [0, 0], "full", 2)
     level = _records([[[1, 2, 4, 9]], [[4, 6, 1, 0]]], [0, 1], [0, 0], "full", 2)

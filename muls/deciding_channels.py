@@ -1,0 +1,175 @@
+"""Which signal channels of a record window can decide a return, judged on the noise-free signal before any noise
+is drawn: the digitiser's ``deciding_only`` mode synthesises only those (the ``auto`` fidelity level's records).
+
+Ranging keeps, for each echo, the unsaturated peak with the best SNR (:func:`muls.ranging.choose_returns`).
+Channels that split one detector's current see the same optical power at different gains, so where the
+window's echo signal is one hump, that choice is known before the noise is drawn, with certainty bounds from the
+noise's range (every normal is smaller than :data:`muls.noise.NORMAL_BOUND` in magnitude):
+
+- a channel that the backscatter alone clips throughout the window gives no peak (the peak search sees nothing
+  where the calibrated baseline clips): not needed, in any window;
+- in a one-hump window whose detector's channels all see the whole window (no gate edge in it), the
+  highest-gain channel that surely stays unclipped and surely clears the threshold at the hump is kept; a
+  channel of higher gain is not needed where it surely clips at the hump (its peak is saturated, and a saturated
+  peak loses to an unsaturated one); a channel of lower gain is not needed where its best possible SNR stays
+  below the kept channel's worst by :data:`SNR_MARGIN` (its peak cannot win).
+
+Anything else is kept: a window with two humps (two echoes apart), a gate edge, a channel that may or may not
+clip. What the pruning gives up is a peak that could only lose, and a lower-gain channel's chance of catching an
+echo near the threshold that the higher-gain channel misses; docs/fidelity.md states it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .noise import NORMAL_BOUND
+
+#: The kept channel's worst SNR must exceed a lower-gain channel's best by this factor for that one to be dropped:
+#: room for the peak fit's amplitude ratio (the centre sample over the fitted peak, within a few per cent).
+SNR_MARGIN = 1.25
+
+
+@numba.njit(cache=True, nogil=True)
+def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma):
+    """Fill ``out`` (n_channels,) bool with the channels of one window that can decide a return (module doc).
+
+    power: (n,) noise-free optical power at the window's samples [W]; baseline: (n,) the processor's calibrated
+    baseline there [W] (background plus the uncut column, as :mod:`muls.peaks` uses it); times: (n,) the sample
+    times [s]; chans: the signal channels' :class:`muls.channels.ChannelArrays`; max_code: the top code [LSB];
+    k_sigma: the detection threshold [sigma].
+    """
+    n_chan, n = out.shape[0], power.shape[0]
+    whole = np.ones(n_chan, np.bool_)  # gate open over the whole window
+    plain = np.ones(n_chan, np.bool_)  # no sample where the baseline alone clips it (a blind sample's residual is 0)
+    tolerance = np.inf  # [W] one dark sigma of the most sensitive channel that sees the echo
+    top, highest = 0, power[0]
+    for k in range(1, n):
+        highest = max(highest, power[k])
+        if power[k] - baseline[k] > power[top] - baseline[top]:
+            top = k
+    for c in range(n_chan):
+        out[c] = False  # until an open sample where the baseline alone leaves it below the top code, with echo on it
+        for k in range(n):
+            is_open = chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c]
+            blind = is_open and chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * baseline[k] >= max_code
+            whole[c] = whole[c] and is_open
+            out[c] = out[c] or (is_open and not blind and power[k] > baseline[k])
+            plain[c] = plain[c] and not blind
+        if out[c]:
+            tolerance = min(tolerance, _dark_sigma(chans, c) / chans.lsb_per_w[c])
+    if not _one_hump(power, baseline, top, tolerance):
+        return
+    best, best_snr = -1, -np.inf  # the surely unclipped, surely detected channel with the best least SNR
+    for c in range(n_chan):
+        least = _snr_bounds(c, power, baseline, top, chans)[0]
+        if out[c] and whole[c] and plain[c] and least > k_sigma and least > best_snr and _surely_unclipped(c, highest, chans,
+                                                                                              max_code):
+            best, best_snr = c, least
+    # a channel open at the hump and surely clipped there gives a saturated peak there, or none (clipped)
+    clipped = np.zeros(n_chan, np.bool_)
+    lowest = -1  # the lowest-gain channel that gives a saturated peak at the hump
+    for c in range(n_chan):
+        if out[c] and chans.gate_open_s[c] <= times[top] < chans.gate_close_s[c]:
+            if plain[c]:
+                clipped[c] = _surely_clipped(c, power[top], chans, max_code)
+                if clipped[c] and (lowest < 0 or chans.lsb_per_w[c] < chans.lsb_per_w[lowest]):
+                    lowest = c
+            else:
+                clipped[c] = _clipped_from_blindness(c, power, baseline, times, top, chans, max_code)
+    if best < 0:
+        # every channel that sees is clipped: the return is the lowest-gain saturated peak (muls.ranging)
+        every_clipped = lowest >= 0
+        for c in range(n_chan):
+            every_clipped = every_clipped and (clipped[c] or not out[c])
+        if every_clipped:
+            for c in range(n_chan):
+                out[c] = c == lowest
+        return
+    for c in range(n_chan):
+        if out[c] and c != best:
+            out[c] = not (clipped[c] or (whole[c] and plain[c] and SNR_MARGIN * _snr_bounds(c, power, baseline, top, chans)[1]
+                                         < best_snr))
+
+
+@numba.njit(cache=True, inline="always")
+def _dark_sigma(chans, c):
+    """Channel c's noise without light [LSB]: dark noise and rounding."""
+    return math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _noise_reach(chans, c, power):
+    """Most that channel c's noise and rounding can move a code at optical power ``power`` [W] [LSB]."""
+    return NORMAL_BOUND * (chans.dark_std_lsb[c] + math.sqrt(chans.shot_lsb2_per_w[c] * power)) + 0.5
+
+
+@numba.njit(cache=True, inline="always")
+def _level(chans, c, power):
+    """Channel c's noise-free level [LSB] at optical power ``power`` [W] (MULS Eq. 12 in LSB)."""
+    return chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * power
+
+
+@numba.njit(cache=True, inline="always")
+def _surely_unclipped(c, highest_power, chans, max_code):
+    """No sample of channel c, whose gate is open throughout, can reach the top code whatever the noise: its level
+    and the noise's reach both grow with the power, so the window's highest power [W] decides."""
+    return _level(chans, c, highest_power) + _noise_reach(chans, c, highest_power) < max_code
+
+
+@numba.njit(cache=True, inline="always")
+def _surely_clipped(c, power, chans, max_code):
+    """Channel c's sample at optical power ``power`` [W] reaches the top code, whatever the noise."""
+    return _level(chans, c, power) - _noise_reach(chans, c, power) >= max_code
+
+
+@numba.njit(cache=True, nogil=True)
+def _clipped_from_blindness(c, power, baseline, times, top, chans, max_code):
+    """Channel c, which the baseline alone clips at some samples, surely stays clipped from its last such sample
+    through the hump, which lies after all of them, with its gate open all along: the plateau at the hump then runs
+    back into samples the backscatter clips, and the peak search takes it for the column, not an echo."""
+    last = -1
+    for k in range(power.shape[0]):
+        is_open = chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c]
+        if is_open and chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * baseline[k] >= max_code:
+            if k >= top:
+                return False
+            last = k
+    if last < 0:
+        return False
+    for k in range(last, top + 1):
+        if not (chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c] and _surely_clipped(c, power[k], chans,
+                                                                                              max_code)):
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _snr_bounds(c, power, baseline, top, chans):
+    """(least, most) SNR of channel c's peak at the hump: its amplitude over the baseline, less or plus the noise's
+    reach, over the processor's noise there (dark, rounding and the baseline's shot noise, as muls.peaks has it)."""
+    amplitude = chans.lsb_per_w[c] * (power[top] - baseline[top])
+    reach = _noise_reach(chans, c, power[top])
+    sigma = math.sqrt(chans.dark_std_lsb[c] ** 2 + chans.shot_lsb2_per_w[c] * baseline[top] + 1.0 / 12.0)
+    return (amplitude - reach) / sigma, (amplitude + reach) / sigma
+
+
+@numba.njit(cache=True, nogil=True)
+def _one_hump(power, baseline, top, tolerance):
+    """The echo signal r = power - baseline has one hump, at ``top``: going out from it either way, r never rises
+    by more than ``tolerance`` [W] over both its lowest value since the hump and zero (a rise below the baseline,
+    the column's deficit behind a cut shrinking, cannot start a run over it)."""
+    lowest = np.inf
+    for k in range(top, -1, -1):
+        lowest = min(lowest, power[k] - baseline[k])
+        if power[k] - baseline[k] > max(lowest, 0.0) + tolerance:
+            return False
+    lowest = np.inf
+    for k in range(top, power.shape[0]):
+        lowest = min(lowest, power[k] - baseline[k])
+        if power[k] - baseline[k] > max(lowest, 0.0) + tolerance:
+            return False
+    return True
