@@ -29,7 +29,7 @@ from .noise import (
     stream_base,
     uniform_at,
 )
-from .waveform import Echoes, OpticalModel, PulseBatch, column_integrals_at, column_value, pulse_value
+from .waveform import Echoes, OpticalModel, PulseBatch, column_integrals_at, uncut_column_value
 
 RECORD_MODES = ("windowed", "full")
 
@@ -202,11 +202,19 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
                noise_scale):
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
+    ra, rb = math.exp(-basis[0] * sampling.dt_s), math.exp(-basis[1] * sampling.dt_s)
     for p in numba.prange(n_pulses):
         base = stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM)
+        ea, eb = -1.0, -1.0  # the pulse basis's two exponentials at u, stepped by constant factors once u >= 0
         for k in range(n_ref):
             u = sampling.t0_s + k * sampling.dt_s + sampling.phase_s[p]
-            level = lsb_per_density * pulse_value(u, basis) if u < extent else 0.0
+            level = 0.0
+            if 0.0 <= u < extent:  # the filtered pulse (MULS Eq. 2), as muls.waveform.pulse_value
+                if ea < 0.0:
+                    ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
+                level = lsb_per_density * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
+                ea *= ra
+                eb *= rb
             if keep:
                 clean[p, k] = level + dark_mean
             reference[p, k] = _quantise(level + dark_mean + noise_scale * dark_std * normal_at(base, k), max_code)
@@ -295,10 +303,10 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                     next_cut += 1
                 power[k] = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
                 if next_cut < n_cut:
-                    power[k] += ahead[next_cut] * column_value(t, np.inf, col)
+                    power[k] += ahead[next_cut] * uncut_column_value(t, col)
             if settings.deciding_only:
                 for k in range(n_samples):
-                    baseline[k] = cuts.background_w[p] + column_value(times[k], np.inf, col)
+                    baseline[k] = cuts.background_w[p] + uncut_column_value(times[k], col)
                 deciding_channels(synthesised[w], power, baseline, times, chans, max_code, settings.k_sigma)
             else:
                 synthesised[w, :] = True
@@ -312,6 +320,9 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
             shot_drawn[:, :] = False
             for c in range(n_chan):
                 det = chans.detector[c]
+                if not synthesised[w, c] and not keep:
+                    codes[w, c, :] = 0
+                    continue
                 for k in range(n_samples):
                     gated = power[k] if chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c] else 0.0
                     level = chans.lsb_per_w[c] * gated + chans.dark_mean_lsb[c]  # MULS Eq. 12 in LSB

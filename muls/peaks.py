@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from .detection import Records
-from .waveform import Echoes, OpticalModel, PulseBatch, column_value, pulse_value
+from .waveform import Echoes, OpticalModel, PulseBatch, pulse_value, uncut_column_value
 
 #: Most peaks kept per window and channel (more means noise, not echoes).
 MAX_PEAKS_PER_WINDOW = 8
@@ -233,7 +233,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
         base_w = np.empty(n_samples)
         for k in range(n_samples):
             times[k] = t0 + (window_start[w] + k) * dt + phase[p]
-            base_w[k] = background[p] + column_value(times[k], np.inf, col)
+            base_w[k] = background[p] + uncut_column_value(times[k], col)
         resid = np.empty(n_samples)
         sigma = np.empty(n_samples)
         echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)

@@ -360,7 +360,7 @@ def _print_profile(args) -> int:
 # -- tradeoff -------------------------------------------------------------------------------------------
 @subcommand("tradeoff")
 def _add_tradeoff(sub):
-    from .tradeoff import DEFAULT_PULSES, DEFAULT_WAVEFORM_PULSES, KNOBS
+    from .tradeoff import DEFAULT_PULSES, DEFAULT_REPEAT, DEFAULT_WAVEFORM_PULSES, KNOBS
 
     p = sub.add_parser("tradeoff", help="speed against accuracy: each fidelity level and knob on the same pulses, "
                        "against the truth and the reference level (chart, table, JSON)")
@@ -372,6 +372,8 @@ def _add_tradeoff(sub):
     p.add_argument("--pulses", type=positive_int(), default=DEFAULT_PULSES, help="pulses per run (default: %(default)s)")
     p.add_argument("--waveform-pulses", type=positive_int(), default=DEFAULT_WAVEFORM_PULSES,
                    help="pulses whose records are compared (default: %(default)s)")
+    p.add_argument("--repeat", type=positive_int(), default=DEFAULT_REPEAT,
+                   help="timed passes of each run, round-robin, the fastest kept (default: %(default)s)")
     p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /tradeoff)")
     p.add_argument("--json", action="store_true", help="print tradeoff.json instead of the table")
     p.add_argument("--no-render", action="store_true", help="no chart")
@@ -390,7 +392,7 @@ def _cmd_tradeoff(args) -> int:
     out = Path(args.out or Path(config.output_dir) / "tradeoff")
     progress = None if args.json else (lambda name: print(f"running {name}", file=sys.stderr, flush=True))
     result = tradeoff(config, tuple(args.levels), tuple(args.knobs), args.pulses, args.waveform_pulses, progress,
-                      convergence=not args.no_convergence)
+                      convergence=not args.no_convergence, repeat=args.repeat)
     path = write_tradeoff(result, out, render=not args.no_render)
     print(json.dumps(result) if args.json else markdown_table(result) + str(path))
     return 0

@@ -47,7 +47,8 @@ class FidelityLevel:
 
 
 FIDELITY_LEVELS: dict[str, FidelityLevel] = {
-    "fast": FidelityLevel("fast", subrays=7, shadow_rays=True, record_mode="windowed", column_cut="pulse"),
+    "fast": FidelityLevel("fast", subrays=7, shadow_rays=True, record_mode="windowed", column_cut="pulse",
+                          deciding_only=True),
     "balanced": FidelityLevel("balanced", subrays=19, shadow_rays=True, record_mode="windowed", column_cut="subray"),
     "auto": FidelityLevel("auto", subrays=19, shadow_rays=True, record_mode="windowed", column_cut="subray",
                           adaptive=True, deciding_only=True),
