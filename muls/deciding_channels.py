@@ -1,22 +1,22 @@
 """Which signal channels of a record window can decide a return, judged on the noise-free signal before any noise
-is drawn: the digitiser's ``deciding_only`` mode synthesises only those (the ``auto`` fidelity level's records).
+is drawn: the digitiser's ``deciding_only`` mode synthesises only those (the ``auto`` and ``fast`` levels).
 
-Ranging keeps, for each echo, the unsaturated peak with the best SNR (:func:`muls.ranging.choose_returns`).
-Channels that split one detector's current see the same optical power at different gains, so where the
-window's echo signal is one hump, that choice is known before the noise is drawn, with certainty bounds from the
-noise's range (every normal is smaller than :data:`muls.noise.NORMAL_BOUND` in magnitude):
+Ranging keeps, for each echo, the unsaturated peak with the best SNR (:func:`muls.ranging.choose_returns`), and
+every normal the noise streams give is smaller than :data:`muls.noise.NORMAL_BOUND` in magnitude, so some outcomes
+are certain before the noise is drawn:
 
-- a channel that the backscatter alone clips throughout the window gives no peak (the peak search sees nothing
-  where the calibrated baseline clips): not needed, in any window;
-- in a one-hump window whose detector's channels all see the whole window (no gate edge in it), the
-  highest-gain channel that surely stays unclipped and surely clears the threshold at the hump is kept; a
-  channel of higher gain is not needed where it surely clips at the hump (its peak is saturated, and a saturated
-  peak loses to an unsaturated one); a channel of lower gain is not needed where its best possible SNR stays
-  below the kept channel's worst by :data:`SNR_MARGIN` (its peak cannot win).
+- a channel with no open sample that both escapes the column's clipping (the processor's calibrated baseline below
+  the top code) and carries echo over that baseline finds no echo in the window: not needed;
+- where the echo signal over the baseline is one hump, the channel (gate open and baseline unclipped throughout)
+  that surely stays unclipped and surely clears the threshold at the hump, with the best least SNR, is kept; a
+  channel surely clipped at the hump, or clipped from samples the column blinds through the hump, gives a
+  saturated peak or none and cannot win; a channel whose best SNR, times :data:`SNR_MARGIN`, stays below the kept
+  channel's least cannot win either. Where every channel that sees the echo is clipped, the lowest-gain one is kept
+  (its saturated peak is the return).
 
-Anything else is kept: a window with two humps (two echoes apart), a gate edge, a channel that may or may not
-clip. What the pruning gives up is a peak that could only lose, and a lower-gain channel's chance of catching an
-echo near the threshold that the higher-gain channel misses; docs/fidelity.md states it.
+Anything else is kept: two humps (echoes apart), a gate edge or a blind stretch for the SNR comparison, a channel
+that may or may not clip. What the pruning gives up, a pruned channel's false alarms and its duplicate returns of
+an echo another channel ranges, docs/fidelity.md states.
 """
 
 from __future__ import annotations
@@ -66,8 +66,8 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma):
     best, best_snr = -1, -np.inf  # the surely unclipped, surely detected channel with the best least SNR
     for c in range(n_chan):
         least = _snr_bounds(c, power, baseline, top, chans)[0]
-        if out[c] and whole[c] and plain[c] and least > k_sigma and least > best_snr and _surely_unclipped(c, highest, chans,
-                                                                                              max_code):
+        candidate = out[c] and whole[c] and plain[c] and least > k_sigma and least > best_snr
+        if candidate and _surely_unclipped(c, highest, chans, max_code):
             best, best_snr = c, least
     # a channel open at the hump and surely clipped there gives a saturated peak there, or none (clipped)
     clipped = np.zeros(n_chan, np.bool_)
@@ -91,8 +91,8 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma):
         return
     for c in range(n_chan):
         if out[c] and c != best:
-            out[c] = not (clipped[c] or (whole[c] and plain[c] and SNR_MARGIN * _snr_bounds(c, power, baseline, top, chans)[1]
-                                         < best_snr))
+            loses = whole[c] and plain[c] and SNR_MARGIN * _snr_bounds(c, power, baseline, top, chans)[1] < best_snr
+            out[c] = not (clipped[c] or loses)
 
 
 @numba.njit(cache=True, inline="always")

@@ -43,6 +43,21 @@ def test_every_level_has_its_speed_and_both_sets_of_metrics(step_edges):
     assert "| subrays=1 |" in (out / "tradeoff.md").read_text()
 
 
+def test_more_timed_passes_change_only_the_speeds():
+    """A seed fixes the points, so timing each run once or three times (round-robin, the fastest kept) gives the
+    same metrics; only pulses_per_s may move, and the JSON says how many passes timed it."""
+    from scanner_sim.tradeoff import tradeoff
+
+    config = load_scene(FAILURES / "step_edges.yaml")
+    once, thrice = (tradeoff(config, ("fast", "auto"), (), pulses=300, waveform_pulses=100, convergence=False,
+                             repeat=r) for r in (1, 3))
+    assert (once["timed_passes"], thrice["timed_passes"]) == (1, 3)
+    for name in ("fast", "auto"):
+        a, b = once["levels"][name], thrice["levels"][name]
+        assert a["vs_truth"] == b["vs_truth"] and a["vs_reference"] == b["vs_reference"]
+        assert b["pulses_per_s"] > 0
+
+
 def test_the_reference_against_itself_is_exact(step_edges):
     """The reference run twice on the same pulses and seed is the same run: nothing missing or extra, no
     position difference, every class agrees, waveforms identical."""
