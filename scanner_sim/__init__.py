@@ -8,6 +8,8 @@ The Python API (``docs/python-api.md``)::
     result.points.xyz, result.points.classification, result.summary["points"]
 """
 
+import muls  # noqa: F401  first: it sets where numba caches kernels (muls/kernel_cache.py)
+
 from .config import ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes
 from .records import DropoutRecords, PointRecords
 from .scene import Scene, build_scene

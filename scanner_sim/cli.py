@@ -267,8 +267,10 @@ def _first_run_notice() -> None:
     from pathlib import Path
 
     import muls
+    from muls.kernel_cache import kernel_cache_dir
 
-    if not any((Path(muls.__file__).parent / "__pycache__").glob("detection._digitise*.nbi")):
+    cache = kernel_cache_dir() or Path(muls.__file__).parent / "__pycache__"
+    if not any(cache.rglob("detection._digitise*.nbi")):
         print("first run: compiling the simulation kernels (about a minute; later runs load them from the cache)",
               file=sys.stderr, flush=True)
 
