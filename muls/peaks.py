@@ -225,7 +225,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
     for w in numba.prange(n_windows):
         p = window_pulse[w]
         first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
-        while first < n_chan and not (synthesised[w, first] and _may_run(codes, w, first, dark_mean, dark_std, k_sigma)):
+        while first < n_chan and not _may_run(codes, synthesised, w, first, dark_mean, dark_std, k_sigma):
             first += 1
         if first == n_chan:
             continue
@@ -241,7 +241,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
         blind = np.empty(n_samples, np.bool_)
         for c in range(first, n_chan):
             slot = w * n_chan + c
-            if c > first and not (synthesised[w, c] and _may_run(codes, w, c, dark_mean, dark_std, k_sigma)):
+            if c > first and not _may_run(codes, synthesised, w, c, dark_mean, dark_std, k_sigma):
                 continue
             sees = False
             for k in range(n_samples):
@@ -337,9 +337,11 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
 
 
 @numba.njit(cache=True, inline="always")
-def _may_run(codes, w, c, dark_mean, dark_std, k_sigma):
-    """Whether channel ``c`` of window ``w`` has a sample over half the threshold above its dark level, where a run
-    may start (the baseline and its noise only raise the bar)."""
+def _may_run(codes, synthesised, w, c, dark_mean, dark_std, k_sigma):
+    """Whether channel ``c`` of window ``w`` was synthesised and has a sample over half the threshold above its dark
+    level, where a run may start (the baseline and its noise only raise the bar)."""
+    if not synthesised[w, c]:
+        return False
     highest = 0
     for k in range(codes.shape[2]):
         highest = max(highest, codes[w, c, k])
