@@ -7,12 +7,13 @@ are certain before the noise is drawn:
 
 - a channel with no open sample that both escapes the column's clipping (the processor's calibrated baseline below
   the top code) and carries echo over that baseline finds no echo in the window: not needed;
-- where the echo signal over the baseline is one hump, the channel (gate open and baseline unclipped throughout)
-  that surely stays unclipped and surely clears the threshold at the hump, with the best least SNR, is kept; a
-  channel surely clipped at the hump, or clipped from samples the column blinds through the hump, gives a
-  saturated peak or none and cannot win; a channel whose best SNR, times :data:`SNR_MARGIN`, stays below the kept
-  channel's least cannot win either. Where every channel that sees the echo is clipped, the lowest-gain one is kept
-  (its saturated peak is the return).
+- where the pulse's echoes lie within a sample of each other and their signal over the baseline is one hump, the
+  channel (gate open and baseline unclipped throughout) that surely stays unclipped and surely clears the threshold
+  at the hump, with the best least SNR, is kept; a channel surely clipped at the hump, or clipped from samples the
+  column blinds through the hump, gives a saturated peak or none and cannot win; a channel whose best SNR, times
+  :data:`SNR_MARGIN`, stays below the kept channel's least cannot win either, and is left out where its least SNR
+  exceeds :data:`TIMED_SNR` (a weaker peak, timed by its noise, may be ranged as a duplicate return). Where every
+  channel that sees the echo is clipped, the lowest-gain one is kept (its saturated peak is the return).
 
 Anything else is kept: two humps (echoes apart), a gate edge or a blind stretch for the SNR comparison, a channel
 that may or may not clip. What the pruning gives up, a pruned channel's false alarms and its duplicate returns of
@@ -31,16 +32,25 @@ from .noise import NORMAL_BOUND
 #: The kept channel's worst SNR must exceed a lower-gain channel's best by this factor for that one to be dropped:
 #: room for the peak fit's amplitude ratio (the centre sample over the fitted peak, within a few per cent).
 SNR_MARGIN = 1.25
+#: [s] Most spread of a pulse's echo delays for its echo to count as one: a sample interval, so the echo is the
+#: pulse's shape to a few per cent and the peak search finds it once. A footprint stretched over range (grazing
+#: incidence) makes a long hump in which the search finds several peaks per channel, and which of them become
+#: returns depends on how the other channels' peaks chain them (muls.ranging's merge window).
+ECHO_SPAN_S = 1e-9
+#: A peak surely this far over its noise is timed within a fraction of a nanosecond (a 10 ns pulse's edge over
+#: the SNR), far inside the 4 ns within which ranging merges the peaks of different channels into one return; a
+#: weaker one, timed by its noise, can fall outside it and be ranged as a return of its own (a duplicate).
+TIMED_SNR = 20.0
 
 
 @numba.njit(cache=True, nogil=True)
-def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma):
+def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, echo_span_s):
     """Fill ``out`` (n_channels,) bool with the channels of one window that can decide a return (module doc).
 
     power: (n,) noise-free optical power at the window's samples [W]; baseline: (n,) the processor's calibrated
     baseline there [W] (background plus the uncut column, as :mod:`muls.peaks` uses it); times: (n,) the sample
     times [s]; chans: the signal channels' :class:`muls.channels.ChannelArrays`; max_code: the top code [LSB];
-    k_sigma: the detection threshold [sigma].
+    k_sigma: the detection threshold [sigma]; echo_span_s: the spread of the pulse's echo delays [s].
     """
     n_chan, n = out.shape[0], power.shape[0]
     whole = np.ones(n_chan, np.bool_)  # gate open over the whole window
@@ -61,7 +71,7 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma):
             plain[c] = plain[c] and not blind
         if out[c]:
             tolerance = min(tolerance, _dark_sigma(chans, c) / chans.lsb_per_w[c])
-    if not _one_hump(power, baseline, top, tolerance):
+    if echo_span_s > ECHO_SPAN_S or not _one_hump(power, baseline, top, tolerance):
         return
     best, best_snr = -1, -np.inf  # the surely unclipped, surely detected channel with the best least SNR
     for c in range(n_chan):
@@ -91,7 +101,9 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma):
         return
     for c in range(n_chan):
         if out[c] and c != best:
-            loses = whole[c] and plain[c] and SNR_MARGIN * _snr_bounds(c, power, baseline, top, chans)[1] < best_snr
+            least, most = _snr_bounds(c, power, baseline, top, chans)
+            # its peak cannot win, and is timed too well to be ranged as a return of its own
+            loses = whole[c] and plain[c] and SNR_MARGIN * most < best_snr and least > TIMED_SNR
             out[c] = not (clipped[c] or loses)
 
 

@@ -307,7 +307,12 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
             if settings.deciding_only:
                 for k in range(n_samples):
                     baseline[k] = cuts.background_w[p] + uncut_column_value(times[k], col)
-                deciding_channels(synthesised[w], power, baseline, times, chans, max_code, settings.k_sigma)
+                first_echo, last_echo = np.inf, -np.inf
+                for j in range(offsets[p], offsets[p + 1]):
+                    if energy[j] > 0.0:
+                        first_echo, last_echo = min(first_echo, delay[j]), max(last_echo, delay[j])
+                deciding_channels(synthesised[w], power, baseline, times, chans, max_code, settings.k_sigma,
+                                  last_echo - first_echo)
             else:
                 synthesised[w, :] = True
             # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per

@@ -86,16 +86,48 @@ def test_where_every_channel_clips_only_the_lowest_gain_one_is_synthesised():
     assert np.all(ranged_every.peaks.saturated) and _returns(ranged_kept) == _returns(ranged_every)
 
 
-def test_a_weak_echo_is_decided_by_the_high_gain_channel_alone():
-    """A dark plate (reflectance 0.03) at 15 m: CH1 stays unclipped and clears the threshold whatever the noise
-    (about 135 LSB over its dark level), CH2 sees a ninth of it with far lower SNR: CH2 is left out, and CH1
-    ranges every pulse as before."""
+def test_an_unclipped_echo_is_decided_by_the_high_gain_channel_alone():
+    """A plate of reflectance 0.05 at 10 m in the pool: CH1 stays below the top code whatever the noise (about 830 LSB
+    over its dark level) with hundreds of sigma of SNR; CH2 sees a ninth of it, some 90 sigma, far less than CH1's
+    and enough to time it inside the merge window: CH2 is left out, and CH1 ranges every pulse as before."""
     model = _model()
-    batch = PulseBatch.flat_target(model.instrument, np.full(50, 15.0), reflectance=0.03)
+    batch = PulseBatch.flat_target(model.instrument, np.full(50, 10.0), reflectance=0.05)
     _, ranged_every = simulate(model, batch, seed=2)
     kept, ranged_kept = simulate(model, batch, seed=2, deciding_only=True)
     assert np.all(kept.synthesised[:, :2] == [True, False])
     assert _returns(ranged_kept) == _returns(ranged_every) and np.all(ranged_kept.returns.channel == 1)
+
+
+def test_a_low_gain_peak_timed_by_its_noise_is_kept():
+    """A black plate (0.03) at 15 m: CH2's peak (about 15 LSB, SNR 10 to 20) cannot beat CH1's, but at that SNR its
+    noise can time it more than the 4 ns merge window from CH1's, and ranging would report it as a second return
+    of the plate (as the mine_field survey showed): CH2 is kept, so the returns are those of every channel."""
+    model = _model()
+    batch = PulseBatch.flat_target(model.instrument, np.full(50, 15.0), reflectance=0.03)
+    _, ranged_every = simulate(model, batch, seed=2)
+    kept, ranged_kept = simulate(model, batch, seed=2, deciding_only=True)
+    assert np.all(kept.synthesised[:, :2])
+    assert _returns(ranged_kept) == _returns(ranged_every)
+
+
+def test_regression_an_echo_stretched_over_range_keeps_every_channel():
+    """Root cause: at grazing incidence (scenes/failures/grazing_89.yaml) a footprint's echoes spread over 1.5 m of
+    range make one long hump; the peak search finds several peaks in it per channel, and the low-gain channel's
+    peaks chain the high-gain channel's into one return. With only CH1 synthesised its second peak became a return
+    of its own: 2.000 points per pulse against 1.991 and a median range error of 0.35 m against 0.09 m. A pulse
+    whose echoes spread over more than a sample now keeps every channel that sees them, and ranges as before."""
+    model = _model()
+    ins = model.instrument
+    n, ranges = 30, np.linspace(5.0, 6.5, 19)  # a 3 cm beam at 89 degrees: 19 sub-ray echoes over 1.5 m
+    one = PulseBatch.flat_target(ins, ranges, reflectance=0.3, incidence_rad=np.radians(60.0))
+    batch = PulseBatch(pulse_id=np.arange(n), return_pulse=np.repeat(np.arange(n), ranges.size),
+                       return_range_m=np.tile(ranges, n), return_weight_per_sr=np.tile(one.return_weight_per_sr / 19, n),
+                       column_cut_m=np.tile(ranges, (n, 1)), column_cut_weight=np.full((n, ranges.size), 1.0 / 19),
+                       background_w=np.zeros(n))
+    _, ranged_every = simulate(model, batch, seed=7)
+    kept, ranged_kept = simulate(model, batch, seed=7, deciding_only=True)
+    assert np.all(kept.synthesised[:, :2])
+    assert _returns(ranged_kept) == _returns(ranged_every)
 
 
 def test_two_echoes_apart_in_one_window_keep_every_channel_that_sees():
