@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from .instrument import Channel, Instrument
@@ -78,3 +79,10 @@ class ChannelArrays(NamedTuple):
     def signal(self) -> ChannelArrays:
         """The signal channels only (CH0 dropped): what the digitiser and peak kernels index by channel."""
         return ChannelArrays(*(a[1:] for a in self))
+
+
+@numba.njit(cache=True, inline="always")
+def processor_sigma_lsb(chans, c, baseline_w):
+    """The noise [LSB] the peak search assumes on signal channel ``c`` of ``chans`` (:meth:`ChannelArrays.signal`)
+    over a calibrated baseline of ``baseline_w`` [W]: dark noise, the baseline's shot noise and rounding."""
+    return math.sqrt(chans.dark_std_lsb[c] ** 2 + chans.shot_lsb2_per_w[c] * baseline_w + 1.0 / 12.0)

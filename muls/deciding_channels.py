@@ -27,6 +27,7 @@ import math
 import numba
 import numpy as np
 
+from .channels import processor_sigma_lsb
 from .noise import NORMAL_BOUND
 
 #: The kept channel's worst SNR must exceed a lower-gain channel's best by this factor for that one to be dropped:
@@ -64,13 +65,13 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
     for c in range(n_chan):
         out[c] = False  # until an open sample where the baseline alone leaves it below the top code, with echo on it
         for k in range(n):
-            is_open = chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c]
-            blind = is_open and chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * baseline[k] >= max_code
+            is_open = _open(chans, c, times[k])
+            blind = is_open and _level(chans, c, baseline[k]) >= max_code
             whole[c] = whole[c] and is_open
             out[c] = out[c] or (is_open and not blind and power[k] > baseline[k])
             plain[c] = plain[c] and not blind
         if out[c]:
-            tolerance = min(tolerance, _dark_sigma(chans, c) / chans.lsb_per_w[c])
+            tolerance = min(tolerance, processor_sigma_lsb(chans, c, 0.0) / chans.lsb_per_w[c])
     if echo_span_s > ECHO_SPAN_S or not _one_hump(power, baseline, top, tolerance):
         return
     best, best_snr = -1, -np.inf  # the surely unclipped, surely detected channel with the best least SNR
@@ -83,7 +84,7 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
     clipped = np.zeros(n_chan, np.bool_)
     lowest = -1  # the lowest-gain channel that gives a saturated peak at the hump
     for c in range(n_chan):
-        if out[c] and chans.gate_open_s[c] <= times[top] < chans.gate_close_s[c]:
+        if out[c] and _open(chans, c, times[top]):
             if plain[c]:
                 clipped[c] = _surely_clipped(c, power[top], chans, max_code)
                 if clipped[c] and (lowest < 0 or chans.lsb_per_w[c] < chans.lsb_per_w[lowest]):
@@ -108,9 +109,9 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
 
 
 @numba.njit(cache=True, inline="always")
-def _dark_sigma(chans, c):
-    """Channel c's noise without light [LSB]: dark noise and rounding."""
-    return math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
+def _open(chans, c, t):
+    """Channel c's gate is open at time t [s]."""
+    return chans.gate_open_s[c] <= t < chans.gate_close_s[c]
 
 
 @numba.njit(cache=True, inline="always")
@@ -145,16 +146,14 @@ def _clipped_from_blindness(c, power, baseline, times, top, chans, max_code):
     back into samples the backscatter clips, and the peak search takes it for the column, not an echo."""
     last = -1
     for k in range(power.shape[0]):
-        is_open = chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c]
-        if is_open and chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * baseline[k] >= max_code:
+        if _open(chans, c, times[k]) and _level(chans, c, baseline[k]) >= max_code:
             if k >= top:
                 return False
             last = k
     if last < 0:
         return False
     for k in range(last, top + 1):
-        if not (chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c] and _surely_clipped(c, power[k], chans,
-                                                                                              max_code)):
+        if not (_open(chans, c, times[k]) and _surely_clipped(c, power[k], chans, max_code)):
             return False
     return True
 
@@ -165,7 +164,7 @@ def _snr_bounds(c, power, baseline, top, chans):
     reach, over the processor's noise there (dark, rounding and the baseline's shot noise, as muls.peaks has it)."""
     amplitude = chans.lsb_per_w[c] * (power[top] - baseline[top])
     reach = _noise_reach(chans, c, power[top])
-    sigma = math.sqrt(chans.dark_std_lsb[c] ** 2 + chans.shot_lsb2_per_w[c] * baseline[top] + 1.0 / 12.0)
+    sigma = processor_sigma_lsb(chans, c, baseline[top])
     return (amplitude - reach) / sigma, (amplitude + reach) / sigma
 
 

@@ -94,26 +94,17 @@ def centred_unit(bits32):
 
 
 @numba.njit(cache=True, inline="always")
-def normal_pair_at(base, index):
-    """Two independent standard normals at position ``index`` of a stream (one per 32-bit half, |x| <
-    :data:`NORMAL_BOUND`)."""
-    h = splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
-    return (_inverse_normal_cdf(centred_unit(h >> np.uint64(32))),
-            _inverse_normal_cdf(centred_unit(h & np.uint64(0xFFFFFFFF))))
-
-
-@numba.njit(cache=True, inline="always")
 def normal_half_at(base, index, half):
-    """The normal of 32-bit half ``half`` (0: the high bits, 1: the low) of position ``index`` of a stream: element
-    ``half`` of :func:`normal_pair_at`, without computing the other."""
+    """The standard normal of 32-bit half ``half`` (0: the high bits, 1: the low) of position ``index`` of a stream:
+    each position gives two independent normals, |x| < :data:`NORMAL_BOUND`."""
     h = splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
     return _inverse_normal_cdf(centred_unit(h >> np.uint64(32) if half == 0 else h & np.uint64(0xFFFFFFFF)))
 
 
 @numba.njit(cache=True, inline="always")
 def normal_at(base, index):
-    """Standard normal at position ``index`` of a stream."""
-    return normal_pair_at(base, index)[0]
+    """Standard normal at position ``index`` of a stream (its first half)."""
+    return normal_half_at(base, index, 0)
 
 
 @numba.njit(cache=True)

@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from .channels import processor_sigma_lsb
 from .detection import Records
 from .waveform import Echoes, OpticalModel, PulseBatch, pulse_value, uncut_column_value
 
@@ -219,13 +220,13 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
     cap = out.window.shape[0] // max(1, n_windows * n_chan)
     basis = col.basis
     lsb_per_w, gate_open, gate_close = chans.lsb_per_w, chans.gate_open_s, chans.gate_close_s
-    dark_mean, dark_std, shot = chans.dark_mean_lsb, chans.dark_std_lsb, chans.shot_lsb2_per_w
+    dark_mean = chans.dark_mean_lsb
     k_sigma, tail_tolerance, max_code = settings.k_sigma, settings.tail_tolerance, settings.max_code
     out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts = out
     for w in numba.prange(n_windows):
         p = window_pulse[w]
         first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
-        while first < n_chan and not _may_run(codes, synthesised, w, first, dark_mean, dark_std, k_sigma):
+        while first < n_chan and not _may_run(codes, synthesised, w, first, chans, k_sigma):
             first += 1
         if first == n_chan:
             continue
@@ -241,7 +242,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
         blind = np.empty(n_samples, np.bool_)
         for c in range(first, n_chan):
             slot = w * n_chan + c
-            if c > first and not _may_run(codes, synthesised, w, c, dark_mean, dark_std, k_sigma):
+            if c > first and not _may_run(codes, synthesised, w, c, chans, k_sigma):
                 continue
             sees = False
             for k in range(n_samples):
@@ -255,7 +256,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                 continue  # blind in the whole window: every residual is zero
             for k in range(n_samples):
                 base = base_w[k] if open_[k] else 0.0
-                sigma[k] = math.sqrt(dark_std[c] ** 2 + shot[c] * base + 1.0 / 12.0)
+                sigma[k] = processor_sigma_lsb(chans, c, base)
                 resid[k] = 0.0 if blind[k] else codes[w, c, k] - (dark_mean[c] + lsb_per_w[c] * base)
                 echoes[k] = 0.0
             k = 0
@@ -337,7 +338,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
 
 
 @numba.njit(cache=True, inline="always")
-def _may_run(codes, synthesised, w, c, dark_mean, dark_std, k_sigma):
+def _may_run(codes, synthesised, w, c, chans, k_sigma):
     """Whether channel ``c`` of window ``w`` was synthesised and has a sample over half the threshold above its dark
     level, where a run may start (the baseline and its noise only raise the bar)."""
     if not synthesised[w, c]:
@@ -345,7 +346,7 @@ def _may_run(codes, synthesised, w, c, dark_mean, dark_std, k_sigma):
     highest = 0
     for k in range(codes.shape[2]):
         highest = max(highest, codes[w, c, k])
-    return highest - dark_mean[c] > 0.5 * k_sigma * math.sqrt(dark_std[c] ** 2 + 1.0 / 12.0)
+    return highest - chans.dark_mean_lsb[c] > 0.5 * k_sigma * processor_sigma_lsb(chans, c, 0.0)
 
 
 @numba.njit(cache=True, inline="always")

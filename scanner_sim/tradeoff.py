@@ -38,7 +38,7 @@ KNOBS: dict[str, tuple[str, object]] = {
 #: ring layout, beams.SUBRAY_COUNTS: 8 rings against the reference's 5).
 CONVERGENCE_SUBRAYS = 217
 #: Pulses each run simulates, by default, and of those, pulses whose waveforms are compared. On 2 shared cores
-#: ``scanner-sim tradeoff cable_survey`` (3 levels, 7 knobs and the convergence run) then takes 1-3 minutes
+#: ``scanner-sim tradeoff cable_survey`` (4 levels, 8 knobs, the convergence run, 3 timed passes) then takes 1.5-3 minutes
 #: (docs/fidelity.md).
 DEFAULT_PULSES = 30000
 #: Timed passes of each run, the fastest kept: one pass of 30,000 pulses lasts about a second, and on a shared
@@ -110,9 +110,10 @@ def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     return out
 
 
-def _timed_pass(setup: PassSetup, slots: list, seabed: bool):
+def _timed_pass(setup: PassSetup, slots: list):
     """The chunk loop over ``slots`` (with the coverage tally over a seabed): (points, covered share or None, wall
     seconds of the loop)."""
+    seabed = setup.scene.heightfield is not None
     coverage = sinks.CoverageSink(setup.scene) if seabed else None
     parts, started = [], time.perf_counter()
     for chunk_slots in slots:
@@ -130,7 +131,7 @@ def run_level(base: PassSetup, level: FidelityLevel, waveform_pulses: int) -> Le
     seabed = setup.scene.heightfield is not None
     slots = list(setup.slot_chunks())
     setup.simulate_chunk(slots[0][:WARM_UP_PULSES], footprint=seabed)  # compiled kernels and caches warm
-    points, covered, wall_s = _timed_pass(setup, slots, seabed)
+    points, covered, wall_s = _timed_pass(setup, slots)
     n = int(sum(s.size for s in slots))
     if covered is None:
         covered = np.unique(points.pulse_index[points.object_id >= 0]).size / max(n, 1)
@@ -147,8 +148,7 @@ def best_speed(base: PassSetup, runs: dict, repeat: int) -> dict:
     for _ in range(repeat - 1):
         for name, run in runs.items():
             setup = with_level(base, run.level)
-            slots = list(setup.slot_chunks())
-            _, _, wall_s = _timed_pass(setup, slots, setup.scene.heightfield is not None)
+            _, _, wall_s = _timed_pass(setup, list(setup.slot_chunks()))
             best[name] = max(best[name], run.n_pulses / wall_s)
     return {name: replace(run, pulses_per_s=best[name]) for name, run in runs.items()}
 
