@@ -20,11 +20,9 @@ from .deciding_channels import deciding_channels
 from .errors import check_choice
 from .noise import (
     FIRST_SIGNAL_STREAM,
-    NORMAL_BOUND,
     PHASE_STREAM,
     REFERENCE_STREAM,
-    normal_at,
-    normal_half_at,
+    fill_normal_pairs,
     seed_key,
     stream_base,
     uniform_at,
@@ -191,6 +189,10 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
                    synthesised if deciding_only else None)
 
 
+#: Windows (or CH0 records) per block of the digitiser kernels: each block allocates its work arrays once.
+WINDOW_BLOCK = 64
+
+
 @numba.njit(cache=True, inline="always")
 def _quantise(u, max_code):
     u = math.floor(u + 0.5)  # MULS Eq. 13: rounding, then clipping to [0, 2^bits - 1]
@@ -203,21 +205,23 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
     ra, rb = math.exp(-basis[0] * sampling.dt_s), math.exp(-basis[1] * sampling.dt_s)
-    for p in numba.prange(n_pulses):
-        base = stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM)
-        ea, eb = -1.0, -1.0  # the pulse basis's two exponentials at u, stepped by constant factors once u >= 0
-        for k in range(n_ref):
-            u = sampling.t0_s + k * sampling.dt_s + sampling.phase_s[p]
-            level = 0.0
-            if 0.0 <= u < extent:  # the filtered pulse (MULS Eq. 2), as muls.waveform.pulse_value
-                if ea < 0.0:
-                    ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
-                level = lsb_per_density * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
-                ea *= ra
-                eb *= rb
-            if keep:
-                clean[p, k] = level + dark_mean
-            reference[p, k] = _quantise(level + dark_mean + noise_scale * dark_std * normal_at(base, k), max_code)
+    for block in numba.prange((n_pulses + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
+        normal, no_low, tails = np.empty(n_ref), np.empty(0), np.empty(n_ref, np.uint64)
+        for p in range(block * WINDOW_BLOCK, min(n_pulses, (block + 1) * WINDOW_BLOCK)):
+            fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM), 0, normal, no_low, tails)
+            ea, eb = -1.0, -1.0  # the pulse basis's two exponentials at u, stepped by constant factors once u >= 0
+            for k in range(n_ref):
+                u = sampling.t0_s + k * sampling.dt_s + sampling.phase_s[p]
+                level = 0.0
+                if 0.0 <= u < extent:  # the filtered pulse (MULS Eq. 2), as muls.waveform.pulse_value
+                    if ea < 0.0:
+                        ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
+                    level = lsb_per_density * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
+                    ea *= ra
+                    eb *= rb
+                if keep:
+                    clean[p, k] = level + dark_mean
+                reference[p, k] = _quantise(level + dark_mean + noise_scale * dark_std * normal[k], max_code)
 
 
 class DigitiserSettings(NamedTuple):
@@ -229,10 +233,6 @@ class DigitiserSettings(NamedTuple):
     noise_scale: float
     deciding_only: bool
     k_sigma: float
-
-
-#: Windows per block of the digitiser kernel: each block allocates its work arrays once.
-WINDOW_BLOCK = 64
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
@@ -250,10 +250,10 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
     ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
     max_code, noise_scale = settings.max_code, settings.noise_scale
     for block in numba.prange((n_windows + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
-        bases = np.empty(n_pairs, np.uint64)
-        shot_bases = np.empty(n_shot_pairs, np.uint64)
-        shot_normal = np.empty((n_detectors, n_samples))
-        shot_drawn = np.empty((n_detectors, n_samples), np.bool_)
+        dark_normal = np.empty((2 * n_pairs, n_samples))
+        shot_normal = np.empty((2 * n_shot_pairs, n_samples))
+        tails, no_low = np.empty(n_samples, np.uint64), np.empty(0)
+        shot_needed = np.empty(n_detectors, np.bool_)
         cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
         times, power, baseline = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
         for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
@@ -317,33 +317,42 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                 synthesised[w, :] = True
             # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per
             # detector (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's
-            # current), drawn when a channel first needs it.
+            # current). Drawn a window at once for the pairs a synthesised channel needs.
+            shot_needed[:] = False
             for j in range(n_pairs):
-                bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + j)
-            for j in range(n_shot_pairs):
-                shot_bases[j] = stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + n_pairs + j)
-            shot_drawn[:, :] = False
+                low = 2 * j + 1 < n_chan and synthesised[w, 2 * j + 1]
+                if synthesised[w, 2 * j] or low:
+                    fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + j),
+                                      window_start[w], dark_normal[2 * j], dark_normal[2 * j + 1] if low else no_low,
+                                      tails)
             for c in range(n_chan):
-                det = chans.detector[c]
-                if not synthesised[w, c] and not keep:
+                shot_needed[chans.detector[c]] |= synthesised[w, c]
+            for j in range(n_shot_pairs):
+                low = 2 * j + 1 < n_detectors and shot_needed[2 * j + 1]
+                if shot_needed[2 * j] or low:
+                    fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + n_pairs + j),
+                                      window_start[w], shot_normal[2 * j], shot_normal[2 * j + 1] if low else no_low,
+                                      tails)
+            for c in range(n_chan):
+                if keep:
+                    for k in range(n_samples):
+                        gated = power[k] if chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c] else 0.0
+                        clean[w, c, k] = chans.lsb_per_w[c] * gated + chans.dark_mean_lsb[c]
+                if synthesised[w, c]:
+                    _channel_codes(codes[w, c], power, times, dark_normal[c], shot_normal[chans.detector[c]], chans, c,
+                                   max_code, noise_scale)
+                else:
                     codes[w, c, :] = 0
-                    continue
-                for k in range(n_samples):
-                    gated = power[k] if chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c] else 0.0
-                    level = chans.lsb_per_w[c] * gated + chans.dark_mean_lsb[c]  # MULS Eq. 12 in LSB
-                    if keep:
-                        clean[w, c, k] = level
-                    if not synthesised[w, c]:
-                        codes[w, c, k] = 0
-                        continue
-                    shot_std = math.sqrt(chans.shot_lsb2_per_w[c] * gated)
-                    if level - noise_scale * NORMAL_BOUND * (chans.dark_std_lsb[c] + shot_std) >= max_code - 0.5:
-                        codes[w, c, k] = max_code  # clipped whatever the draws: no need to make them
-                        continue
-                    index = window_start[w] + k
-                    if not shot_drawn[det, k]:
-                        shot_normal[det, k] = normal_half_at(shot_bases[det // 2], index, det % 2)
-                        shot_drawn[det, k] = True
-                    noise = chans.dark_std_lsb[c] * normal_half_at(bases[c // 2], index, c % 2) + shot_std * shot_normal[
-                        det, k]
-                    codes[w, c, k] = _quantise(level + noise_scale * noise, max_code)  # MULS Eq. 13
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _channel_codes(out, power, times, dark_normal, shot_normal, chans, c, max_code, noise_scale):
+    """One channel's codes (n,) of a window from the power [W] at its sample times [s] and its two normals: no
+    branch but selects, so the loop runs on SIMD lanes."""
+    lsb, dark_mean, dark_std, shot = chans.lsb_per_w[c], chans.dark_mean_lsb[c], chans.dark_std_lsb[c], chans.shot_lsb2_per_w[c]
+    gate_open, gate_close = chans.gate_open_s[c], chans.gate_close_s[c]
+    for k in range(out.shape[0]):
+        gated = power[k] if gate_open <= times[k] < gate_close else 0.0
+        level = lsb * gated + dark_mean  # MULS Eq. 12 in LSB
+        noise = dark_std * dark_normal[k] + math.sqrt(shot * gated) * shot_normal[k]
+        out[k] = _quantise(level + noise_scale * noise, max_code)  # MULS Eq. 13

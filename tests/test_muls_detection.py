@@ -57,6 +57,25 @@ def test_the_uniforms_behind_the_normals_stay_inside_0_1_and_are_symmetric():
         assert centred_unit(np.uint64(k)) + centred_unit(np.uint64(top - k)) == 1.0
 
 
+def test_block_draws_equal_the_draws_one_by_one_tails_included():
+    """The digitiser draws a window's normals a block at once (``fill_normal_pairs``: the central formula on SIMD
+    lanes, then the tails patched); each must equal the draw-by-draw ``normal_half_at`` bit for bit, in both
+    halves, with the low half skipped or not, at any first index: else records would depend on the blocking."""
+    from muls.noise import fill_normal_pairs, normal_half_at, seed_key, stream_base
+
+    n = 5000
+    for pulse, stream, first in ((0, 2, 0), (17, 3, 123), (2**40, 4, 999_983)):
+        base = np.uint64(stream_base(seed_key(11), pulse, stream))
+        expected = np.array([[normal_half_at(base, first + k, half) for k in range(n)] for half in (0, 1)])
+        assert (np.abs(expected) > 1.97).sum() > 0.04 * expected.size  # the tail formula is exercised
+        high, low, tails = np.empty(n), np.empty(n), np.empty(n, np.uint64)
+        fill_normal_pairs(base, first, high, low, tails)
+        assert np.array_equal(high, expected[0]) and np.array_equal(low, expected[1])
+        only_high = np.empty(n)
+        fill_normal_pairs(base, first, only_high, np.empty(0), tails)
+        assert np.array_equal(only_high, expected[0])
+
+
 def test_quantisation_rounds_and_clipping_saturates():
     model = _model()
     batch = PulseBatch.flat_target(model.instrument, [3.0, 25.0])
