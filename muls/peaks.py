@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from .channels import processor_sigma_lsb
-from .detection import Records
+from .detection import WINDOW_BLOCK, Records
 from .waveform import Echoes, OpticalModel, PulseBatch, pulse_value, uncut_column_value
 
 #: Most peaks kept per window and channel (more means noise, not echoes).
@@ -219,122 +219,127 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
     n_windows, n_chan, n_samples = codes.shape
     cap = out.window.shape[0] // max(1, n_windows * n_chan)
     basis = col.basis
-    lsb_per_w, gate_open, gate_close = chans.lsb_per_w, chans.gate_open_s, chans.gate_close_s
-    dark_mean = chans.dark_mean_lsb
     k_sigma, tail_tolerance, max_code = settings.k_sigma, settings.tail_tolerance, settings.max_code
     out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts = out
-    for w in numba.prange(n_windows):
-        p = window_pulse[w]
-        first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
-        while first < n_chan and not _may_run(codes, synthesised, w, first, chans, k_sigma):
-            first += 1
-        if first == n_chan:
-            continue
-        times = np.empty(n_samples)
-        base_w = np.empty(n_samples)
-        for k in range(n_samples):
-            times[k] = t0 + (window_start[w] + k) * dt + phase[p]
-            base_w[k] = background[p] + uncut_column_value(times[k], col)
-        resid = np.empty(n_samples)
-        sigma = np.empty(n_samples)
+    for block in numba.prange((n_windows + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
+        times, base_w = np.empty(n_samples), np.empty(n_samples)
+        resid, sigma = np.empty(n_samples), np.empty(n_samples)
         echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
-        open_ = np.empty(n_samples, np.bool_)
-        blind = np.empty(n_samples, np.bool_)
-        for c in range(first, n_chan):
-            slot = w * n_chan + c
-            if c > first and not _may_run(codes, synthesised, w, c, chans, k_sigma):
+        open_, blind = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_)
+        for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
+            p = window_pulse[w]
+            first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
+            while first < n_chan and not _may_run(codes, synthesised, w, first, chans, k_sigma):
+                first += 1
+            if first == n_chan:
                 continue
-            sees = False
             for k in range(n_samples):
-                open_[k] = gate_open[c] <= times[k] < gate_close[c]
-                base = base_w[k] if open_[k] else 0.0
-                expected = dark_mean[c] + lsb_per_w[c] * base
-                # Where the backscatter alone clips the channel, nothing can be seen in it.
-                blind[k] = expected >= max_code
-                sees = sees or not blind[k]
-            if not sees:
-                continue  # blind in the whole window: every residual is zero
-            for k in range(n_samples):
-                base = base_w[k] if open_[k] else 0.0
-                sigma[k] = processor_sigma_lsb(chans, c, base)
-                resid[k] = 0.0 if blind[k] else codes[w, c, k] - (dark_mean[c] + lsb_per_w[c] * base)
-                echoes[k] = 0.0
-            k = 0
-            while k < n_samples:
-                if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
-                    k += 1
+                times[k] = t0 + (window_start[w] + k) * dt + phase[p]
+                base_w[k] = background[p] + uncut_column_value(times[k], col)
+            for c in range(first, n_chan):
+                slot = w * n_chan + c
+                if c > first and not _may_run(codes, synthesised, w, c, chans, k_sigma):
                     continue
-                start = k
-                top = k
-                clipped_first = -1
-                clipped_last = -1
-                while k < n_samples and resid[k] - echoes[k] > 0.5 * k_sigma * sigma[k]:
-                    if resid[k] - echoes[k] > resid[top] - echoes[top]:
-                        top = k
-                    if codes[w, c, k] >= max_code:
-                        if clipped_first < 0:
-                            clipped_first = k
-                        clipped_last = k
-                    k += 1
-                # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
-                # threshold there, over what the echoes already found leave if their shape is a little off.
-                # A clipped run may run on past the window's end once its plateau has ended inside it: the
-                # plateau and its two clip levels alone time it, whatever the tail does after.
-                if start == 0 or (k >= n_samples and not (clipped_first >= 0 and clipped_last < n_samples - 1)):
-                    continue
-                if clipped_first < 0 and (top == start or not open_[top - 1]):
-                    continue  # no rising edge inside the gate: a gate opening on a tail, not an echo
-                if clipped_first >= 0:
-                    # The plateau may have begun before the run did (clipped samples with a small residual on a
-                    # high baseline): it must rise from a sample the channel sees, or its width is unknown.
-                    # A plateau that runs through samples the backscatter alone clips began in the column.
-                    through_blind = False
-                    while clipped_first > 0 and codes[w, c, clipped_first - 1] >= max_code:
-                        clipped_first -= 1
-                        through_blind = through_blind or blind[clipped_first]
-                    if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
+                if _residuals(codes[w, c], times, base_w, chans, c, max_code, open_, blind, sigma, resid, echoes) == 0:
+                    continue  # blind in the whole window: every residual is zero
+                k = 0
+                while k < n_samples:
+                    if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
+                        k += 1
                         continue
-                    # A plateau that runs on into samples the backscatter alone clips ends there only in the
-                    # residual: its width, so its amplitude and time, are unknown (issue 12, blind-zone edge).
-                    if blind[clipped_last + 1] and codes[w, c, clipped_last + 1] >= max_code:
+                    start = k
+                    top = k
+                    clipped_first = -1
+                    clipped_last = -1
+                    while k < n_samples and resid[k] - echoes[k] > 0.5 * k_sigma * sigma[k]:
+                        if resid[k] - echoes[k] > resid[top] - echoes[top]:
+                            top = k
+                        if codes[w, c, k] >= max_code:
+                            if clipped_first < 0:
+                                clipped_first = k
+                            clipped_last = k
+                        k += 1
+                    # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
+                    # threshold there, over what the echoes already found leave if their shape is a little off.
+                    # A clipped run may run on past the window's end once its plateau has ended inside it: the
+                    # plateau and its two clip levels alone time it, whatever the tail does after.
+                    if start == 0 or (k >= n_samples and not (clipped_first >= 0 and clipped_last < n_samples - 1)):
                         continue
-                if blind[top - 1]:
-                    continue
-                height = resid[top] - echoes[top]
-                if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
-                    continue
-                if counts[slot] >= cap:
-                    continue
-                if clipped_first >= 0:
-                    # Clipped: the plateau and the clip levels at its ends (over a baseline that may slope) give
-                    # amplitude and peak time through the known pulse shape. A clip level that the echoes found
-                    # before already explain leaves the plateau's edge, so its width, unknown.
-                    level_first = resid[clipped_first] - echoes[clipped_first]
-                    level_last = resid[clipped_last] - echoes[clipped_last]
-                    if not (level_first > 0.0 and level_last > 0.0):
+                    if clipped_first < 0 and (top == start or not open_[top - 1]):
+                        continue  # no rising edge inside the gate: a gate opening on a tail, not an echo
+                    if clipped_first >= 0:
+                        # The plateau may have begun before the run did (clipped samples with a small residual on a
+                        # high baseline): it must rise from a sample the channel sees, or its width is unknown.
+                        # A plateau that runs through samples the backscatter alone clips began in the column.
+                        through_blind = False
+                        while clipped_first > 0 and codes[w, c, clipped_first - 1] >= max_code:
+                            clipped_first -= 1
+                            through_blind = through_blind or blind[clipped_first]
+                        if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
+                            continue
+                        # A plateau that runs on into samples the backscatter alone clips ends there only in the
+                        # residual: its width, so its amplitude and time, are unknown (issue 12, blind-zone edge).
+                        if blind[clipped_last + 1] and codes[w, c, clipped_last + 1] >= max_code:
+                            continue
+                    if blind[top - 1]:
                         continue
-                    idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_table)
-                    idx += window_start[w]
-                    # Plain peak detection reports the first sample at the top code; the plateau's model
-                    # still places the echo that is taken off before the search goes on.
-                    found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
-                else:
-                    d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
-                                       settings.fit, fit_table)
-                    idx = float(window_start[w] + top) + d
-                    found = idx
-                    amp = height / ratio
-                    k = top + 1  # look again behind this echo once its modelled shape is taken off
-                u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
-                _add_echo(echoes, top + 1, u, dt, amp / settings.peak_density, basis)
-                j = slot * cap + counts[slot]
-                out_w[j] = w
-                out_c[j] = c
-                out_idx[j] = found
-                out_amp[j] = amp
-                out_snr[j] = amp / sigma[top]
-                out_sat[j] = clipped_first >= 0
-                counts[slot] += 1
+                    height = resid[top] - echoes[top]
+                    if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
+                        continue
+                    if counts[slot] >= cap:
+                        continue
+                    if clipped_first >= 0:
+                        # Clipped: the plateau and the clip levels at its ends (over a baseline that may slope) give
+                        # amplitude and peak time through the known pulse shape. A clip level that the echoes found
+                        # before already explain leaves the plateau's edge, so its width, unknown.
+                        level_first = resid[clipped_first] - echoes[clipped_first]
+                        level_last = resid[clipped_last] - echoes[clipped_last]
+                        if not (level_first > 0.0 and level_last > 0.0):
+                            continue
+                        idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_table)
+                        idx += window_start[w]
+                        # Plain peak detection reports the first sample at the top code; the plateau's model
+                        # still places the echo that is taken off before the search goes on.
+                        found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
+                    else:
+                        d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
+                                           settings.fit, fit_table)
+                        idx = float(window_start[w] + top) + d
+                        found = idx
+                        amp = height / ratio
+                        k = top + 1  # look again behind this echo once its modelled shape is taken off
+                    u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
+                    _add_echo(echoes, top + 1, u, dt, amp / settings.peak_density, basis)
+                    j = slot * cap + counts[slot]
+                    out_w[j] = w
+                    out_c[j] = c
+                    out_idx[j] = found
+                    out_amp[j] = amp
+                    out_snr[j] = amp / sigma[top]
+                    out_sat[j] = clipped_first >= 0
+                    counts[slot] += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _residuals(codes, times, base_w, chans, c, max_code, open_, blind, sigma, resid, echoes):
+    """Channel ``c``'s residuals over its baseline (codes (n,) at ``times`` (n,) [s], the uncut baseline ``base_w``
+    (n,) [W] before the gate), in one loop without branches (it runs on SIMD lanes): ``open_``, ``blind`` (the
+    backscatter alone clips the channel: nothing can be seen there, residual 0), ``sigma`` [LSB], ``resid`` [LSB],
+    ``echoes`` zeroed. Returns how many samples the channel sees."""
+    lsb, dark_mean = chans.lsb_per_w[c], chans.dark_mean_lsb[c]
+    gate_open, gate_close = chans.gate_open_s[c], chans.gate_close_s[c]
+    seen = 0
+    for k in range(codes.shape[0]):
+        is_open = gate_open <= times[k] < gate_close
+        base = base_w[k] if is_open else 0.0
+        expected = dark_mean + lsb * base
+        is_blind = expected >= max_code
+        open_[k], blind[k] = is_open, is_blind
+        seen += 0 if is_blind else 1
+        sigma[k] = processor_sigma_lsb(chans, c, base)
+        resid[k] = 0.0 if is_blind else codes[k] - expected
+        echoes[k] = 0.0
+    return seen
 
 
 @numba.njit(cache=True, inline="always")
