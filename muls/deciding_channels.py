@@ -45,8 +45,9 @@ TIMED_SNR = 20.0
 
 
 @numba.njit(cache=True, nogil=True)
-def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, echo_span_s):
-    """Fill ``out`` (n_channels,) bool with the channels of one window that can decide a return (module doc).
+def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, echo_span_s, scratch):
+    """Fill ``out`` (n_channels,) bool with the channels of one window that can decide a return (module doc);
+    ``scratch``: (3, n_channels) bool work space.
 
     power: (n,) noise-free optical power at the window's samples [W]; baseline: (n,) the processor's calibrated
     baseline there [W] (background plus the uncut column, as :mod:`muls.peaks` uses it); times: (n,) the sample
@@ -54,8 +55,7 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
     k_sigma: the detection threshold [sigma]; echo_span_s: the spread of the pulse's echo delays [s].
     """
     n_chan, n = out.shape[0], power.shape[0]
-    whole = np.ones(n_chan, np.bool_)  # gate open over the whole window
-    plain = np.ones(n_chan, np.bool_)  # no sample where the baseline alone clips it (a blind sample's residual is 0)
+    whole, plain, clipped = scratch[0], scratch[1], scratch[2]
     tolerance = np.inf  # [W] one dark sigma of the most sensitive channel that sees the echo
     top, highest = 0, power[0]
     for k in range(1, n):
@@ -63,13 +63,17 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
         if power[k] - baseline[k] > power[top] - baseline[top]:
             top = k
     for c in range(n_chan):
-        out[c] = False  # until an open sample where the baseline alone leaves it below the top code, with echo on it
+        # whole: gate open over the whole window; plain: no sample where the baseline alone clips it (a blind
+        # sample's residual is 0); out: an open sample where the baseline alone leaves it below the top code, with
+        # echo on it. Bitwise, not short-circuit, so that the loop has no branch.
+        all_open, no_blind, echo = True, True, False
         for k in range(n):
             is_open = _open(chans, c, times[k])
-            blind = is_open and _level(chans, c, baseline[k]) >= max_code
-            whole[c] = whole[c] and is_open
-            out[c] = out[c] or (is_open and not blind and power[k] > baseline[k])
-            plain[c] = plain[c] and not blind
+            blind = is_open & (_level(chans, c, baseline[k]) >= max_code)
+            all_open &= is_open
+            echo |= is_open & (not blind) & (power[k] > baseline[k])
+            no_blind &= not blind
+        whole[c], plain[c], out[c] = all_open, no_blind, echo
         if out[c]:
             tolerance = min(tolerance, processor_sigma_lsb(chans, c, 0.0) / chans.lsb_per_w[c])
     if echo_span_s > ECHO_SPAN_S or not _one_hump(power, baseline, top, tolerance):
@@ -81,7 +85,7 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
         if candidate and _surely_unclipped(c, highest, chans, max_code):
             best, best_snr = c, least
     # a channel open at the hump and surely clipped there gives a saturated peak there, or none (clipped)
-    clipped = np.zeros(n_chan, np.bool_)
+    clipped[:] = False
     lowest = -1  # the lowest-gain channel that gives a saturated peak at the hump
     for c in range(n_chan):
         if out[c] and _open(chans, c, times[top]):
@@ -111,7 +115,7 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
 @numba.njit(cache=True, inline="always")
 def _open(chans, c, t):
     """Channel c's gate is open at time t [s]."""
-    return chans.gate_open_s[c] <= t < chans.gate_close_s[c]
+    return (chans.gate_open_s[c] <= t) & (t < chans.gate_close_s[c])
 
 
 @numba.njit(cache=True, inline="always")

@@ -27,7 +27,7 @@ from .noise import (
     stream_base,
     uniform_at,
 )
-from .waveform import Echoes, OpticalModel, PulseBatch, column_integrals_at, uncut_column_value
+from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values, column_integrals_at, uncut_column_value
 
 RECORD_MODES = ("windowed", "full")
 
@@ -254,6 +254,7 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
         shot_normal = np.empty((2 * n_shot_pairs, n_samples))
         tails, no_low = np.empty(n_samples, np.uint64), np.empty(0)
         shot_needed = np.empty(n_detectors, np.bool_)
+        deciding_scratch = np.empty((3, n_chan), np.bool_)
         cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
         times, power, baseline = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
         for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
@@ -305,14 +306,13 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                 if next_cut < n_cut:
                     power[k] += ahead[next_cut] * uncut_column_value(t, col)
             if settings.deciding_only:
-                for k in range(n_samples):
-                    baseline[k] = cuts.background_w[p] + uncut_column_value(times[k], col)
+                baseline_values(baseline, times, cuts.background_w[p], col)
                 first_echo, last_echo = np.inf, -np.inf
                 for j in range(offsets[p], offsets[p + 1]):
                     if energy[j] > 0.0:
                         first_echo, last_echo = min(first_echo, delay[j]), max(last_echo, delay[j])
                 deciding_channels(synthesised[w], power, baseline, times, chans, max_code, settings.k_sigma,
-                                  last_echo - first_echo)
+                                  last_echo - first_echo, deciding_scratch)
             else:
                 synthesised[w, :] = True
             # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per

@@ -291,6 +291,18 @@ def uncut_column_value(t, col):
     return col.uncut[i] + (x - i) * (col.uncut[i + 1] - col.uncut[i])
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def baseline_values(out, times, background_w, col):
+    """out[k] = ``background_w`` + :func:`uncut_column_value` (times[k]) [W], the same numbers, in a loop whose
+    branches are selects (the table index clamped), so it runs on SIMD lanes."""
+    table, last = col.uncut, col.uncut.shape[0] - 1
+    for k in range(times.shape[0]):
+        x = times[k] / col.step_s
+        i = int(min(max(x, 0.0), last - 1.0))
+        inside = (times[k] > 0.0) & (x < last)
+        out[k] = background_w + (table[i] + (x - i) * (table[i + 1] - table[i]) if inside else 0.0)
+
+
 @numba.njit(cache=True, inline="always")
 def column_value(t, cut_tau, col):
     """Column power [W] at time t [s] of a beam cut at two-way time cut_tau [s] (exact cut, see module doc);

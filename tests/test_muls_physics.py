@@ -176,6 +176,22 @@ def test_cut_column_equals_numerical_convolution_of_truncated_profile():
     assert model.column_power_w(early, cut) == pytest.approx(model.column_power_w(early), rel=1e-12)
 
 
+def test_baselines_a_window_at_once_are_the_uncut_column_plus_background():
+    """The peak search and the channel test take a window's baseline from ``baseline_values`` (a loop of selects
+    over the uncut column table); it must be the background plus the column that meets nothing, as the exact
+    column (``column_power_w`` with no cut, a second engine) gives it, zero before emission and past the tables."""
+    from muls.waveform import baseline_values
+
+    model = OpticalModel.build(mul2023(), water_preset("coastal_ocean"))
+    end = model.column.step_s * (model.column.uncut.shape[0] - 1)
+    t = np.concatenate([[-5e-9, 0.0], np.linspace(1e-10, 300e-9, 997), [end - 1e-12, end, end + 1e-9]])
+    out = np.empty_like(t)
+    baseline_values(out, t, 2e-9, model.column)
+    expected = model.column_power_w(t)
+    assert out - 2e-9 == pytest.approx(expected, rel=REL_TOL_TABLE, abs=1e-15)
+    assert np.all(out[:2] == 2e-9) and np.all(out[-2:] == 2e-9) and out[200] > 1e-7
+
+
 def test_column_energy_is_conserved():
     """The time integral of the column power is E_t times the integral of the Eq. 4 density over range."""
     ins, water = mul2023(), water_preset("coastal_ocean")
