@@ -119,16 +119,19 @@ def _plan(offsets, first, usable, reach):
     earlier windows end (``reach`` samples after each window start) joins the cluster, whose window then
     runs to its last echo's reach. A run of samples that chains several echoes so lies whole in one window
     (the ranging drops a run cut by a window's edge, unless it is clipped and its plateau ends inside the
-    window). Returns (pulse, first sample, samples the cluster spans) per window."""
+    window). ``first`` must ascend within a pulse (it does, from :class:`Echoes`' delays). Returns (pulse, first
+    sample, samples the cluster spans) per window."""
     n = offsets.shape[0] - 1
     out_p = np.empty(first.shape[0], np.int64)
     out_s = np.empty(first.shape[0], np.int64)
     out_n = np.empty(first.shape[0], np.int64)
     m = 0
     for p in range(n):
-        starts = np.sort(first[offsets[p]:offsets[p + 1]][usable[offsets[p]:offsets[p + 1]]])
         end = -(1 << 40)
-        for s in starts:
+        for j in range(offsets[p], offsets[p + 1]):  # ascending: Echoes are sorted by delay within a pulse
+            if not usable[j]:
+                continue
+            s = first[j]
             if s < end:  # within the cluster: it only extends it
                 end = max(end, s + reach)
                 out_n[m - 1] = end - out_s[m - 1]
