@@ -164,7 +164,7 @@ class PassSetup:
                     self.model.instrument.geometry, self.level.shadow_rays)
         batch = pulse_batch(hits, slots, self.model, self.config.water.background_radiance_w_m2_sr_nm,
                             self.level.column_cut)
-        return RayStage(slots, hits, batch, self.lines_of_sight(slots, times, hits),
+        return RayStage(slots, hits, batch, self.lines_of_sight(slots, times, hits, (beam_o, beam_d)),
                         nominal_footprint(hits) if footprint else None)
 
     def finish_chunk(self, stage: RayStage, record_mode: str | None = None, every_channel: bool = False) -> Chunk:
@@ -184,13 +184,19 @@ class PassSetup:
         that coverage needs (None otherwise); ``record_mode``, ``every_channel``: as :meth:`finish_chunk`."""
         return self.finish_chunk(self.cast_chunk(slots, footprint), record_mode, every_channel)
 
-    def lines_of_sight(self, slots: np.ndarray, times: np.ndarray, hits: Hits) -> LinesOfSight:
+    def lines_of_sight(self, slots: np.ndarray, times: np.ndarray, hits: Hits,
+                       true_beam: tuple[np.ndarray, np.ndarray] | None = None) -> LinesOfSight:
         """Each pulse's estimated beam, with the first truth surface along it. Without navigation noise the
-        estimated beam is the true beam axis, whose first hit the beam cast already holds (sub-ray 0 of every
-        pattern is the axis), so only a noisy navigation needs a cast of its own."""
-        origin, direction, _, _, _ = self.scanner.world_rays(self.trajectory.poses(times, estimated=True))
+        estimated beam is the true beam axis (``true_beam``: its origins and directions (n, 3), if the caller has
+        them), whose first hit the beam cast already holds (sub-ray 0 of every pattern is the axis), so only a
+        noisy navigation needs its poses, its rays and a cast of its own."""
+        noisy = self.trajectory.has_navigation_noise
+        if noisy or true_beam is None:
+            origin, direction, _, _, _ = self.scanner.world_rays(self.trajectory.poses(times, estimated=True))
+        else:
+            origin, direction = true_beam
         true_range, first_object = np.full(slots.size, np.nan), np.full(slots.size, -1)
-        if self.trajectory.has_navigation_noise:
+        if noisy:
             ray, tri, dist = self.caster.first_hits((origin - self.scene.local_origin).astype(np.float32),
                                                     direction.astype(np.float32))
             true_range[ray], first_object[ray] = dist, self.scene.face_object[tri]
