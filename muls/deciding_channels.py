@@ -27,7 +27,7 @@ import math
 import numba
 import numpy as np
 
-from .channels import processor_sigma_lsb
+from .channels import gate_open_at, level_lsb, processor_sigma_lsb
 from .noise import NORMAL_BOUND
 
 #: The kept channel's worst SNR must exceed a lower-gain channel's best by this factor for that one to be dropped:
@@ -68,8 +68,8 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
         # echo on it. Bitwise, not short-circuit, so that the loop has no branch.
         all_open, no_blind, echo = True, True, False
         for k in range(n):
-            is_open = _open(chans, c, times[k])
-            blind = is_open & (_level(chans, c, baseline[k]) >= max_code)
+            is_open = gate_open_at(chans, c, times[k])
+            blind = is_open & (level_lsb(chans, c, baseline[k]) >= max_code)
             all_open &= is_open
             echo |= is_open & (not blind) & (power[k] > baseline[k])
             no_blind &= not blind
@@ -88,7 +88,7 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
     clipped[:] = False
     lowest = -1  # the lowest-gain channel that gives a saturated peak at the hump
     for c in range(n_chan):
-        if out[c] and _open(chans, c, times[top]):
+        if out[c] and gate_open_at(chans, c, times[top]):
             if plain[c]:
                 clipped[c] = _surely_clipped(c, power[top], chans, max_code)
                 if clipped[c] and (lowest < 0 or chans.lsb_per_w[c] < chans.lsb_per_w[lowest]):
@@ -113,34 +113,22 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
 
 
 @numba.njit(cache=True, inline="always")
-def _open(chans, c, t):
-    """Channel c's gate is open at time t [s]."""
-    return (chans.gate_open_s[c] <= t) & (t < chans.gate_close_s[c])
-
-
-@numba.njit(cache=True, inline="always")
 def _noise_reach(chans, c, power):
     """Most that channel c's noise and rounding can move a code at optical power ``power`` [W] [LSB]."""
     return NORMAL_BOUND * (chans.dark_std_lsb[c] + math.sqrt(chans.shot_lsb2_per_w[c] * power)) + 0.5
 
 
 @numba.njit(cache=True, inline="always")
-def _level(chans, c, power):
-    """Channel c's noise-free level [LSB] at optical power ``power`` [W] (MULS Eq. 12 in LSB)."""
-    return chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * power
-
-
-@numba.njit(cache=True, inline="always")
 def _surely_unclipped(c, highest_power, chans, max_code):
     """No sample of channel c, whose gate is open throughout, can reach the top code whatever the noise: its level
     and the noise's reach both grow with the power, so the window's highest power [W] decides."""
-    return _level(chans, c, highest_power) + _noise_reach(chans, c, highest_power) < max_code
+    return level_lsb(chans, c, highest_power) + _noise_reach(chans, c, highest_power) < max_code
 
 
 @numba.njit(cache=True, inline="always")
 def _surely_clipped(c, power, chans, max_code):
     """Channel c's sample at optical power ``power`` [W] reaches the top code, whatever the noise."""
-    return _level(chans, c, power) - _noise_reach(chans, c, power) >= max_code
+    return level_lsb(chans, c, power) - _noise_reach(chans, c, power) >= max_code
 
 
 @numba.njit(cache=True, nogil=True)
@@ -150,14 +138,14 @@ def _clipped_from_blindness(c, power, baseline, times, top, chans, max_code):
     back into samples the backscatter clips, and the peak search takes it for the column, not an echo."""
     last = -1
     for k in range(power.shape[0]):
-        if _open(chans, c, times[k]) and _level(chans, c, baseline[k]) >= max_code:
+        if gate_open_at(chans, c, times[k]) and level_lsb(chans, c, baseline[k]) >= max_code:
             if k >= top:
                 return False
             last = k
     if last < 0:
         return False
     for k in range(last, top + 1):
-        if not (_open(chans, c, times[k]) and _surely_clipped(c, power[k], chans, max_code)):
+        if not (gate_open_at(chans, c, times[k]) and _surely_clipped(c, power[k], chans, max_code)):
             return False
     return True
 

@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from .channels import gate_open_at, level_lsb
 from .deciding_channels import deciding_channels
 from .errors import check_choice
 from .noise import (
@@ -322,25 +323,15 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
             # detector (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's
             # current). Drawn a window at once for the pairs a synthesised channel needs.
             shot_needed[:] = False
-            for j in range(n_pairs):
-                low = 2 * j + 1 < n_chan and synthesised[w, 2 * j + 1]
-                if synthesised[w, 2 * j] or low:
-                    fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + j),
-                                      window_start[w], dark_normal[2 * j], dark_normal[2 * j + 1] if low else no_low,
-                                      tails)
             for c in range(n_chan):
                 shot_needed[chans.detector[c]] |= synthesised[w, c]
-            for j in range(n_shot_pairs):
-                low = 2 * j + 1 < n_detectors and shot_needed[2 * j + 1]
-                if shot_needed[2 * j] or low:
-                    fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], FIRST_SIGNAL_STREAM + n_pairs + j),
-                                      window_start[w], shot_normal[2 * j], shot_normal[2 * j + 1] if low else no_low,
-                                      tails)
+            _draw_pairs(dark_normal, synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, window_start[w], no_low, tails)
+            _draw_pairs(shot_normal, shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, window_start[w], no_low,
+                        tails)
             for c in range(n_chan):
                 if keep:
                     for k in range(n_samples):
-                        gated = power[k] if chans.gate_open_s[c] <= times[k] < chans.gate_close_s[c] else 0.0
-                        clean[w, c, k] = chans.lsb_per_w[c] * gated + chans.dark_mean_lsb[c]
+                        clean[w, c, k] = level_lsb(chans, c, power[k] if gate_open_at(chans, c, times[k]) else 0.0)
                 if synthesised[w, c]:
                     _channel_codes(codes[w, c], power, times, dark_normal[c], shot_normal[chans.detector[c]], chans, c,
                                    max_code, noise_scale)
@@ -348,14 +339,24 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                     codes[w, c, :] = 0
 
 
+@numba.njit(cache=True, inline="always")
+def _draw_pairs(normals, needed, sampling, p, first_stream, first_index, no_low, tails):
+    """Rows 2j and 2j + 1 of ``normals`` (2 m, n) from the two halves of stream ``first_stream + j`` of pulse ``p``,
+    positions ``first_index`` on, for the pairs with a ``needed`` (k,) row; a half no row needs is not drawn."""
+    for j in range(normals.shape[0] // 2):
+        low = 2 * j + 1 < needed.shape[0] and needed[2 * j + 1]
+        if needed[2 * j] or low:
+            fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], first_stream + j), first_index,
+                              normals[2 * j], normals[2 * j + 1] if low else no_low, tails)
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _channel_codes(out, power, times, dark_normal, shot_normal, chans, c, max_code, noise_scale):
     """One channel's codes (n,) of a window from the power [W] at its sample times [s] and its two normals: no
     branch but selects, so the loop runs on SIMD lanes."""
-    lsb, dark_mean, dark_std, shot = chans.lsb_per_w[c], chans.dark_mean_lsb[c], chans.dark_std_lsb[c], chans.shot_lsb2_per_w[c]
-    gate_open, gate_close = chans.gate_open_s[c], chans.gate_close_s[c]
+    dark_std, shot = chans.dark_std_lsb[c], chans.shot_lsb2_per_w[c]
     for k in range(out.shape[0]):
-        gated = power[k] if gate_open <= times[k] < gate_close else 0.0
-        level = lsb * gated + dark_mean  # MULS Eq. 12 in LSB
+        gated = power[k] if gate_open_at(chans, c, times[k]) else 0.0
+        level = level_lsb(chans, c, gated)
         noise = dark_std * dark_normal[k] + math.sqrt(shot * gated) * shot_normal[k]
         out[k] = _quantise(level + noise_scale * noise, max_code)  # MULS Eq. 13

@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from .channels import processor_sigma_lsb
+from .channels import gate_open_at, level_lsb, processor_sigma_lsb
 from .detection import WINDOW_BLOCK, Records
 from .waveform import Echoes, OpticalModel, PulseBatch, pulse_value, uncut_column_value
 
@@ -326,13 +326,11 @@ def _residuals(codes, times, base_w, chans, c, max_code, open_, blind, sigma, re
     (n,) [W] before the gate), in one loop without branches (it runs on SIMD lanes): ``open_``, ``blind`` (the
     backscatter alone clips the channel: nothing can be seen there, residual 0), ``sigma`` [LSB], ``resid`` [LSB],
     ``echoes`` zeroed. Returns how many samples the channel sees."""
-    lsb, dark_mean = chans.lsb_per_w[c], chans.dark_mean_lsb[c]
-    gate_open, gate_close = chans.gate_open_s[c], chans.gate_close_s[c]
     seen = 0
     for k in range(codes.shape[0]):
-        is_open = gate_open <= times[k] < gate_close
+        is_open = gate_open_at(chans, c, times[k])
         base = base_w[k] if is_open else 0.0
-        expected = dark_mean + lsb * base
+        expected = level_lsb(chans, c, base)
         is_blind = expected >= max_code
         open_[k], blind[k] = is_open, is_blind
         seen += 0 if is_blind else 1

@@ -185,13 +185,13 @@ class PassSetup:
         return self.finish_chunk(self.cast_chunk(slots, footprint), record_mode, every_channel)
 
     def lines_of_sight(self, slots: np.ndarray, times: np.ndarray, hits: Hits,
-                       true_beam: tuple[np.ndarray, np.ndarray] | None = None) -> LinesOfSight:
+                       true_beam: tuple[np.ndarray, np.ndarray]) -> LinesOfSight:
         """Each pulse's estimated beam, with the first truth surface along it. Without navigation noise the
-        estimated beam is the true beam axis (``true_beam``: its origins and directions (n, 3), if the caller has
-        them), whose first hit the beam cast already holds (sub-ray 0 of every pattern is the axis), so only a
+        estimated beam is the true beam axis (``true_beam``: its origins and directions (n, 3), as the ray stage
+        cast them), whose first hit the beam cast already holds (sub-ray 0 of every pattern is the axis), so only a
         noisy navigation needs its poses, its rays and a cast of its own."""
         noisy = self.trajectory.has_navigation_noise
-        if noisy or true_beam is None:
+        if noisy:
             origin, direction, _, _, _ = self.scanner.world_rays(self.trajectory.poses(times, estimated=True))
         else:
             origin, direction = true_beam
