@@ -1,7 +1,7 @@
-"""Numba kernels of the ``auto`` level's analytic seabed hits (scanner_sim.auto_level): the seabed height field
-as a grid of coarse cells with bounds (slope, highest seabed node, highest other object), the proof that nothing
-can stand in a pulse's sub-rays' way or between their hits and the receiver, and the ray-plane hits of the
-pulses it proves. Compiled on first use and cached on disk.
+"""Numba kernels of the proofs on the seabed's coarse grid (scanner_sim.seabed_grid): that nothing can stand in a
+pulse's sub-rays' way or between their hits and the receiver, the ``auto`` level's ray-plane hits of the pulses it
+proves (scanner_sim.auto_level), and the shadow rays any level need not cast (scanner_sim.raycast.cast_beams).
+Compiled on first use and cached on disk.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from numba import njit
 
 
 class SeabedGrid(NamedTuple):
-    """The seabed height field as the ``auto`` level's analytic hits see it (scanner_sim.auto_level.seabed_grid).
+    """The seabed height field as the proofs of this module see it (scanner_sim.seabed_grid.seabed_grid).
 
     x0, y0 [m]: local-frame position of node (0, 0); spacing [m]; nx, ny: nodes; face0: the scene face of cell
     (0, 0)'s lower triangle (cell (i, j) is face0 + i (nx - 1) + j, its upper triangle that plus (nx - 1)(ny - 1),
@@ -24,7 +24,8 @@ class SeabedGrid(NamedTuple):
     node; object_top [m], the highest point of any other triangle whose xy box overlaps it (-inf: none).
     z_top [m]: above it there is no geometry at all. plane (2 (nx - 1)(ny - 1), 4): each seabed face's plane n . x = w
     as (n, w), n the (unnormalised) cross product of its float32 edges, in face order from face0. super_top
-    (sy, sx) [m]: the highest point of any triangle over each block of super_k x super_k coarse cells."""
+    (sy, sx) [m]: the highest point of any triangle over each block of super_k x super_k coarse cells. object_id: the
+    seabed's index in the scene's objects."""
 
     x0: float
     y0: float
@@ -40,6 +41,7 @@ class SeabedGrid(NamedTuple):
     plane: np.ndarray
     super_k: int
     super_top: np.ndarray
+    object_id: int
 
 
 @njit(cache=True, nogil=True)
@@ -275,3 +277,58 @@ def unproven_shadows(pulse, p0, analytic, length):
             out[k] = c
             k += 1
     return out[:k]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def shadows_to_cast(grid, rows, local_origin, rx_local, sh_len, first, count, m, need):
+    """Which of a block's shadow rays Embree must cast: writes their indices (0 .. ``count`` - 1, for hit rows
+    ``first`` ..) into ``need`` and returns how many.
+
+    rows: :class:`scanner_sim._raykernels.HitRows` in scan order, ``m`` sub-rays per pulse at most; sh_len (count,):
+    each row's shadow-ray length (<= 0: empty, never cast); rx_local (n_pulses, 3): the receiver apertures in the
+    local frame (``local_origin`` [m] off the world frame). A pulse's non-empty shadow rays are all left out when
+    every one of them starts on the seabed (``grid.object_id``) and :func:`_bundle_clear` proves that
+    nothing can meet the straight segments from those hits up to the aperture: then Embree would find none
+    blocked. A hit on anything else, or a test that fails, casts them all."""
+    hx, hy, hz = np.empty(m), np.empty(m), np.empty(m)
+    z_end, wx, wy, rise = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    rows_of = np.empty(m, np.int64)
+    pulse, point = rows.pulse, rows.point
+    k, c = 0, 0
+    while c < count:
+        p = pulse[first + c]
+        n, proven = 0, True
+        while c < count and pulse[first + c] == p:
+            if sh_len[c] > 0.0:
+                rows_of[n] = c
+                n += 1
+                proven = proven and rows.object_id[first + c] == grid.object_id
+            c += 1
+        if n == 0:
+            continue
+        if proven:
+            rx, ry, rz = rx_local[p, 0], rx_local[p, 1], rx_local[p, 2]
+            fx, fy = point[first + rows_of[0], 0] - local_origin[0], point[first + rows_of[0], 1] - local_origin[1]
+            reach, zmin = 0.0, np.inf
+            for j in range(n):
+                i = first + rows_of[j]
+                x, y, z = point[i, 0] - local_origin[0], point[i, 1] - local_origin[1], point[i, 2] - local_origin[2]
+                up = rz - z
+                if not up > 0.0:
+                    proven = False
+                    break
+                hx[j], hy[j], hz[j], z_end[j] = x, y, z, rz
+                h2 = (rx - x) ** 2 + (ry - y) ** 2
+                if h2 > 0.0:
+                    inv_h = 1.0 / math.sqrt(h2)
+                    rise[j], wx[j], wy[j] = up * inv_h, (rx - x) * inv_h, (ry - y) * inv_h
+                else:
+                    rise[j], wx[j], wy[j] = np.inf, 0.0, 0.0
+                reach = max(reach, math.sqrt((x - fx) ** 2 + (y - fy) ** 2))
+                zmin = min(zmin, z)
+            proven = proven and _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, n, fx, fy, reach, zmin)
+        if not proven:
+            for j in range(n):
+                need[k] = rows_of[j]
+                k += 1
+    return k

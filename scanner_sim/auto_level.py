@@ -2,8 +2,8 @@
 simple footprint's echoes collapsed to two (:mod:`scanner_sim.echo_collapse`).
 
 Embree casts every pulse's axis. Where the axis lands on the seabed's height field and a test on a coarse grid
-(:func:`seabed_grid`) proves that nothing else can stand in the sub-rays' way or between their hits and the
-receiver, and that the seabed rises along each sub-ray less steeply than the ray does, each other sub-ray meets
+(:mod:`scanner_sim.seabed_grid`) proves that nothing else can stand in the sub-rays' way or between their hits
+and the receiver, and that the seabed rises along each sub-ray less steeply than the ray does, each other sub-ray meets
 the seabed exactly once, on the triangle the height field puts under it: its hit is the ray-plane intersection
 (:mod:`scanner_sim._seabed_kernels`) and its shadow ray cannot be blocked. Every other pulse is cast as
 ``balanced`` casts it.
@@ -17,76 +17,14 @@ import numba
 import numpy as np
 
 from ._raykernels import HitRows, ShadowRays, clear_blocked, hit_block, subrays_local32
-from ._seabed_kernels import SeabedGrid, analytic_block, rasterise_tops, seabed_planes, unproven_shadows
+from ._seabed_kernels import analytic_block, unproven_shadows
 from .beams import BeamPattern
 from .echo_collapse import HIT_FIELDS, collapse_simple, emit_rows, pulse_figures
 from .raycast import Hits, cast_beams, kernel_inputs
+from .seabed_grid import seabed_grid_of
 
-#: [m] Side of the coarse cells over which :func:`seabed_grid` bounds the seabed's slope and the other objects.
-COARSE_CELL_M = 0.1
-#: [m] Side of the blocks of coarse cells over which :func:`seabed_grid` keeps the highest point of anything.
-SUPER_CELL_M = 1.0
 #: Sub-rays per block of :func:`cast_seabed_analytic`.
 AUTO_BLOCK_RAYS = 32768
-
-
-def seabed_grid(scene, caster):
-    """The :class:`scanner_sim._seabed_kernels.SeabedGrid` of ``scene``'s seabed in ``caster``'s local frame, or None
-    where the scene has no height field or its seabed faces are not the height field's own, in its order."""
-    hf = scene.heightfield
-    seabeds = [o for o in scene.objects if o.kind == "seabed"]
-    if hf is None or len(seabeds) != 1:
-        return None
-    sb = seabeds[0]
-    ny, nx = hf.shape
-    cells = (nx - 1) * (ny - 1)
-    faces = scene.faces[sb.face_start:sb.face_stop]
-    if faces.shape[0] != 2 * cells:
-        return None
-    _, expected = hf.mesh()
-    if not np.array_equal(faces - faces.min(), expected):
-        return None
-    k = max(1, round(COARSE_CELL_M / hf.spacing_m))
-    cy, cx = -(-(ny - 1) // k), -(-(nx - 1) // k)
-
-    normal = scene.face_normal[sb.face_start:sb.face_stop]
-    gradient = np.empty((cy, cx, 4))
-    for axis in (0, 1):  # dz/dx, dz/dy of each seabed triangle: -n_x / n_z, -n_y / n_z
-        g = (-normal[:, axis] / normal[:, 2]).reshape(2, ny - 1, nx - 1)
-        gradient[:, :, 2 * axis] = -_block_max(-g.min(axis=0), k)
-        gradient[:, :, 2 * axis + 1] = _block_max(g.max(axis=0), k)
-    z = caster.vertices[faces.min():faces.min() + nx * ny, 2].astype(np.float64).reshape(ny, nx)
-    node_top = np.maximum(np.maximum(z[:-1, :-1], z[:-1, 1:]), np.maximum(z[1:, :-1], z[1:, 1:]))
-    x0, y0 = hf.x0_m - scene.local_origin[0], hf.y0_m - scene.local_origin[1]
-    object_top = np.full((cy, cx), -np.inf)
-    size = k * hf.spacing_m
-    rasterise_tops(caster.vertices, caster.faces, 0, sb.face_start, x0, y0, size, object_top)
-    rasterise_tops(caster.vertices, caster.faces, sb.face_stop, caster.faces.shape[0], x0, y0, size, object_top)
-    seabed_top = _block_max(node_top, k)
-    sk = max(1, round(SUPER_CELL_M / (k * hf.spacing_m)))
-    super_top = _block_max(np.maximum(seabed_top, object_top), sk)
-    plane = np.empty((2 * cells, 4))
-    seabed_planes(caster.vertices, caster.faces, sb.face_start, sb.face_stop, plane)
-    return SeabedGrid(float(x0), float(y0), float(hf.spacing_m), int(nx), int(ny), int(sb.face_start), int(k),
-                      gradient, seabed_top, object_top, float(caster.vertices[:, 2].max()) + 1e-3, plane,
-                      int(sk), super_top)
-
-
-def _block_max(a: np.ndarray, k: int) -> np.ndarray:
-    """The maximum of each k x k block of the 2-D ``a`` (the last blocks padded with -inf)."""
-    by, bx = -(-a.shape[0] // k), -(-a.shape[1] // k)
-    padded = np.full((by * k, bx * k), -np.inf)
-    padded[:a.shape[0], :a.shape[1]] = a
-    return padded.reshape(by, k, bx, k).max(axis=(1, 3))
-
-
-def _grid_of(caster, scene):
-    """:func:`seabed_grid` once per caster (its scene)."""
-    cached = getattr(caster, "_auto_seabed_grid", None)
-    if cached is None or cached[0] is not scene:
-        cached = (scene, seabed_grid(scene, caster))
-        caster._auto_seabed_grid = cached
-    return cached[1]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -179,7 +117,7 @@ def cast_seabed_analytic(caster, scene, beam_origin, beam_dir, shaft_dir, rx_ori
     receiver. The hit rows are made by the same kernel as ``cast_beams``'s, so they differ from it by float32
     rounding of the distances at most. Same arguments and result; a scene without a height field is cast as
     ``cast_beams`` casts it. ``collapse``: each block's hits go through :func:`collapse_simple` while in cache."""
-    grid = _grid_of(caster, scene)
+    grid = seabed_grid_of(caster, scene)
     if grid is None:
         hits = cast_beams(caster, scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
                           shadow_rays)

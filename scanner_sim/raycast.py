@@ -21,7 +21,9 @@ import numpy as np
 
 from muls.errors import ParameterError
 
+from ._seabed_kernels import shadows_to_cast
 from .beams import BeamPattern, perpendicular_basis
+from .seabed_grid import seabed_grid_of
 
 BACKENDS = ("auto", "embree", "numpy")
 
@@ -254,15 +256,18 @@ def shadow_offset_m(local_extent_m: float) -> float:
 
 def cast_beams(caster: RayCaster, scene, beam_origin: np.ndarray, beam_dir: np.ndarray, shaft_dir: np.ndarray,
                rx_origin: np.ndarray, rx_dir: np.ndarray, pattern: BeamPattern, geometry,
-               shadow_rays: bool = True) -> Hits:
+               shadow_rays: bool = True, prove_shadows: bool = True) -> Hits:
     """Cast the sub-rays of a chunk of pulses into ``scene`` and check each hit against the receiver.
 
     beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir: (n_pulses, 3) float64 world frame (from
     :meth:`scanner_sim.scanner.Scanner.world_rays`); pattern: sub-ray layout; geometry: the instrument's
     :class:`muls.overlap.TransceiverGeometry` (beam radius, divergence, receiver aperture and FOV);
-    shadow_rays: cast a visibility ray from each in-cone hit to the receiver aperture (else only the cone).
-    ``caster``: the :class:`RayCaster` over ``scene`` (:meth:`RayCaster.for_scene`). Returns :class:`Hits`
-    in scan order.
+    shadow_rays: cast a visibility ray from each in-cone hit to the receiver aperture (else only the cone);
+    prove_shadows: over a seabed height field, leave out the shadow rays of each pulse whose hits all lie on the
+    seabed with nothing that can stand between them and the aperture (proven on the seabed's coarse grid,
+    :func:`scanner_sim._seabed_kernels.shadows_to_cast`): Embree would find none of them blocked, so the hits are
+    the same either way. ``caster``: the :class:`RayCaster` over ``scene`` (:meth:`RayCaster.for_scene`). Returns
+    :class:`Hits` in scan order.
 
     The work around the two Embree calls is two fused numba kernels (sub-rays in; hit attributes, FOV cone
     and shadow rays out), so the stage keeps most of Embree's raw throughput (``scanner-sim bench-rays``).
@@ -272,6 +277,7 @@ def cast_beams(caster: RayCaster, scene, beam_origin: np.ndarray, beam_dir: np.n
     rays, layout, faces, cone = kernel_inputs(scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern,
                                               geometry)
     rows = kernels.HitRows.empty(n_pulses * m)  # sized for every sub-ray hitting; only rows written are kept
+    grid = seabed_grid_of(caster, scene) if shadow_rays and prove_shadows else None
 
     # Blocks of pulses small enough that each block's rays, Embree answers and shadow rays stay in cache.
     block = max(1, BLOCK_RAYS // m)
@@ -288,9 +294,15 @@ def cast_beams(caster: RayCaster, scene, beam_origin: np.ndarray, beam_dir: np.n
                                      caster.workspace("shadow_length32", (b,), np.float32))
         c = kernels.hit_block(prim, tfar, p0 * m, base, rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov,
                               rows, shadows)
-        if shadow_rays and c:  # hits outside the cone have empty (length -1) shadow rays, skipped by Embree
+        if shadow_rays and c and grid is None:  # hits outside the cone have empty (length -1) shadow rays
             occluded = caster.occluded_raw(shadows.origin[:c], shadows.direction[:c], shadows.length[:c])
             kernels.clear_blocked(occluded, shadows.length[:c], rows.seen, base)
+        elif shadow_rays and c:
+            need = caster.workspace("shadows_to_cast", (c,), np.int64)
+            need = need[:shadows_to_cast(grid, rows, scene.local_origin, rays.rx, shadows.length[:c], base, c, m, need)]
+            if need.size:
+                occluded = caster.occluded_raw(shadows.origin[need], shadows.direction[need], shadows.length[need])
+                rows.seen[base + need[occluded >= 0]] = 0.0
         base += c
 
     k = base

@@ -16,6 +16,7 @@ from scanner_sim.echo_collapse import HIT_FIELDS, SIMPLE_SPREAD_M, simple_pulses
 from scanner_sim.fidelity import FIDELITY_LEVELS
 from scanner_sim.raycast import Hits, RayCaster, cast_beams
 from scanner_sim.scene import LABELS, Part, Scene, panel_mesh, tube
+from scanner_sim.seabed_grid import seabed_grid
 from scanner_sim.survey import PassOptions, PassSetup, hit_echo_range_m
 from scanner_sim.terrain import HeightField
 from scanner_sim.tradeoff import with_level
@@ -181,7 +182,7 @@ def _both(scene, pulses, shadow_rays=True):
     caster = CountingCaster(RayCaster.for_scene(scene))
     pattern = beam_pattern(19)
     proven = auto_level.cast_seabed_analytic(caster, scene, *pulses, pattern, GEOMETRY, shadow_rays)
-    embree = cast_beams(caster._caster, scene, *pulses, pattern, GEOMETRY, shadow_rays)
+    embree = cast_beams(caster._caster, scene, *pulses, pattern, GEOMETRY, shadow_rays, prove_shadows=False)
     return proven, embree, caster
 
 
@@ -258,7 +259,7 @@ def test_a_scene_without_a_height_field_is_cast_as_balanced_casts_it():
     origin = np.zeros((n, 3))
     direction = np.tile([0.0, 0.0, -1.0], (n, 1))
     pulses = (origin, direction, np.tile([1.0, 0, 0], (n, 1)), origin + [0, GEOMETRY.offset_m, 0], direction)
-    assert auto_level.seabed_grid(scene, RayCaster.for_scene(scene)) is None
+    assert seabed_grid(scene, RayCaster.for_scene(scene)) is None
     proven, embree, _ = _both(scene, pulses)
     for f in HIT_FIELDS:
         np.testing.assert_array_equal(getattr(proven, f), getattr(embree, f))
@@ -270,7 +271,7 @@ def test_the_seabed_bounds_hold_every_triangle():
     plate = panel_mesh([101.03, 201.03, -19.5], (0.02, 0.02), (0, 0, 1), (0, 1, 0))
     scene = _seabed_scene([("plate", plate)])
     caster = RayCaster.for_scene(scene)
-    grid = auto_level.seabed_grid(scene, caster)
+    grid = seabed_grid(scene, caster)
     v = scene.vertices - scene.local_origin
     tri = v[scene.faces[:2 * 100 * 100]]
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
@@ -311,3 +312,29 @@ def test_auto_on_a_seabed_keeps_each_pulses_echo_energy_and_mean_delay():
                          minlength=n)[lit] / eb[lit]
     np.testing.assert_allclose(mean_a, mean_b, rtol=0, atol=2e-5)
     assert np.bincount(auto.pulse_index, minlength=n).mean() < 4  # mostly three rows a pulse
+
+
+@pytest.mark.parametrize("ridges", [False, True])
+def test_shadow_rays_proven_clear_leave_every_hit_as_embree_finds_it(ridges):
+    """Every level casts its shadow rays through cast_beams, which leaves out a pulse's rays where the seabed grid
+    proves nothing can stand between its seabed hits and the receiver. With plates over the seabed, a cable on it
+    and (``ridges``) relief that hides hits, the hits and receiver checks are those of every ray cast, to the bit,
+    while far fewer shadow rays are cast; a proof that passed a blocked path would change a receiver check."""
+    rng = np.random.default_rng(5)
+    hf, plates = _field(ridges), []
+    for i in range(60):
+        x, y = 101.9 + 1.2 * rng.random(), 201.9 + 1.2 * rng.random()
+        z = float(hf.height(x, y)) + 0.2 + 0.2 * rng.random()
+        plates.append((f"plate{i}", panel_mesh([x, y, z], (0.04 + 0.1 * rng.random(), 0.03), (0, 0, 1), (0, 1, 0))))
+    line = np.c_[np.linspace(100.2, 104.8, 90), np.full(90, 202.5), np.zeros(90)]
+    line[:, 2] = hf.height(line[:, 0], line[:, 1]) + 0.03
+    scene = _seabed_scene(plates + [("cable", tube(line, 0.04))], ridges=ridges)
+    pulses = _pulses(4000, seed=6, spread_deg=60.0 if ridges else 40.0)
+    every, proving = CountingCaster(RayCaster.for_scene(scene)), CountingCaster(RayCaster.for_scene(scene))
+    cast = cast_beams(every, scene, *pulses, beam_pattern(19), GEOMETRY, prove_shadows=False)
+    proven = cast_beams(proving, scene, *pulses, beam_pattern(19), GEOMETRY)
+    shadowed = (cast.receiver_weight == 0) & (_seen_without_shadow_rays(scene, pulses) == 1)
+    assert shadowed.sum() > 20  # hits hidden from the receiver: what the shadow rays are for
+    for f in HIT_FIELDS:
+        np.testing.assert_array_equal(getattr(proven, f), getattr(cast, f), err_msg=f)
+    assert proving.shadow_rays < (0.6 if ridges else 0.4) * every.shadow_rays, (proving.shadow_rays, every.shadow_rays)
