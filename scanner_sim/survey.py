@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import numba
 import numpy as np
 from tqdm import tqdm
 
@@ -318,30 +320,43 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     """Every chunk of the pass through the flow, in order (with the nominal footprint where coverage needs it),
     under a progress bar with the pass's pulse count as its total.
 
-    Two stages overlap: a thread casts the rays of chunk k + 1 (Embree and the ray kernels release the GIL)
-    while this one runs the physics of chunk k. Each chunk is a pure function of its slots, so the bits do not
-    depend on the overlap; at most two chunks are in flight.
+    Chunks run side by side, one per core: each of :func:`chunk_workers` threads takes the next chunk and runs
+    it whole (ray stage, then physics) on one numba thread; Embree and the kernels release the GIL. Each chunk
+    is a pure function of its slots, so the bits do not depend on which thread ran it or how many there are; at
+    most one chunk more than there are workers is in flight.
     """
     footprint = setup.scene.heightfield is not None
     bar = tqdm(total=setup.expected_pulses(), unit="pulse", unit_scale=True, disable=not options.progress,
                desc=setup.config.name)
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="ray-stage") as ray_stage:
-        pending = None
+    workers = chunk_workers()
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="chunk") as pool:
+        in_flight: deque[Future] = deque()
         for slots in setup.slot_chunks():
-            cast = ray_stage.submit(setup.cast_chunk, slots, footprint)
-            if pending is not None:
-                yield _finished(setup, pending, bar)
-            pending = cast
-        if pending is not None:
-            yield _finished(setup, pending, bar)
+            in_flight.append(pool.submit(_whole_chunk, setup, slots, footprint))
+            if len(in_flight) > workers:
+                yield _finished(in_flight.popleft(), bar)
+        while in_flight:
+            yield _finished(in_flight.popleft(), bar)
     bar.close()
 
 
-def _finished(setup: PassSetup, cast: Future, bar) -> Chunk:
-    stage = cast.result()
-    chunk = setup.finish_chunk(stage)
-    bar.update(stage.slots.size)
-    return chunk
+def chunk_workers() -> int:
+    """Chunks a pass runs side by side: numba's thread count (the cores, unless ``NUMBA_NUM_THREADS`` or
+    ``numba.set_num_threads`` says fewer)."""
+    return numba.get_num_threads()
+
+
+def _whole_chunk(setup: PassSetup, slots: np.ndarray, footprint: bool) -> Chunk:
+    # One numba thread per chunk (numba's count is per thread): the chunks beside it keep the other cores busy,
+    # and more threads than cores would only evict each other's caches.
+    numba.set_num_threads(1)
+    return setup.simulate_chunk(slots, footprint=footprint)
+
+
+def _finished(chunk: Future, bar) -> Chunk:
+    done = chunk.result()
+    bar.update(done.slots.size)
+    return done
 
 
 def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):

@@ -93,7 +93,8 @@ def test_same_seed_same_points_whatever_the_chunk_size(cable_survey, tmp_path):
 
 
 def test_same_seed_same_points_whatever_the_thread_count(tmp_path):
-    """One numba thread and two, with the ray stage overlapping the physics or not: the same bytes."""
+    """One numba thread (the chunks one after another) and two (two chunks side by side, each on one thread of
+    its own): the same bytes."""
     code = ("import sys; from scanner_sim.cli import main; main(['run', '--out', sys.argv[1], '--max-pulses', "
             "'12000', '--chunk-pulses', '5000', '--no-render', '--quiet'])")
     for threads in ("1", "2"):
@@ -105,9 +106,9 @@ def test_same_seed_same_points_whatever_the_thread_count(tmp_path):
 
 
 def test_idle_parallel_workers_sleep_unless_the_user_says_otherwise():
-    """Importing muls sets OpenMP's wait policy to PASSIVE before any parallel kernel runs: spinning workers took a
-    core from the ray-stage thread (``fast`` on cable_survey: 91,000 against 103,000 pulses/s, medians of five).
-    A policy the user set is kept."""
+    """Importing muls sets OpenMP's wait policy to PASSIVE before any parallel kernel runs: spinning workers take a
+    core from the threads working beside them (measured when a ray-stage thread ran beside the physics: ``fast`` on
+    cable_survey 91,000 against 103,000 pulses/s, medians of five). A policy the user set is kept."""
     code = "import os, muls; print(os.environ['OMP_WAIT_POLICY'])"
     env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
     for given, expected in ((None, "PASSIVE"), ("ACTIVE", "ACTIVE")):

@@ -300,8 +300,8 @@ class SurveyConfig(StrictModel):
     """Length of the pass [s]; default the whole trajectory."""
     max_pulses: Integer(ge=1) | None = None
     """Stop after this many fired pulses."""
-    chunk_pulses: Integer(ge=1) = 20000
-    """Pulse slots simulated at once (memory against overhead)."""
+    chunk_pulses: Integer(ge=1) = 10000
+    """Pulse slots per chunk: one core simulates a chunk at once (memory against overhead)."""
 
     @property
     def level(self) -> FidelityLevel:
