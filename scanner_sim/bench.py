@@ -30,9 +30,11 @@ def _peak_rss_mb() -> float:
 def _level_figures(scene_name: str, fidelity: str, pulses: int, repeat: int, overrides: dict) -> dict:
     """In a fresh process: best pulses/s of ``repeat`` passes, cores used, set-up seconds and peak RSS."""
     from .config import load_scene
+    from .raycast import tune_memory
     from .scene import build_scene
     from .survey import PassOptions, run_pass
 
+    tune_memory()  # as scanner-sim does at start: this process is spawned afresh
     config = load_scene(scene_name).with_overrides(overrides)
     t0 = time.perf_counter()
     scene = build_scene(config)

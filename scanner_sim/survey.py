@@ -38,6 +38,7 @@ from .raycast import Hits, RayCaster, cast_beams
 from .records import DropoutRecords, PointRecords
 from .scanner import Scanner
 from .scene import Scene, build_scene
+from .seabed_grid import seabed_grid_of
 from .setup_checks import build_trajectory
 from .trajectory import Trajectory
 
@@ -115,6 +116,7 @@ class PassSetup:
         model = OpticalModel.build(config.instrument.to_instrument(water), water)
         scene = build_scene(config) if scene is None else scene
         caster = RayCaster.for_scene(scene)  # the Embree BVH is built here: set-up, not part of the pass
+        seabed_grid_of(caster, scene)  # and the seabed's proof grid, kept on the caster (None: no height field)
         trajectory = build_trajectory(config, scene)
         scanner = Scanner.from_config(config.scanner, model.instrument)
         level = survey.level
