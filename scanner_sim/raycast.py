@@ -92,6 +92,9 @@ class RayCaster:
                                   f"({exc}); install it with `pip install embreex` or use backend 'auto'") from exc
             self._scene = rtcore_scene.EmbreeScene()
             TriangleMesh(scene=self._scene, vertices=self.vertices, indices=self.faces)
+            # embreex builds the BVH (commits the scene) on the first query, unguarded: build it now, in one
+            # thread, before chunks running side by side can each start a build of the same scene.
+            self._scene.run(np.zeros((1, 3), np.float32), np.array([[0.0, 0.0, 1.0]], np.float32))
         else:
             import trimesh
             from trimesh.ray.ray_triangle import RayMeshIntersector

@@ -152,3 +152,12 @@ def test_explicit_embree_backend_is_loud_when_missing(monkeypatch):
 def test_unknown_backend_lists_choices():
     with pytest.raises(ValueError, match="'auto', 'embree', 'numpy'"):
         RayCaster(np.zeros((3, 3)), np.array([[0, 1, 2]]), backend="optix")
+
+
+def test_bvh_is_built_when_the_caster_is_made_not_by_the_first_chunks():
+    """Root cause: embreex commits its scene (builds the BVH) inside the first query, with no lock, so the first
+    chunks of a pass, running side by side on two threads, could both start building the same scene, and the
+    build was timed as part of the pass (0.1 s of a cable_survey pass). The caster now builds it on creation."""
+    bv, bf = frustum(0.5, 0.2, 0.4)
+    caster = RayCaster(bv, bf, backend="embree")
+    assert caster._scene.is_committed == 1
