@@ -323,9 +323,10 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     under a progress bar with the pass's pulse count as its total.
 
     Chunks run side by side, one per core: each of :func:`chunk_workers` threads takes the next chunk and runs
-    it whole (ray stage, then physics) on one numba thread; Embree and the kernels release the GIL. Each chunk
-    is a pure function of its slots, so the bits do not depend on which thread ran it or how many there are; at
-    most one chunk more than there are workers is in flight.
+    it whole (ray stage, then physics) on one numba thread; Embree and the kernels release the GIL. The last chunk
+    is cut in one part per worker (:func:`last_cut`). Each chunk is a pure function of its slots, so the bits do
+    not depend on which thread ran it, how many there are or how the slots were cut; at most one chunk more than
+    there are workers is in flight.
     """
     footprint = setup.scene.heightfield is not None
     bar = tqdm(total=setup.expected_pulses(), unit="pulse", unit_scale=True, disable=not options.progress,
@@ -333,13 +334,24 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     workers = chunk_workers()
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="chunk") as pool:
         in_flight: deque[Future] = deque()
-        for slots in setup.slot_chunks():
+        for slots in last_cut(setup.slot_chunks(), workers):
             in_flight.append(pool.submit(_whole_chunk, setup, slots, footprint))
             if len(in_flight) > workers:
                 yield _finished(in_flight.popleft(), bar)
         while in_flight:
             yield _finished(in_flight.popleft(), bar)
     bar.close()
+
+
+def last_cut(chunks, parts: int):
+    """``chunks`` (arrays of slots) as they come, the last one cut into ``parts`` near-equal chunks, so that the
+    cores share the pass's end instead of one running its last chunk alone (the bits do not depend on the cut)."""
+    current = next(chunks, None)
+    for following in chunks:
+        yield current
+        current = following
+    if current is not None:
+        yield from (part for part in np.array_split(current, parts) if part.size)
 
 
 def chunk_workers() -> int:

@@ -2,8 +2,8 @@
 run on the same pulses of the same seed, timed, and measured against the truth mesh and against the reference
 level (:mod:`scanner_sim.accuracy`).
 
-Each run is the pass's own chunk loop (:meth:`PassSetup.simulate_chunk`, with the nominal footprint and coverage
-tally where the scene has a seabed) over the scene's first ``pulses`` pulses; ``pulses_per_s`` times that loop
+Each run is the pass's own chunk loop (:func:`scanner_sim.survey.pass_chunks`, with the nominal footprint and
+coverage tally where the scene has a seabed) over the scene's first ``pulses`` pulses; ``pulses_per_s`` times that loop
 alone, after a short untimed warm-up, the fastest of ``repeat`` passes taken round-robin over the runs. The
 waveform R^2 is measured on the first ``waveform_pulses`` pulses, simulated again with their records kept (the
 full reference records take 6 kB a pulse).
@@ -24,7 +24,7 @@ from .config import SceneConfig
 from .fidelity import FIDELITY_LEVELS, FidelityLevel
 from .records import PointRecords
 from .scene import build_scene
-from .survey import PassOptions, PassSetup
+from .survey import PassOptions, PassSetup, pass_chunks
 
 #: The level every other is measured against.
 REFERENCE = "reference"
@@ -110,14 +110,14 @@ def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     return out
 
 
-def _timed_pass(setup: PassSetup, slots: list):
-    """The chunk loop over ``slots`` (with the coverage tally over a seabed): (points, covered share or None, wall
-    seconds of the loop)."""
+def _timed_pass(setup: PassSetup):
+    """The pass's chunks as a pass runs them (:func:`scanner_sim.survey.pass_chunks`, one per core at once), with
+    the coverage tally over a seabed: (points, covered share or None, wall seconds of the loop)."""
     seabed = setup.scene.heightfield is not None
     coverage = sinks.CoverageSink(setup.scene) if seabed else None
     parts, started = [], time.perf_counter()
-    for chunk_slots in slots:
-        chunk = setup.simulate_chunk(chunk_slots, footprint=seabed)._replace(records=None)
+    for chunk in pass_chunks(setup, PassOptions(progress=False)):
+        chunk = chunk._replace(records=None)
         if coverage is not None:
             coverage.add(chunk)
         parts.append(chunk.points)
@@ -131,7 +131,7 @@ def run_level(base: PassSetup, level: FidelityLevel, waveform_pulses: int) -> Le
     seabed = setup.scene.heightfield is not None
     slots = list(setup.slot_chunks())
     setup.simulate_chunk(slots[0][:WARM_UP_PULSES], footprint=seabed)  # compiled kernels and caches warm
-    points, covered, wall_s = _timed_pass(setup, slots)
+    points, covered, wall_s = _timed_pass(setup)
     n = int(sum(s.size for s in slots))
     if covered is None:
         covered = np.unique(points.pulse_index[points.object_id >= 0]).size / max(n, 1)
@@ -148,7 +148,7 @@ def best_speed(base: PassSetup, runs: dict, repeat: int) -> dict:
     for _ in range(repeat - 1):
         for name, run in runs.items():
             setup = with_level(base, run.level)
-            _, _, wall_s = _timed_pass(setup, list(setup.slot_chunks()))
+            _, _, wall_s = _timed_pass(setup)
             best[name] = max(best[name], run.n_pulses / wall_s)
     return {name: replace(run, pulses_per_s=best[name]) for name, run in runs.items()}
 
