@@ -15,7 +15,7 @@ from scanner_sim.cli import main
 from scanner_sim.config import load_scene
 from scanner_sim.records import DROPOUT_CAUSES
 from scanner_sim.scene import LABELS
-from scanner_sim.survey import PassOptions, PassSetup, run_pass
+from scanner_sim.survey import PassOptions, PassSetup, last_cut, run_pass
 
 POOL_P95_MAX_M = 0.15
 INDEPENDENT_TOL_M = 0.01
@@ -90,6 +90,17 @@ def test_same_seed_same_points_whatever_the_chunk_size(cable_survey, tmp_path):
     other = _pass(cable_survey, tmp_path / "c", max_pulses=12000, seed=2)
     c = laspy.read(tmp_path / "c" / "points.las")
     assert not np.array_equal(np.asarray(a.z), np.asarray(c.z)[: len(a.z)]) and other["seed"] == 2
+
+
+@pytest.mark.parametrize("sizes", [[10, 10, 10], [10, 10, 1], [7], [3], []])
+def test_the_last_chunk_is_shared_by_the_workers_and_no_slot_is_lost(sizes):
+    """The pass's chunks in order, every slot once; the last chunk in up to two near-equal parts (two workers)."""
+    chunks = [np.arange(sum(sizes[:i]), sum(sizes[: i + 1])) for i in range(len(sizes))]
+    out = list(last_cut(iter(chunks), 2))
+    assert np.array_equal(np.concatenate(out) if out else np.zeros(0), np.arange(sum(sizes)))
+    assert [c.size for c in out[: max(len(sizes) - 1, 0)]] == sizes[:-1]
+    last = [c.size for c in out[len(sizes) - 1:]]
+    assert all(n > 0 for n in last) and (not last or max(last) - min(last) <= 1 and len(last) == min(2, sizes[-1]))
 
 
 def test_same_seed_same_points_whatever_the_thread_count(tmp_path):
