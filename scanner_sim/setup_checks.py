@@ -29,10 +29,11 @@ def build_trajectory(config, scene=None) -> Trajectory:
 
 
 #: Bytes a chunk holds per pulse slot and sub-ray (rays, hits, echoes), and per pulse slot for its records by
-#: record mode: the growth of peak RSS of cable_survey passes between 10,000- and 80,000-pulse chunks (fast,
-#: 7 sub-rays: 2.7 kB per pulse; balanced, 19: 4.4 kB; reference, 91 with full records: 18 kB), rounded up.
-CHUNK_BYTES_PER_SUBRAY = 200
-CHUNK_BYTES_PER_PULSE = {"windowed": 2_000, "full": 8_000}
+#: record mode, with the chunks a pass keeps in flight (one per worker and one more): the growth of peak RSS of
+#: cable_survey passes between 10,000- and 80,000-pulse chunks on 2 cores (fast, 7 sub-rays: 5.6 kB per pulse;
+#: balanced, 19: 9.7 kB; reference, 91 with full records: 48 kB), fitted and rounded up.
+CHUNK_BYTES_PER_SUBRAY = 350
+CHUNK_BYTES_PER_PULSE = {"windowed": 3_500, "full": 18_000}
 #: Bytes of what grows with the track or the pass: a sample of the path (every PATH_STEP_M: position,
 #: heading, height, pitch and their filters), of the navigation-noise grid (six processes and their filter),
 #: a row of the 10 Hz trajectory table (true and estimated poses), a pulse slot listed for waveform
@@ -131,7 +132,7 @@ def estimate_pass(config) -> PassEstimate:
     track_key = "platform.lawnmower" if p.mode == "lawnmower" else "platform.waypoints_m"
     memory = {
         "survey.chunk_pulses": (sv.chunk_pulses * (level.subrays * CHUNK_BYTES_PER_SUBRAY
-                                                   + CHUNK_BYTES_PER_PULSE.get(level.record_mode, 8_000)),
+                                                   + CHUNK_BYTES_PER_PULSE.get(level.record_mode, 18_000)),
                                 f"chunks of {sv.chunk_pulses:,} pulses x {level.subrays} sub-rays"),
         track_key: ((length_m / PATH_STEP_M + 2) * PATH_BYTES_PER_SAMPLE, f"a path {length_m:,.0f} m long"),
         time_key: (pass_s * TRAJECTORY_TABLE_RATE_HZ * TRAJECTORY_BYTES_PER_ROW,

@@ -138,10 +138,10 @@ def test_too_many_pulses_refused_before_anything_is_allocated(mine_scene):
 def test_memory_estimate_names_the_key_that_drives_it():
     config = _config(**{"survey.chunk_pulses": 10**9})
     est = estimate_pass(config)
-    assert est.memory["survey.chunk_pulses"][0] == 10**9 * (19 * 200 + 2_000)  # balanced: 19 sub-rays, windowed
+    assert est.memory["survey.chunk_pulses"][0] == 10**9 * (19 * 350 + 3_500)  # balanced: 19 sub-rays, windowed
     with pytest.raises(ConfigError) as exc:
         check_pass_budget(config, available_bytes=32 << 30)
-    assert str(exc.value).startswith("survey.chunk_pulses = 1000000000: the pass would need about 5,800.0 GB of "
+    assert str(exc.value).startswith("survey.chunk_pulses = 1000000000: the pass would need about 10,150.0 GB of "
                                      "memory (chunks of 1,000,000,000 pulses x 19 sub-rays"), str(exc.value)
     big_seabed = _config(**{"seabed.size_m": [10_000, 10_000], "seabed.resolution_m": 10})
     with pytest.raises(ConfigError, match=r"seabed.size_m = \[10000.0, 10000.0\]: .*\(coverage over 1,600,000,000 cells"):
