@@ -171,6 +171,23 @@ def _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, n, foot_x, foot_y, foot
     return True
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _rising_segment(x, y, z, tx, ty, tz, s, hx, hy, hz, z_end, wx, wy, rise):
+    """Segment ``s`` of a bundle for :func:`_bundle_clear`: from the seabed point (x, y, z) straight up to the point
+    (tx, ty, tz) [m] (a receiver aperture). False, and nothing written, where that point is not above it."""
+    up = tz - z
+    if not up > 0.0:
+        return False
+    h2 = (tx - x) ** 2 + (ty - y) ** 2
+    hx[s], hy[s], hz[s], z_end[s] = x, y, z, tz
+    if h2 > 0.0:
+        inv_h = 1.0 / math.sqrt(h2)
+        rise[s], wx[s], wy[s] = up * inv_h, (tx - x) * inv_h, (ty - y) * inv_h
+    else:
+        rise[s], wx[s], wy[s] = np.inf, 0.0, 0.0
+    return True
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shadow, prim, tfar, analytic):
     """The ``auto`` level's analytic sub-ray hits on the seabed, for one block of pulses.
@@ -248,18 +265,9 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
             if shadow:  # one test for both bundles: they leave the footprint for nearly the same place
                 rx, ry, rz = rx_local[p0 + q, 0], rx_local[p0 + q, 1], rx_local[p0 + q, 2]
                 for j in range(m):
-                    up = rz - hz[j]
-                    if not up > 0.0:
+                    if not _rising_segment(hx[j], hy[j], hz[j], rx, ry, rz, m + j, hx, hy, hz, z_end, wx, wy, rise):
                         ok = False
                         break
-                    h2 = (rx - hx[j]) ** 2 + (ry - hy[j]) ** 2
-                    s = m + j
-                    hx[s], hy[s], hz[s], z_end[s] = hx[j], hy[j], hz[j], rz
-                    if h2 > 0.0:
-                        inv_h = 1.0 / math.sqrt(h2)
-                        rise[s], wx[s], wy[s] = up * inv_h, (rx - hx[j]) * inv_h, (ry - hy[j]) * inv_h
-                    else:
-                        rise[s], wx[s], wy[s] = np.inf, 0.0, 0.0
                 segments = 2 * m
             if ok:
                 ok = _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, segments, fx, fy, reach, zmin)
@@ -313,17 +321,9 @@ def shadows_to_cast(grid, rows, local_origin, rx_local, sh_len, first, count, m,
             for j in range(n):
                 i = first + rows_of[j]
                 x, y, z = point[i, 0] - local_origin[0], point[i, 1] - local_origin[1], point[i, 2] - local_origin[2]
-                up = rz - z
-                if not up > 0.0:
+                if not _rising_segment(x, y, z, rx, ry, rz, j, hx, hy, hz, z_end, wx, wy, rise):
                     proven = False
                     break
-                hx[j], hy[j], hz[j], z_end[j] = x, y, z, rz
-                h2 = (rx - x) ** 2 + (ry - y) ** 2
-                if h2 > 0.0:
-                    inv_h = 1.0 / math.sqrt(h2)
-                    rise[j], wx[j], wy[j] = up * inv_h, (rx - x) * inv_h, (ry - y) * inv_h
-                else:
-                    rise[j], wx[j], wy[j] = np.inf, 0.0, 0.0
                 reach = max(reach, math.sqrt((x - fx) ** 2 + (y - fy) ** 2))
                 zmin = min(zmin, z)
             proven = proven and _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, n, fx, fy, reach, zmin)

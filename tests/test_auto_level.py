@@ -168,6 +168,19 @@ def _seabed_scene(objects=(), ridges=False):
     return Scene(parts, heightfield=hf)
 
 
+def _plates_and_cable_scene(seed, ridges=False):
+    """:func:`_seabed_scene` with 60 small plates 20-40 cm over its middle (placed by ``seed``) and a cable lying on it."""
+    rng = np.random.default_rng(seed)
+    hf, plates = _field(ridges), []
+    for i in range(60):
+        x, y = 101.9 + 1.2 * rng.random(), 201.9 + 1.2 * rng.random()
+        z = float(hf.height(x, y)) + 0.2 + 0.2 * rng.random()
+        plates.append((f"plate{i}", panel_mesh([x, y, z], (0.04 + 0.1 * rng.random(), 0.03), (0, 0, 1), (0, 1, 0))))
+    line = np.c_[np.linspace(100.2, 104.8, 90), np.full(90, 202.5), np.zeros(90)]
+    line[:, 2] = hf.height(line[:, 0], line[:, 1]) + 0.03
+    return _seabed_scene(plates + [("cable", tube(line, 0.04))], ridges=ridges)
+
+
 def _pulses(n, seed, spread_deg=40.0):
     """n beams from 1-2 m over the field's middle, up to ``spread_deg`` off nadir; receiver 13 cm aside, parallel."""
     rng = np.random.default_rng(seed)
@@ -215,15 +228,7 @@ def test_analytic_seabed_hits_are_embrees_hits_with_far_fewer_rays():
 def test_analytic_hits_leave_blocked_and_shadowed_pulses_to_embree():
     """Small plates 20-40 cm over the seabed and a cable lying on it cut some footprints and some paths to the
     receiver: hits on them, hits the plates hide from the receiver and hits beside them all equal Embree's."""
-    rng = np.random.default_rng(3)
-    hf, plates = _field(), []
-    for i in range(60):
-        x, y = 101.9 + 1.2 * rng.random(), 201.9 + 1.2 * rng.random()
-        z = float(hf.height(x, y)) + 0.2 + 0.2 * rng.random()
-        plates.append((f"plate{i}", panel_mesh([x, y, z], (0.04 + 0.1 * rng.random(), 0.03), (0, 0, 1), (0, 1, 0))))
-    line = np.c_[np.linspace(100.2, 104.8, 90), np.full(90, 202.5), np.zeros(90)]
-    line[:, 2] = hf.height(line[:, 0], line[:, 1]) + 0.03
-    scene = _seabed_scene(plates + [("cable", tube(line, 0.04))])
+    scene = _plates_and_cable_scene(seed=3)
     pulses = _pulses(4000, seed=2)
     proven, embree, caster = _both(scene, pulses)
     on_objects = embree.object_id > 0
@@ -320,15 +325,7 @@ def test_shadow_rays_proven_clear_leave_every_hit_as_embree_finds_it(ridges):
     proves nothing can stand between its seabed hits and the receiver. With plates over the seabed, a cable on it
     and (``ridges``) relief that hides hits, the hits and receiver checks are those of every ray cast, to the bit,
     while far fewer shadow rays are cast; a proof that passed a blocked path would change a receiver check."""
-    rng = np.random.default_rng(5)
-    hf, plates = _field(ridges), []
-    for i in range(60):
-        x, y = 101.9 + 1.2 * rng.random(), 201.9 + 1.2 * rng.random()
-        z = float(hf.height(x, y)) + 0.2 + 0.2 * rng.random()
-        plates.append((f"plate{i}", panel_mesh([x, y, z], (0.04 + 0.1 * rng.random(), 0.03), (0, 0, 1), (0, 1, 0))))
-    line = np.c_[np.linspace(100.2, 104.8, 90), np.full(90, 202.5), np.zeros(90)]
-    line[:, 2] = hf.height(line[:, 0], line[:, 1]) + 0.03
-    scene = _seabed_scene(plates + [("cable", tube(line, 0.04))], ridges=ridges)
+    scene = _plates_and_cable_scene(seed=5, ridges=ridges)
     pulses = _pulses(4000, seed=6, spread_deg=60.0 if ridges else 40.0)
     every, proving = CountingCaster(RayCaster.for_scene(scene)), CountingCaster(RayCaster.for_scene(scene))
     cast = cast_beams(every, scene, *pulses, beam_pattern(19), GEOMETRY, prove_shadows=False)
