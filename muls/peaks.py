@@ -373,11 +373,24 @@ def _add_echo(echoes, first, u, dt, scale, basis):
 @numba.njit(cache=True, inline="always")
 def _on_geometric_grid(x, ratio, table):
     """Linear interpolation of ``table`` at ``x`` on the geometric grid ``ratio`` (O(1): index from log x)."""
-    n = ratio.shape[0]
     if not x > ratio[0]:  # also x <= 0 and NaN: below the grid
         return table[0]
-    pos = (math.log(x) - math.log(ratio[0])) / (math.log(ratio[n - 1]) - math.log(ratio[0])) * (n - 1)
-    if pos <= 0.0:
+    return _on_log_grid(math.log(x), math.log(ratio[0]), _steps_per_log(ratio), table)
+
+
+@numba.njit(cache=True, inline="always")
+def _steps_per_log(ratio):
+    """Grid steps per unit of natural log of the geometric grid ``ratio``."""
+    return (ratio.shape[0] - 1) / (math.log(ratio[ratio.shape[0] - 1]) - math.log(ratio[0]))
+
+
+@numba.njit(cache=True, inline="always")
+def _on_log_grid(log_x, log_first, steps_per_log, table):
+    """:func:`_on_geometric_grid` given log x, the log of the grid's first ratio and its steps per unit of log: no
+    transcendental function, for loops that move along the grid in log."""
+    n = table.shape[0]
+    pos = (log_x - log_first) * steps_per_log
+    if not pos > 0.0:  # also NaN
         return table[0]
     if pos >= n - 1:
         return table[n - 1]
@@ -389,16 +402,18 @@ def _on_geometric_grid(x, ratio, table):
 @numba.njit(cache=True, nogil=True)
 def _clipped_peak(first, last, level_first, level_last, table):
     """(peak index [samples], amplitude) of an echo clipped from sample ``first`` to ``last``, where the clip
-    level above the baseline was ``level_first`` and ``level_last``: the amplitude A whose pulse exceeds those
-    levels for exactly the plateau's width (rising and falling crossings half a sample outside it)."""
+    level above the baseline was ``level_first`` and ``level_last`` (both > 0): the amplitude A whose pulse exceeds
+    those levels for exactly the plateau's width (rising and falling crossings half a sample outside it)."""
     ratio, rise, fall = table.ratio, table.rise, table.fall
+    log_first, steps = math.log(ratio[0]), _steps_per_log(ratio)
+    log_level_first, log_level_last = math.log(level_first), math.log(level_last)
     width = last - first + 1.0
     lo = math.log(max(level_first, level_last, 1e-9))
-    hi = lo + math.log(1.0 / ratio[0])
-    for _ in range(32):  # bisection on log A: 2^-32 of the bracket
+    hi = lo - log_first
+    for _ in range(32):  # bisection on log A: 2^-32 of the bracket; the grid is read at log(level / A)
         mid = 0.5 * (lo + hi)
-        a = math.exp(mid)
-        span = _on_geometric_grid(level_first / a, ratio, rise) + _on_geometric_grid(level_last / a, ratio, fall)
+        span = (_on_log_grid(log_level_first - mid, log_first, steps, rise)
+                + _on_log_grid(log_level_last - mid, log_first, steps, fall))
         if span < width:
             lo = mid
         else:
