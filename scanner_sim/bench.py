@@ -1,11 +1,11 @@
 """End-to-end benchmark of survey passes per fidelity level, beside raw embreex on the same rays, in one run.
 
 Each level runs in a fresh process (so its peak memory is its own, and no level inherits another's caches):
-a warm-up pass, then ``repeat`` timed passes of ``pulses`` pulses with their LAS and dropout files. Beside
-the pulses per second, the bench reports the cores the pass kept busy (its process CPU seconds over wall
-seconds) and the process's peak resident memory. The large-seabed case rebuilds the scene's seabed at about
-two million triangles and times the scene build, the BVH and a balanced pass over it. The JSON has the same
-keys in the same order every run.
+a warm-up pass of one chunk per worker (:func:`warm_up_pulses`), then ``repeat`` timed passes of ``pulses``
+pulses with their LAS and dropout files. Beside the pulses per second, the bench reports the cores the pass kept
+busy (its process CPU seconds over wall seconds) and the process's peak resident memory. The large-seabed case
+rebuilds the scene's seabed at about two million triangles and times the scene build, the BVH and a balanced pass
+over it. The JSON has the same keys in the same order every run.
 """
 
 from __future__ import annotations
@@ -40,8 +40,8 @@ def _level_figures(scene_name: str, fidelity: str, pulses: int, repeat: int, ove
     scene = build_scene(config)
     scene_s = time.perf_counter() - t0
     quiet = dict(fidelity=fidelity, progress=False, render=False, write_scene=False)
-    with tempfile.TemporaryDirectory(prefix="muls-bench-") as out:
-        run_pass(config, out, PassOptions(max_pulses=2000, **quiet), scene=scene)  # numba's cache, warm-up
+    with tempfile.TemporaryDirectory(prefix="muls-bench-") as out:  # numba's cache; a whole chunk per worker
+        run_pass(config, out, PassOptions(max_pulses=warm_up_pulses(config, pulses), **quiet), scene=scene)
     best, cores, setup_s = 0.0, 0.0, 0.0
     for _ in range(repeat):
         with tempfile.TemporaryDirectory(prefix="muls-bench-") as out:
@@ -52,6 +52,15 @@ def _level_figures(scene_name: str, fidelity: str, pulses: int, repeat: int, ove
             best, cores, setup_s = summary["pulses_per_s"], cpu / wall, summary["setup_s"]
     return {"pulses_per_s": round(best, 1), "cores_used": round(cores, 2), "setup_s": round(setup_s, 2),
             "scene_build_s": round(scene_s, 2), "triangles": int(scene.n_faces), "peak_rss_mb": round(_peak_rss_mb(), 1)}
+
+
+def warm_up_pulses(config, pulses: int) -> int:
+    """Pulses of the untimed pass before timed passes of ``pulses``: a whole chunk for every worker (no more than
+    the timed pass), so that each worker's memory has grown to a chunk's size (the first chunk a thread runs pays
+    its page faults) and every kernel is loaded."""
+    from .survey import chunk_workers
+
+    return min(pulses, chunk_workers() * config.survey.chunk_pulses)
 
 
 def _in_fresh_process(fn, *args):
