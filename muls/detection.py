@@ -199,8 +199,9 @@ WINDOW_BLOCK = 64
 
 @numba.njit(cache=True, inline="always")
 def _quantise(u, max_code):
-    u = math.floor(u + 0.5)  # MULS Eq. 13: rounding, then clipping to [0, 2^bits - 1]
-    return 0 if u < 0.0 else (max_code if u > max_code else u)
+    """MULS Eq. 13: rounding, then clipping to [0, 2^bits - 1], as an int32 (a float-to-int conversion that
+    vectorises; the code then fits any integer record type)."""
+    return np.int32(min(max(math.floor(u + 0.5), 0.0), max_code))
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 from .errors import ParameterError, check_choice, check_fraction, check_non_negative, check_positive
 from .overlap import TransceiverGeometry
@@ -214,9 +215,10 @@ class Instrument:
             offset_m=self.receiver.offset_m,
         )
 
-    @property
+    @cached_property
     def pulse(self) -> PulseShape:
-        """The emitted pulse as the digitiser sees it (through the analog bandwidth)."""
+        """The emitted pulse as the digitiser sees it (through the analog bandwidth); one object per instrument, so
+        that its solved constants (peak delay, fall to half) are solved once, not in every chunk."""
         return PulseShape(self.transmitter.pulse_width_s, self.digitizer.bandwidth_hz)
 
     @property
