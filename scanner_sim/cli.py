@@ -314,7 +314,8 @@ def _add_bench(sub):
                        "cores used and peak memory, and a two-million-triangle seabed")
     p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--pulses", type=positive_int(), default=60000, help="pulses per fidelity level")
-    p.add_argument("--repeat", type=positive_int(), default=2, help="timed passes per level (the best is kept)")
+    p.add_argument("--repeat", type=positive_int(), default=5,
+                   help="timed passes per level (the best is kept, the median reported beside it)")
     p.add_argument("--no-large-seabed", action="store_true", help="skip the two-million-triangle seabed case")
     p.add_argument("--profile", choices=list(FIDELITY_LEVELS), metavar="LEVEL",
                    help="instead: CPU seconds per stage of one pass at LEVEL on one numba thread (scanner_sim.profiling)")
@@ -336,8 +337,9 @@ def _cmd_bench(args) -> int:
         big = result["large_seabed"]
         rows.append((f"balanced, {big['triangles'] / 1e6:.1f} M triangles", big["balanced"]))
     for name, r in rows:
-        print(f"{name:28s} {r['pulses_per_s']:>9,.0f} pulses/s  raw embreex {r['raw_embreex_pulses_per_s']:>9,.0f}"
-              f"  ratio {r['ratio_to_raw_rays']:.2f}  cores {r['cores_used']:.2f}  peak {r['peak_rss_mb']:,.0f} MB")
+        print(f"{name:28s} {r['pulses_per_s']:>9,.0f} pulses/s (median {r['median_pulses_per_s']:>9,.0f})"
+              f"  raw embreex {r['raw_embreex_pulses_per_s']:>9,.0f}  ratio {r['ratio_to_raw_rays']:.2f}"
+              f"  cores {r['cores_used']:.2f}  peak {r['peak_rss_mb']:,.0f} MB")
     if "large_seabed" in result:
         big = result["large_seabed"]
         print(f"large seabed: scene build {big['scene_build_s']:.1f} s, BVH {big['bvh_build_s']:.1f} s")

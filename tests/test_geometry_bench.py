@@ -19,12 +19,13 @@ def test_bench_reports_both_throughputs():
 @pytest.mark.slow
 def test_pass_bench_reports_every_level_with_cores_and_memory():
     """Each level in a fresh process: pulses/s, cores used and peak memory, in the same keys every run."""
-    result = bench_pass("pool_panel", pulses=600, repeat=1, large_seabed=False)
+    result = bench_pass("pool_panel", pulses=600, repeat=2, large_seabed=False)
     assert list(result) == ["scene", "pulses", "repeat", "cpu_count", "load_avg_1min", *FIDELITY_LEVELS,
                             "load_avg_1min_after"]
     for name in FIDELITY_LEVELS:
         level = result[name]
-        assert level["pulses_per_s"] > 0 and 0 < level["cores_used"] <= result["cpu_count"] + 0.5
+        assert level["pulses_per_s"] >= level["median_pulses_per_s"] > 0
+        assert 0 < level["cores_used"] <= result["cpu_count"] + 0.5
         assert level["peak_rss_mb"] > 50 and level["raw_embreex_pulses_per_s"] > level["pulses_per_s"]
 
 
