@@ -265,10 +265,11 @@ def _sort_by_delay_within(offsets, delay, energy, source):
         lo, hi = offsets[p], offsets[p + 1]
         n = hi - lo
         if n > INSERTION_SORT_MAX:
-            first, last = delay[lo], delay[lo]
+            first, last, finite = delay[lo], delay[lo], True
             for i in range(lo, hi):
                 first, last = min(first, delay[i]), max(last, delay[i])
-            if math.isfinite(first) and math.isfinite(last) and last > first:
+                finite &= math.isfinite(delay[i])
+            if finite and last > first:  # else the insertion sort alone
                 per_s = (n - 1) / (last - first)
                 starts[: n + 1] = 0
                 for i in range(n):
