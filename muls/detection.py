@@ -21,6 +21,7 @@ from .deciding_channels import deciding_channels
 from .errors import check_choice
 from .noise import (
     FIRST_SIGNAL_STREAM,
+    NORMAL_BOUND,
     PHASE_STREAM,
     REFERENCE_STREAM,
     fill_normal_pairs,
@@ -158,13 +159,14 @@ class Sampling(NamedTuple):
 
 def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
              keep_noise_free: bool = False, noise: bool = True, echoes: Echoes | None = None,
-             deciding_only: bool = False) -> Records:
+             deciding_only: bool = False, ranging_only: bool = False) -> Records:
     """Digitised records of every channel for a batch of pulses (MULS Eqs. 1, 12, 13).
 
     ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
     ``echoes``: ``model.echoes(batch)`` if already computed. ``deciding_only``: in each window, synthesise only the
     channels that can decide a return (:mod:`muls.deciding_channels`); the others' codes are 0 and
-    ``Records.synthesised`` says which.
+    ``Records.synthesised`` says which. ``ranging_only``: of each CH0 record, only the samples around its peak
+    that the ranging reads (the others 0, :func:`_reference`): the same ranges, the CH0 records not whole.
     """
     ins = model.instrument
     dig = ins.digitizer
@@ -187,7 +189,7 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
               echoes, chans.signal(), settings)
     _reference(reference, ref_clean, sampling, model.basis, pulse.duration_s,
                ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
-               chans.dark_std_lsb[0], settings.max_code, settings.noise_scale)
+               chans.dark_std_lsb[0], settings.max_code, settings.noise_scale, ranging_only)
     return Records(reference, codes, window_pulse, window_start, phase, mode,
                    clean if keep_noise_free else None, ref_clean if keep_noise_free else None,
                    synthesised if deciding_only else None)
@@ -206,27 +208,58 @@ def _quantise(u, max_code):
 
 @numba.njit(cache=True, parallel=True, nogil=True)
 def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_mean, dark_std, max_code,
-               noise_scale):
+               noise_scale, peak_only):
+    """The CH0 records (n_pulses, n_ref) from sample 0 (MULS Eqs. 2, 13 through the photodiode). ``peak_only``:
+    only the samples that can hold the record's highest code or flank it (what :func:`muls.peaks._reference_peaks`
+    reads) get their noise and code, the others code 0: a sample whose noise-free level lies more than two noise
+    bounds (:data:`muls.noise.NORMAL_BOUND` sigma and a rounding each) under the highest level is below the highest
+    code whatever the draws, and so is 0."""
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
     ra, rb = math.exp(-basis[0] * sampling.dt_s), math.exp(-basis[1] * sampling.dt_s)
+    bound = noise_scale * dark_std * NORMAL_BOUND + 0.5
     for block in numba.prange((n_pulses + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
-        normal, no_low, tails = np.empty(n_ref), np.empty(0), np.empty(n_ref, np.uint64)
+        normal, no_low, tails, levels = np.empty(n_ref), np.empty(0), np.empty(n_ref, np.uint64), np.empty(n_ref)
         for p in range(block * WINDOW_BLOCK, min(n_pulses, (block + 1) * WINDOW_BLOCK)):
-            fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM), 0, normal, no_low, tails)
             ea, eb = -1.0, -1.0  # the pulse basis's two exponentials at u, stepped by constant factors once u >= 0
             for k in range(n_ref):
                 u = sampling.t0_s + k * sampling.dt_s + sampling.phase_s[p]
-                level = 0.0
+                levels[k] = 0.0
                 if 0.0 <= u < extent:  # the filtered pulse (MULS Eq. 2), as muls.waveform.pulse_value
                     if ea < 0.0:
                         ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
-                    level = lsb_per_density * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
+                    levels[k] = lsb_per_density * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
                     ea *= ra
                     eb *= rb
                 if keep:
-                    clean[p, k] = level + dark_mean
-                reference[p, k] = _quantise(level + dark_mean + noise_scale * dark_std * normal[k], max_code)
+                    clean[p, k] = levels[k] + dark_mean
+            first, last = 0, n_ref - 1
+            if peak_only:
+                first, last = _reference_span(levels, dark_mean, bound, max_code)
+                reference[p, :first] = 0
+                reference[p, last + 1:] = 0
+            fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM), first,
+                              normal[: last + 1 - first], no_low, tails)
+            for k in range(first, last + 1):
+                reference[p, k] = _quantise(levels[k] + dark_mean + noise_scale * dark_std * normal[k - first],
+                                            max_code)
+
+
+@numba.njit(cache=True, nogil=True)
+def _reference_span(levels, dark_mean, bound, max_code):
+    """(first, last) samples of a CH0 record that can hold its highest code among samples 1 to n - 2 (where the peak
+    search looks) or flank it, from the noise-free ``levels`` (n,) [LSB over the dark mean] and the most a code can lie
+    from its noise-free value, ``bound`` [LSB]: every sample above the highest level less two bounds, or able to reach
+    the top code, and one more on each side."""
+    n = levels.shape[0]
+    top = -np.inf
+    for k in range(1, n - 1):
+        top = max(top, levels[k])
+    first, last = n, -1
+    for k in range(n):
+        if levels[k] + 2.0 * bound >= top or levels[k] + dark_mean + bound >= max_code:
+            first, last = min(first, k), max(last, k)
+    return max(0, first - 1), min(n - 1, last + 1)
 
 
 class DigitiserSettings(NamedTuple):

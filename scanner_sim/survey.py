@@ -174,9 +174,11 @@ class PassSetup:
     def finish_chunk(self, stage: RayStage, record_mode: str | None = None, every_channel: bool = False) -> Chunk:
         """The physics of a chunk after its ray stage: MULS waveforms and ranging, georeferencing, dropouts.
         ``record_mode`` and ``every_channel`` override the level's record mode and its ``deciding_only`` (for
-        records kept whole, as waveforms.npz keeps them)."""
+        records kept whole, as waveforms.npz keeps them); without ``every_channel``, of each CH0 record only the
+        samples the ranging reads are synthesised (the same points, :func:`muls.detection.digitise`)."""
         records, ranging = simulate(self.model, stage.batch, self.seed, record_mode or self.level.record_mode,
-                                    deciding_only=self.level.deciding_only and not every_channel)
+                                    deciding_only=self.level.deciding_only and not every_channel,
+                                    ranging_only=not every_channel)
         sight, lost = stage.sight, ranging.dropout_cause >= 0
         dropouts = DropoutRecords(pulse_index=stage.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
                                   direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))

@@ -45,6 +45,32 @@ def test_echoes_are_sorted_by_delay_within_each_pulse_as_a_stable_sort_leaves_th
     np.testing.assert_array_equal(e, energy[expected])
 
 
+@pytest.mark.parametrize("mode", ["windowed", "full"])
+@pytest.mark.parametrize("dark_std, peak_lsb", [(1.0, 600.0), (40.0, 600.0), (3.0, 1100.0)])
+def test_ranging_only_ch0_records_give_the_ranges_of_whole_ones(mode, dark_std, peak_lsb):
+    """CH0 records synthesised only around their peak (``ranging_only``) hold the whole records' codes there and 0
+    elsewhere, and the ranging reads the same reference times and ranges from them: quiet and very noisy photodiodes,
+    and one whose peak clips at the top code (a plateau, where the first top code is the peak)."""
+    from dataclasses import replace
+
+    from muls.peaks import find_peaks
+
+    ins = mul2023()
+    ins = replace(ins, reference=replace(ins.reference, dark_std_lsb=dark_std, peak_lsb=peak_lsb))
+    model = OpticalModel.build(ins, water_preset("pool"))
+    batch = PulseBatch.flat_target(ins, np.linspace(2.0, 12.0, 300), pulse_id=np.arange(300))
+    echoes = model.echoes(batch)
+    whole = simulate(model, batch, 5, mode)
+    part = simulate(model, batch, 5, mode, ranging_only=True)
+    kept = part[0].reference > 0
+    assert kept.sum(axis=1).max() < 0.6 * kept.shape[1]
+    np.testing.assert_array_equal(part[0].reference[kept], whole[0].reference[kept])
+    np.testing.assert_array_equal(part[0].codes, whole[0].codes)
+    np.testing.assert_array_equal(find_peaks(model, batch, part[0], echoes)[1], find_peaks(model, batch, whole[0], echoes)[1])
+    np.testing.assert_array_equal(part[1].returns.range_m, whole[1].returns.range_m)
+    np.testing.assert_array_equal(part[1].dropout_cause, whole[1].dropout_cause)
+
+
 def test_counter_based_normals_are_standard_and_independent():
     x = standard_normal(7, np.repeat(np.arange(200), 500), 3, np.tile(np.arange(500), 200))
     assert abs(x.mean()) < 0.01
