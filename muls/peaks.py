@@ -194,7 +194,41 @@ def _refine(y0, y1, y2, fit, table):
     d = 0.5 * (y0 - y2) / den
     if fit != 0:
         return min(0.5, max(-0.5, d)), 1.0
-    return np.interp(d, table.feature, table.offset), np.interp(d, table.feature, table.centre)
+    j = _bracket(d, table.feature)
+    return _interp_at(d, j, table.feature, table.offset), _interp_at(d, j, table.feature, table.centre)
+
+
+@numba.njit(cache=True, inline="always")
+def _bracket(x, xp):
+    """The cell of ascending ``xp`` (n,) that holds ``x``, as :func:`numpy.interp` finds it: j with xp[j] <= x <
+    xp[j + 1]; -1 below the grid (or NaN), n - 1 at or above its end. In a compiled loop, numba's scalar np.interp
+    sets up arrays at every call (136 ns against 50 here, measured)."""
+    n = xp.shape[0]
+    if x >= xp[n - 1]:
+        return n - 1
+    if not x >= xp[0]:
+        return -1
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if xp[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@numba.njit(cache=True, inline="always")
+def _interp_at(x, j, xp, fp):
+    """``numpy.interp(x, xp, fp)`` with x in cell ``j`` (:func:`_bracket`), in numpy's arithmetic."""
+    n = xp.shape[0]
+    if j == n - 1:
+        return fp[n - 1]
+    if j < 0:
+        return fp[0] if x < xp[0] else x  # x is NaN: NaN, as numpy gives
+    if xp[j] == x:
+        return fp[j]
+    return (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j]) * (x - xp[j]) + fp[j]
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)

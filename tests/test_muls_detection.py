@@ -71,6 +71,28 @@ def test_ranging_only_ch0_records_give_the_ranges_of_whole_ones(mode, dark_std, 
     np.testing.assert_array_equal(part[1].dropout_cause, whole[1].dropout_cause)
 
 
+def test_the_peak_fits_table_lookup_is_numpys_interp_bit_for_bit():
+    """The compiled lookup of the three-point fit's table (``_bracket`` and ``_interp_at``, in place of numba's scalar
+    np.interp) gives numpy.interp's values exactly: inside the grid, on its points, beyond both ends, at +-inf and NaN."""
+    import numba
+
+    from muls.peaks import _bracket, _interp_at
+
+    @numba.njit
+    def lookup(xs, xp, fp):
+        out = np.empty(xs.size)
+        for i in range(xs.size):
+            out[i] = _interp_at(xs[i], _bracket(xs[i], xp), xp, fp)
+        return out
+
+    table = _model().fit_table
+    rng = np.random.default_rng(1)
+    x = np.concatenate([rng.uniform(table.feature[0] - 0.3, table.feature[-1] + 0.3, 20000), table.feature,
+                        [np.nan, -np.inf, np.inf]])
+    for values in (table.offset, table.centre):
+        np.testing.assert_array_equal(lookup(x, table.feature, values), np.interp(x, table.feature, values))
+
+
 def test_counter_based_normals_are_standard_and_independent():
     x = standard_normal(7, np.repeat(np.arange(200), 500), 3, np.tile(np.arange(500), 200))
     assert abs(x.mean()) < 0.01
