@@ -21,7 +21,7 @@ import numpy as np
 
 from .channels import gate_open_at, level_lsb, processor_sigma_lsb
 from .detection import WINDOW_BLOCK, Records
-from .waveform import Echoes, OpticalModel, PulseBatch, pulse_value, uncut_column_value
+from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values, pulse_value
 
 #: Most peaks kept per window and channel (more means noise, not echoes).
 MAX_PEAKS_PER_WINDOW = 8
@@ -269,7 +269,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                 continue
             for k in range(n_samples):
                 times[k] = t0 + (window_start[w] + k) * dt + phase[p]
-                base_w[k] = background[p] + uncut_column_value(times[k], col)
+            baseline_values(base_w, times, background[p], col)
             for c in range(first, n_chan):
                 slot = w * n_chan + c
                 if c > first and not _may_run(codes, synthesised, w, c, chans, k_sigma):
