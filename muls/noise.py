@@ -105,7 +105,9 @@ def _inverse_normal_cdf(p):
 def centred_unit(bits32):
     """A 32-bit integer k to (k + 1/2) / 2^32: the centres of 2^32 equal cells of (0, 1), never 0 or 1 and
     symmetric about 1/2 (k and 2^32 - 1 - k give p and 1 - p), so the normals are finite and symmetric."""
-    return (float(np.uint32(bits32)) + 0.5) * _INV_2_32  # through uint32: the same value, and it vectorises
+    # Through a signed int32 shifted by 2^31 (exact: every step is an integer below 2^53): the same value as
+    # float(uint32) + 0.5, but a conversion SIMD lanes have, where an unsigned one is emulated.
+    return (float(np.int32(np.int64(bits32) - 2147483648)) + 2147483648.5) * _INV_2_32
 
 
 @numba.njit(cache=True, inline="always")
