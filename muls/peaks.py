@@ -118,13 +118,7 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes:
     ref_time = -dig.pretrigger_s + ref_index * dig.sample_interval_s + phase
     offsets = np.array([0.0] + [ch.range_offset_m for ch in ins.channels])
     range_m = 0.5 * model.water.speed_m_s * (time_s - ref_time[pulse]) + offsets[c]  # MULS Eq. 14
-    order = np.lexsort((idx, c, pulse))
-    # Overlapping windows find a run they both hold twice, identically: keep one.
-    unique = np.ones(order.size, bool)
-    unique[1:] = (pulse[order][1:] != pulse[order][:-1]) | (c[order][1:] != c[order][:-1]) | (
-        idx[order][1:] != idx[order][:-1])
-    order = order[unique]
-    order = order[np.lexsort((time_s[order], pulse[order]))]
+    order = peak_order(pulse, c, idx, time_s)
     pulse, c, time_s = pulse[order], c[order], time_s[order]
     amp, snr = out.amplitude[slot][order], out.snr[slot][order]
     power_w = amp / chans.lsb_per_w[c]  # MULS Eqs. 12-13 inverted
@@ -133,6 +127,52 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes:
     echo = dominant_echo(pulse, time_s, need_w, echoes, model.basis, ins.pulse)
     peaks = Peaks(pulse, c, time_s, range_m[order], amp, snr, out.saturated[slot][order], power_w, echo)
     return peaks, ref_time
+
+
+@numba.njit(cache=True, nogil=True)
+def peak_order(pulse, channel, index, time_s):
+    """(m,) int64: the peaks to keep, in ranging's order: by pulse, then time, then channel and sample index, where
+    overlapping windows found one run twice (the same pulse, channel and index) the earlier one only.
+
+    ``pulse`` (n,) must not decrease (the kernel's slots are by window, and windows by pulse), so each pulse's few
+    peaks are sorted where they lie, and ``time_s`` is a function of pulse and index, so a run found twice has one
+    time. The result equals a stable lexsort by (pulse, channel, index), the duplicates dropped, then a stable
+    lexsort of that by (pulse, time)."""
+    n = pulse.shape[0]
+    order = np.arange(n)
+    kept = np.empty(n, np.int64)
+    m = 0
+    start = 0
+    while start < n:
+        end = start + 1
+        while end < n and pulse[end] == pulse[start]:
+            end += 1
+        for i in range(start + 1, end):  # insertion sort by (time, channel, index, slot)
+            j, o = i - 1, order[i]
+            while j >= start and _after(order[j], o, time_s, channel, index):
+                order[j + 1] = order[j]
+                j -= 1
+            order[j + 1] = o
+        for i in range(start, end):
+            o = order[i]
+            if i > start and channel[o] == channel[order[i - 1]] and index[o] == index[order[i - 1]]:
+                continue
+            kept[m] = o
+            m += 1
+        start = end
+    return kept[:m]
+
+
+@numba.njit(cache=True, inline="always")
+def _after(a, b, time_s, channel, index):
+    """Peak ``a`` comes after peak ``b`` of the same pulse: by time, then channel, sample index and slot."""
+    if time_s[a] != time_s[b]:
+        return time_s[a] > time_s[b]
+    if channel[a] != channel[b]:
+        return channel[a] > channel[b]
+    if index[a] != index[b]:
+        return index[a] > index[b]
+    return a > b
 
 
 def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, shape) -> np.ndarray:

@@ -93,6 +93,27 @@ def test_the_peak_fits_table_lookup_is_numpys_interp_bit_for_bit():
         np.testing.assert_array_equal(lookup(x, table.feature, values), np.interp(x, table.feature, values))
 
 
+def test_peak_order_is_the_two_stable_lexsorts_with_duplicates_dropped():
+    """``peak_order`` (one pass over each pulse's few peaks) against numpy: a stable lexsort by (pulse, channel, index),
+    repeats of (pulse, channel, index) dropped but the first, then a stable lexsort by (pulse, time); with runs found
+    twice by overlapping windows, equal times on different channels, and pulses without peaks between."""
+    from muls.peaks import peak_order
+
+    rng = np.random.default_rng(11)
+    pulse = np.sort(rng.choice(np.arange(0, 3000, 3), 4000))
+    channel = rng.integers(1, 4, pulse.size)
+    index = rng.integers(20, 30, pulse.size) + rng.choice([0.0, 0.25, 0.5], pulse.size)
+    time_s = np.floor(index) * 1e-9 + 1e-12 * (pulse % 7)  # a function of (pulse, index), with ties across both
+    order = np.lexsort((index, channel, pulse))
+    keep = np.ones(order.size, bool)
+    keep[1:] = ((pulse[order][1:] != pulse[order][:-1]) | (channel[order][1:] != channel[order][:-1])
+                | (index[order][1:] != index[order][:-1]))
+    order = order[keep]
+    expected = order[np.lexsort((time_s[order], pulse[order]))]
+    assert expected.size < pulse.size  # duplicates were there to drop
+    np.testing.assert_array_equal(peak_order(pulse, channel, index, time_s), expected)
+
+
 def test_counter_based_normals_are_standard_and_independent():
     x = standard_normal(7, np.repeat(np.arange(200), 500), 3, np.tile(np.arange(500), 200))
     assert abs(x.mean()) < 0.01
