@@ -48,7 +48,8 @@ WINDOW_NEED_S = 56e-9
 class Records:
     """Digitised records of a batch (struct of arrays).
 
-    reference: (n_pulses, n_ref) uint16 CH0 record from sample 0 (the whole record in ``full`` mode).
+    reference: (n_pulses, n_ref) uint16 CH0 record from sample 0 (the whole record in ``full`` mode; under
+    :func:`digitise`'s ``ranging_only`` only the samples around its peak, the others 0).
     codes: (n_windows, n_channels, n_samples) uint16 signal-channel windows, channel j is
     ``instrument.channels[j]``. window_pulse: (n_windows,) batch index of each window's pulse;
     window_start: (n_windows,) index of the window's first sample in the full record. Sample k of the full
