@@ -50,18 +50,14 @@ def choose_returns(model: OpticalModel, peaks: Peaks):
         return peaks, empty, empty, np.zeros(0, np.int64)
     new = np.ones(n, bool)
     new[1:] = (peaks.pulse[1:] != peaks.pulse[:-1]) | (np.diff(peaks.time_s) > proc.merge_window_s)
-    cluster = np.cumsum(new) - 1
     gain = np.array([0.0] + [ch.volts_per_watt for ch in model.instrument.channels])
     score = np.where(peaks.saturated, -gain[peaks.channel], peaks.snr)
-    order = np.lexsort((score, ~peaks.saturated, cluster))
-    last = np.ones(n, bool)
-    last[:-1] = cluster[order][1:] != cluster[order][:-1]
-    best = order[last]
+    best = best_of_clusters(new, peaks.saturated, score)
     all_clipped = peaks.saturated[best]
     dropped = peaks.pulse[best[all_clipped]] if proc.saturation_policy == "drop" else np.zeros(0, np.int64)
     if proc.saturation_policy == "drop":
         best = best[~all_clipped]
-    chosen = peaks.select(np.sort(best))
+    chosen = peaks.select(best)  # ascending: clusters are runs of peaks in order
     pulse = chosen.pulse
     first = np.ones(pulse.shape[0], bool)
     first[1:] = pulse[1:] != pulse[:-1]
@@ -70,6 +66,32 @@ def choose_returns(model: OpticalModel, peaks: Peaks):
     counts = np.bincount(pulse, minlength=int(pulse.max()) + 1 if pulse.size else 0)
     number_of_returns = counts[pulse].astype(np.uint8)
     return chosen, return_number, number_of_returns, dropped
+
+
+@numba.njit(cache=True, nogil=True)
+def best_of_clusters(new, saturated, score):
+    """(k,) int64, ascending: the peak each cluster keeps, where a cluster is a run of peaks that ``new`` (n,) bool
+    starts: the unsaturated one with the highest ``score`` before any saturated one, a tie going to the later peak,
+    and NaN above every number, as the last of a stable lexsort by (cluster, unsaturated, score) would be."""
+    n = new.shape[0]
+    out = np.empty(n, np.int64)
+    m = 0
+    start = 0
+    while start < n:
+        end = start + 1
+        while end < n and not new[end]:
+            end += 1
+        b = start
+        for k in range(start + 1, end):
+            if saturated[k] != saturated[b]:
+                if not saturated[k]:
+                    b = k
+            elif not (score[k] < score[b]) and not (math.isnan(score[b]) and not math.isnan(score[k])):
+                b = k
+        out[m] = b
+        m += 1
+        start = end
+    return out[:m]
 
 
 def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped, echoes: Echoes) -> np.ndarray:

@@ -114,6 +114,25 @@ def test_peak_order_is_the_two_stable_lexsorts_with_duplicates_dropped():
     np.testing.assert_array_equal(peak_order(pulse, channel, index, time_s), expected)
 
 
+def test_each_return_keeps_the_peak_a_stable_lexsort_would_put_last():
+    """``best_of_clusters`` (one pass over runs of peaks) against numpy: the last of a stable lexsort by (cluster,
+    unsaturated, score) in each cluster; with saturated and unsaturated peaks mixed, tied scores and NaN."""
+    from muls.ranging import best_of_clusters
+
+    rng = np.random.default_rng(5)
+    n = 5000
+    new = rng.random(n) < 0.4
+    new[0] = True
+    saturated = rng.random(n) < 0.3
+    score = rng.integers(0, 6, n).astype(float)  # many ties
+    score[rng.random(n) < 0.05] = np.nan
+    cluster = np.cumsum(new) - 1
+    order = np.lexsort((score, ~saturated, cluster))
+    last = np.ones(n, bool)
+    last[:-1] = cluster[order][1:] != cluster[order][:-1]
+    np.testing.assert_array_equal(best_of_clusters(new, saturated, score), np.sort(order[last]))
+
+
 def test_counter_based_normals_are_standard_and_independent():
     x = standard_normal(7, np.repeat(np.arange(200), 500), 3, np.tile(np.arange(500), 200))
     assert abs(x.mean()) < 0.01
