@@ -21,6 +21,7 @@ import numpy as np
 
 from .channels import processor_sigma_lsb
 from .detection import WINDOW_BLOCK, Records
+from .lookup import bracket, interp_at, on_geometric_grid, on_log_grid, steps_per_log
 from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values, pulse_value
 
 #: Most peaks kept per window and channel (more means noise, not echoes).
@@ -234,41 +235,8 @@ def _refine(y0, y1, y2, fit, table):
     d = 0.5 * (y0 - y2) / den
     if fit != 0:
         return min(0.5, max(-0.5, d)), 1.0
-    j = _bracket(d, table.feature)
-    return _interp_at(d, j, table.feature, table.offset), _interp_at(d, j, table.feature, table.centre)
-
-
-@numba.njit(cache=True, inline="always")
-def _bracket(x, xp):
-    """The cell of ascending ``xp`` (n,) that holds ``x``, as :func:`numpy.interp` finds it: j with xp[j] <= x <
-    xp[j + 1]; -1 below the grid (or NaN), n - 1 at or above its end. In a compiled loop, numba's scalar np.interp
-    sets up arrays at every call (136 ns against 50 here, measured)."""
-    n = xp.shape[0]
-    if x >= xp[n - 1]:
-        return n - 1
-    if not x >= xp[0]:
-        return -1
-    lo, hi = 0, n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if xp[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    return lo
-
-
-@numba.njit(cache=True, inline="always")
-def _interp_at(x, j, xp, fp):
-    """``numpy.interp(x, xp, fp)`` with x in cell ``j`` (:func:`_bracket`), in numpy's arithmetic."""
-    n = xp.shape[0]
-    if j == n - 1:
-        return fp[n - 1]
-    if j < 0:
-        return fp[0] if x < xp[0] else x  # x is NaN: NaN, as numpy gives
-    if xp[j] == x:
-        return fp[j]
-    return (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j]) * (x - xp[j]) + fp[j]
+    j = bracket(d, table.feature)
+    return interp_at(d, j, table.feature, table.offset), interp_at(d, j, table.feature, table.centre)
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
@@ -450,53 +418,24 @@ def _add_echo(echoes, first, u, dt, scale, basis):
         eb *= rb
 
 
-@numba.njit(cache=True, inline="always")
-def _on_geometric_grid(x, ratio, table):
-    """Linear interpolation of ``table`` at ``x`` on the geometric grid ``ratio`` (O(1): index from log x)."""
-    if not x > ratio[0]:  # also x <= 0 and NaN: below the grid
-        return table[0]
-    return _on_log_grid(math.log(x), math.log(ratio[0]), _steps_per_log(ratio), table)
-
-
-@numba.njit(cache=True, inline="always")
-def _steps_per_log(ratio):
-    """Grid steps per unit of natural log of the geometric grid ``ratio``."""
-    return (ratio.shape[0] - 1) / (math.log(ratio[ratio.shape[0] - 1]) - math.log(ratio[0]))
-
-
-@numba.njit(cache=True, inline="always")
-def _on_log_grid(log_x, log_first, steps_per_log, table):
-    """:func:`_on_geometric_grid` given log x, the log of the grid's first ratio and its steps per unit of log: no
-    transcendental function, for loops that move along the grid in log."""
-    n = table.shape[0]
-    pos = (log_x - log_first) * steps_per_log
-    if not pos > 0.0:  # also NaN
-        return table[0]
-    if pos >= n - 1:
-        return table[n - 1]
-    i = int(pos)
-    f = pos - i
-    return table[i] + f * (table[i + 1] - table[i])
-
-
 @numba.njit(cache=True, nogil=True)
 def _clipped_peak(first, last, level_first, level_last, table):
     """(peak index [samples], amplitude) of an echo clipped from sample ``first`` to ``last``, where the clip
     level above the baseline was ``level_first`` and ``level_last`` (both > 0): the amplitude A whose pulse exceeds
     those levels for exactly the plateau's width (rising and falling crossings half a sample outside it)."""
     ratio, rise, fall = table.ratio, table.rise, table.fall
-    log_first, steps = math.log(ratio[0]), _steps_per_log(ratio)
+    log_first, steps = math.log(ratio[0]), steps_per_log(ratio)
     log_level_first, log_level_last = math.log(level_first), math.log(level_last)
     width = last - first + 1.0
     lo = math.log(max(level_first, level_last, 1e-9))
     hi = lo - log_first
     for _ in range(32):  # bisection on log A: 2^-32 of the bracket; the grid is read at log(level / A)
         mid = 0.5 * (lo + hi)
-        span = (_on_log_grid(log_level_first - mid, log_first, steps, rise)
-                + _on_log_grid(log_level_last - mid, log_first, steps, fall))
+        span = (on_log_grid(log_level_first - mid, log_first, steps, rise)
+                + on_log_grid(log_level_last - mid, log_first, steps, fall))
         if span < width:
             lo = mid
         else:
             hi = mid
     a = math.exp(0.5 * (lo + hi))
-    return first - 0.5 + _on_geometric_grid(level_first / a, ratio, rise), a
+    return first - 0.5 + on_geometric_grid(level_first / a, ratio, rise), a

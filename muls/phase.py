@@ -23,6 +23,7 @@ import numba
 import numpy as np
 
 from .errors import ParameterError
+from .lookup import bracket
 
 # Petzold's average particle phase function [1/sr], the values published in Mobley (1994), Light and Water,
 # Table 3.10 (also Mobley et al. 1993, Appl. Opt. 32, 7484, Table 1), derived from Petzold (1972), SIO Ref.
@@ -241,13 +242,7 @@ def cumulative_at(sample_theta, theta):
         return 1.0
     if theta <= sample_theta[0]:
         return 0.0
-    lo, hi = 0, m
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if sample_theta[mid] <= theta:
-            lo = mid
-        else:
-            hi = mid
+    lo = bracket(theta, sample_theta)
     return (lo + (theta - sample_theta[lo]) / (sample_theta[lo + 1] - sample_theta[lo])) / m
 
 

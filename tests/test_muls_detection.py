@@ -72,17 +72,17 @@ def test_ranging_only_ch0_records_give_the_ranges_of_whole_ones(mode, dark_std, 
 
 
 def test_the_peak_fits_table_lookup_is_numpys_interp_bit_for_bit():
-    """The compiled lookup of the three-point fit's table (``_bracket`` and ``_interp_at``, in place of numba's scalar
+    """The compiled lookup of the three-point fit's table (``bracket`` and ``interp_at``, in place of numba's scalar
     np.interp) gives numpy.interp's values exactly: inside the grid, on its points, beyond both ends, at +-inf and NaN."""
     import numba
 
-    from muls.peaks import _bracket, _interp_at
+    from muls.lookup import bracket, interp_at
 
     @numba.njit
     def lookup(xs, xp, fp):
         out = np.empty(xs.size)
         for i in range(xs.size):
-            out[i] = _interp_at(xs[i], _bracket(xs[i], xp), xp, fp)
+            out[i] = interp_at(xs[i], bracket(xs[i], xp), xp, fp)
         return out
 
     table = _model().fit_table
@@ -348,11 +348,11 @@ def test_regression_second_plateau_explained_by_the_first_echo_does_not_hang():
     single_channel coastal water). Once the first echo's model was taken off, the second plateau's clip level
     was negative, log() gave NaN, the peak index -inf, and adding that echo's model looped ~2^63 times.
     A plateau whose clip level the echoes before it already explain is not ranged; the grid lookup is total."""
-    from muls.peaks import _on_geometric_grid
+    from muls.lookup import on_geometric_grid
 
     ratio, rise, _ = _model().clip_table
     for x in (0.0, -1.0, float("nan")):
-        assert _on_geometric_grid(x, ratio, rise) == rise[0]
+        assert on_geometric_grid(x, ratio, rise) == rise[0]
     code = (
         "import numpy as np\n"
         "from scanner_sim.config import load_scene\n"
