@@ -24,7 +24,11 @@ from .noise import (
     NORMAL_BOUND,
     PHASE_STREAM,
     REFERENCE_STREAM,
+    fill_hashes,
+    fill_normals_of,
     fill_normal_pairs,
+    half_bits,
+    normal_upper_bound,
     seed_key,
     stream_base,
     uniform_at,
@@ -51,7 +55,8 @@ class Records:
     reference: (n_pulses, n_ref) uint16 CH0 record from sample 0 (the whole record in ``full`` mode; under
     :func:`digitise`'s ``ranging_only`` only the samples around its peak, the others 0).
     codes: (n_windows, n_channels, n_samples) uint16 signal-channel windows, channel j is
-    ``instrument.channels[j]``. window_pulse: (n_windows,) batch index of each window's pulse;
+    ``instrument.channels[j]`` (``full`` mode under ``ranging_only``: only the samples the peak search may read, the
+    others 0). window_pulse: (n_windows,) batch index of each window's pulse;
     window_start: (n_windows,) index of the window's first sample in the full record. Sample k of the full
     record is taken at ``-pretrigger_s + k / sample_rate_hz + phase_s[pulse]``. noise_free_lsb and
     reference_noise_free_lsb: same shapes (float32, before noise, rounding and clipping) when asked for.
@@ -166,8 +171,11 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
     ``echoes``: ``model.echoes(batch)`` if already computed. ``deciding_only``: in each window, synthesise only the
     channels that can decide a return (:mod:`muls.deciding_channels`); the others' codes are 0 and
-    ``Records.synthesised`` says which. ``ranging_only``: of each CH0 record, only the samples around its peak
-    that the ranging reads (the others 0, :func:`_reference`): the same ranges, the CH0 records not whole.
+    ``Records.synthesised`` says which. ``ranging_only``: only the samples the ranging may read get their codes,
+    the others 0: of each CH0 record the samples around its peak (:func:`_reference`), and of ``full`` records
+    the samples where a run of the peak search may start or go on or a code may clip, and those beside them
+    (:func:`_ranging_codes`; windows are mostly echo, and draw faster whole). The same peaks and ranges, the records
+    not whole.
     """
     ins = model.instrument
     dig = ins.digitizer
@@ -185,7 +193,7 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     pulse = ins.pulse
     synthesised = np.empty(shape[:2], np.bool_)
     settings = DigitiserSettings(float(dig.max_code), 1.0 if noise else 0.0, deciding_only,
-                                 ins.processing.threshold_sigma)
+                                 ins.processing.threshold_sigma, ranging_only and noise and mode == "full")
     _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, model.column, model.cuts(batch),
               echoes, chans.signal(), settings)
     _reference(reference, ref_clean, sampling, model.basis, pulse.duration_s,
@@ -265,13 +273,15 @@ def _reference_span(levels, dark_mean, bound, max_code):
 
 class DigitiserSettings(NamedTuple):
     """Scalars of the digitiser kernel: the top code [LSB], the noise's scale (1, or 0 for no noise), whether only
-    the channels that can decide a return are synthesised (:mod:`muls.deciding_channels`) and the threshold
-    [sigma] that decides it."""
+    the channels that can decide a return are synthesised (:mod:`muls.deciding_channels`), the threshold [sigma]
+    that decides it and that the peak search uses, and whether only the samples the peak search may read get their
+    codes (:func:`_ranging_codes`)."""
 
     max_code: float
     noise_scale: float
     deciding_only: bool
     k_sigma: float
+    read_samples_only: bool = False
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
@@ -296,6 +306,8 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
         deciding_scratch = np.empty((3, n_chan), np.bool_)
         cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
         times, power, baseline = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
+        hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
+        read, flags, at = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
         for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
             p = window_pulse[w]
             # Echoes of pulse p (by delay) as three running sums over those started by time t:
@@ -354,19 +366,44 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                                   last_echo - first_echo, deciding_scratch)
             else:
                 synthesised[w, :] = True
+            if keep:
+                for c in range(n_chan):
+                    for k in range(n_samples):
+                        clean[w, c, k] = level_lsb(chans, c, power[k] if gate_open_at(chans, c, times[k]) else 0.0)
             # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per
             # detector (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's
-            # current). Drawn a window at once for the pairs a synthesised channel needs.
+            # current).
+            pulse_id, first_index = sampling.pulse_id[p], window_start[w]
+            if settings.read_samples_only:
+                if not settings.deciding_only:
+                    baseline_values(baseline, times, cuts.background_w[p], col)
+                shot_needed[:] = False
+                for c in range(n_chan):
+                    shot_needed[chans.detector[c]] |= synthesised[w, c]
+                for j in range(n_pairs):
+                    if synthesised[w, 2 * j] or (2 * j + 1 < n_chan and synthesised[w, 2 * j + 1]):
+                        fill_hashes(stream_base(sampling.key, pulse_id, FIRST_SIGNAL_STREAM + j), first_index, hashes[j])
+                for j in range(n_shot_pairs):
+                    if shot_needed[2 * j] or (2 * j + 1 < n_detectors and shot_needed[2 * j + 1]):
+                        fill_hashes(stream_base(sampling.key, pulse_id, FIRST_SIGNAL_STREAM + n_pairs + j), first_index,
+                                    hashes[n_pairs + j])
+                for c in range(n_chan):
+                    if synthesised[w, c]:
+                        d = chans.detector[c]
+                        _ranging_codes(codes[w, c], power, baseline, times, hashes[c // 2], c % 2, hashes[n_pairs + d // 2],
+                                       d % 2, chans, c, max_code, noise_scale, settings.k_sigma, read, at, dark_normal[0],
+                                       shot_normal[0], flags)
+                    else:
+                        codes[w, c, :] = 0
+                continue
+            # Every sample: drawn a window at once for the pairs a synthesised channel needs.
             shot_needed[:] = False
             for c in range(n_chan):
                 shot_needed[chans.detector[c]] |= synthesised[w, c]
-            _draw_pairs(dark_normal, synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, window_start[w], no_low, tails)
-            _draw_pairs(shot_normal, shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, window_start[w], no_low,
+            _draw_pairs(dark_normal, synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index, no_low, tails)
+            _draw_pairs(shot_normal, shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index, no_low,
                         tails)
             for c in range(n_chan):
-                if keep:
-                    for k in range(n_samples):
-                        clean[w, c, k] = level_lsb(chans, c, power[k] if gate_open_at(chans, c, times[k]) else 0.0)
                 if synthesised[w, c]:
                     _channel_codes(codes[w, c], power, times, dark_normal[c], shot_normal[chans.detector[c]], chans, c,
                                    max_code, noise_scale)
@@ -395,3 +432,51 @@ def _channel_codes(out, power, times, dark_normal, shot_normal, chans, c, max_co
         level = level_lsb(chans, c, gated)
         noise = dark_std * dark_normal[k] + math.sqrt(shot * gated) * shot_normal[k]
         out[k] = _quantise(level + noise_scale * noise, max_code)  # MULS Eq. 13
+
+
+#: How far [LSB] :func:`_ranging_codes` keeps its bound on a code above the code's noise-free reach: far more than the
+#: rounding of the sums it adds up, so the bound holds in floating point too.
+READ_MARGIN_LSB = 1e-3
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _ranging_codes(out, power, baseline, times, dark_hashes, dark_half, shot_hashes, shot_half, chans, c, max_code,
+                   noise_scale, k_sigma, read, at, dark_normal, shot_normal, tails):
+    """One channel's codes (n,) of a window where the peak search (:func:`muls.peaks._peaks`) may read them, 0
+    elsewhere: the same codes as :func:`_channel_codes` there, with the normals computed only there.
+
+    The search reads a code where a run may start or go on (its residual over the baseline above half the threshold,
+    ``k_sigma`` / 2 of the processor's sigma), where it may be clipped (the top code), and the samples next to those
+    (a run's ends, the three-point fit, a plateau's edges). A code cannot be either where even its largest possible
+    noise cannot take it there: each normal at most :func:`muls.noise.normal_upper_bound` of its bits (read from the
+    hash, not drawn). The echo model the search takes off a residual is never negative, and a code of 0 lies under
+    every run's level and the top code, so the search finds the same runs. ``dark_hashes``, ``shot_hashes`` (n,): the
+    positions of the channel's dark stream and its detector's shot stream, whose halves ``dark_half`` and
+    ``shot_half`` are this channel's; ``read``, ``tails`` (n,) bool, ``at`` (n,) int64, ``dark_normal``, ``shot_normal``
+    (n,) scratch."""
+    gate_open, gate_close = chans.gate_open_s[c], chans.gate_close_s[c]
+    dark_mean, lsb_per_w = chans.dark_mean_lsb[c], chans.lsb_per_w[c]
+    dark_std, shot = chans.dark_std_lsb[c], chans.shot_lsb2_per_w[c]
+    n = out.shape[0]
+    for k in range(n):
+        is_open = (gate_open <= times[k]) & (times[k] < gate_close)
+        gated = power[k] if is_open else 0.0
+        base = baseline[k] if is_open else 0.0
+        noise_most = (dark_std * normal_upper_bound(half_bits(dark_hashes[k], dark_half))
+                      + math.sqrt(shot * gated) * normal_upper_bound(half_bits(shot_hashes[k], shot_half)))
+        reach = dark_mean + lsb_per_w * gated + noise_scale * noise_most + 0.5 + READ_MARGIN_LSB  # MULS Eq. 13
+        run = reach - (dark_mean + lsb_per_w * base) > 0.5 * k_sigma * math.sqrt(dark_std**2 + shot * base + 1.0 / 12.0)
+        read[k] = run | (reach >= max_code)
+        out[k] = 0
+    m = 0
+    for k in range(n):  # the samples to read and their neighbours, listed without a branch
+        at[m] = k
+        m += read[k] | read[max(k - 1, 0)] | read[min(k + 1, n - 1)]
+    listed = at[:m]
+    fill_normals_of(dark_hashes, dark_half, listed, dark_normal, tails)
+    fill_normals_of(shot_hashes, shot_half, listed, shot_normal, tails)
+    for i in range(m):
+        k = at[i]
+        gated = power[k] if gate_open_at(chans, c, times[k]) else 0.0
+        noise = dark_std * dark_normal[i] + math.sqrt(shot * gated) * shot_normal[i]
+        out[k] = _quantise(level_lsb(chans, c, gated) + noise_scale * noise, max_code)  # MULS Eq. 13

@@ -51,9 +51,15 @@ def stream_base(key, pulse_id, stream):
 
 
 @numba.njit(cache=True, inline="always")
+def hash_at(base, index):
+    """The 64 bits of position ``index`` of a stream: two 32-bit halves, two normals (:func:`normal_of_bits`)."""
+    return splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
+
+
+@numba.njit(cache=True, inline="always")
 def uniform_at(base, index):
     """Uniform in [0, 1) at position ``index`` of a stream."""
-    h = splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
+    h = hash_at(base, index)
     return float(h >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
@@ -111,11 +117,55 @@ def centred_unit(bits32):
 
 
 @numba.njit(cache=True, inline="always")
+def half_bits(h, half):
+    """32-bit half ``half`` (0: the high bits, 1: the low) of a position's hash ``h``."""
+    return h >> np.uint64(32) if half == 0 else h & np.uint64(0xFFFFFFFF)
+
+
+@numba.njit(cache=True, inline="always")
+def normal_of_bits(bits32):
+    """The standard normal of a 32-bit half, |x| < :data:`NORMAL_BOUND`."""
+    return _inverse_normal_cdf(centred_unit(bits32))
+
+
+@numba.njit(cache=True, inline="always")
 def normal_half_at(base, index, half):
     """The standard normal of 32-bit half ``half`` (0: the high bits, 1: the low) of position ``index`` of a stream:
     each position gives two independent normals, |x| < :data:`NORMAL_BOUND`."""
-    h = splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
-    return _inverse_normal_cdf(centred_unit(h >> np.uint64(32) if half == 0 else h & np.uint64(0xFFFFFFFF)))
+    return normal_of_bits(half_bits(hash_at(base, index), half))
+
+
+@numba.njit(cache=True, nogil=True)
+def fill_hashes(base, first_index, out):
+    """out[k] = :func:`hash_at` (base, first_index + k), k < out.shape[0] (uint64)."""
+    base = np.uint64(base)
+    for k in range(out.shape[0]):
+        out[k] = hash_at(base, first_index + k)
+
+
+#: :func:`normal_upper_bound` reads a table of the top 12 bits of a half: 4,096 cells of 2^20 values each.
+UPPER_BOUND_SHIFT = np.uint64(20)
+
+
+@numba.njit(cache=True)
+def _upper_bounds():
+    """(4096,) the normal of each cell's last value, plus 1e-6: more than the inverse CDF's approximation can wiggle
+    (its relative error is 1.2e-9, |x| < 6.34), so each value bounds every normal of its cell from above."""
+    cells = 1 << (32 - int(UPPER_BOUND_SHIFT))
+    out = np.empty(cells)
+    for i in range(cells):
+        out[i] = normal_of_bits(np.uint64((i + 1) << int(UPPER_BOUND_SHIFT)) - np.uint64(1)) + 1e-6
+    return out
+
+
+_NORMAL_UPPER = _upper_bounds()
+
+
+@numba.njit(cache=True, inline="always")
+def normal_upper_bound(bits32):
+    """A number at least :func:`normal_of_bits` (bits32), at most 0.015 above it where |x| < 2.5 (a table lookup, no
+    division or log): enough to tell that a draw cannot exceed a level without drawing it."""
+    return _NORMAL_UPPER[bits32 >> UPPER_BOUND_SHIFT]
 
 
 @numba.njit(cache=True, inline="always")
@@ -137,7 +187,7 @@ def fill_normal_pairs(base, first_index, high, low, tails):
     n, base = high.shape[0], np.uint64(base)  # a Python int would make numba mix int64 and uint64 into float64
     both = low.shape[0] > 0
     for k in range(n):
-        h = splitmix64(base + (np.uint64(first_index + k) + np.uint64(1)) * GAMMA)
+        h = hash_at(base, first_index + k)
         p_high = centred_unit(h >> np.uint64(32))
         high[k] = _central_normal(p_high)
         tail = _in_tail(p_high)
@@ -148,13 +198,27 @@ def fill_normal_pairs(base, first_index, high, low, tails):
         tails[k] = np.uint64(tail)
     for k in range(n):
         if tails[k] != 0:
-            h = splitmix64(base + (np.uint64(first_index + k) + np.uint64(1)) * GAMMA)
+            h = hash_at(base, first_index + k)
             p = centred_unit(h >> np.uint64(32))
             if _in_tail(p):
                 high[k] = _tail_normal(p)
             p = centred_unit(h & np.uint64(0xFFFFFFFF))
             if both and _in_tail(p):
                 low[k] = _tail_normal(p)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def fill_normals_of(hashes, half, at, out, tails):
+    """out[i] = :func:`normal_of_bits` (:func:`half_bits` (hashes[at[i]], half)) for i < at.shape[0], bit for bit;
+    ``tails`` (m,) bool scratch. As :func:`fill_normal_pairs`: a loop without a branch for the central formula, then
+    the draws in the tails patched."""
+    for i in range(at.shape[0]):
+        p = centred_unit(half_bits(hashes[at[i]], half))
+        out[i] = _central_normal(p)
+        tails[i] = _in_tail(p)
+    for i in range(at.shape[0]):
+        if tails[i]:
+            out[i] = _tail_normal(centred_unit(half_bits(hashes[at[i]], half)))
 
 
 @numba.njit(cache=True)

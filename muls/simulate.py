@@ -11,8 +11,8 @@ def simulate(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
              keep_noise_free: bool = False, noise: bool = True, deciding_only: bool = False, ranging_only: bool = False
              ) -> tuple[Records, Ranging]:
     """Digitise the channels of ``batch`` (Eqs. 1-13) and range it (Eq. 14); ``seed`` keys all noise.
-    ``deciding_only``: only the channels that can decide a return; ``ranging_only``: only the CH0 samples the ranging
-    reads, the same ranges for less work (:func:`muls.detection.digitise`)."""
+    ``deciding_only``: only the channels that can decide a return; ``ranging_only``: only the samples the ranging may
+    read, the same ranges for less work (:func:`muls.detection.digitise`)."""
     echoes = model.echoes(batch)
     records = digitise(model, batch, seed, mode=mode, keep_noise_free=keep_noise_free, noise=noise, echoes=echoes,
                        deciding_only=deciding_only, ranging_only=ranging_only)

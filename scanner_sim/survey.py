@@ -171,24 +171,28 @@ class PassSetup:
         return RayStage(slots, hits, batch, self.lines_of_sight(slots, times, hits, (beam_o, beam_d)),
                         nominal_footprint(hits) if footprint else None)
 
-    def finish_chunk(self, stage: RayStage, record_mode: str | None = None, every_channel: bool = False) -> Chunk:
+    def finish_chunk(self, stage: RayStage, record_mode: str | None = None, every_channel: bool = False,
+                     whole_records: bool = False) -> Chunk:
         """The physics of a chunk after its ray stage: MULS waveforms and ranging, georeferencing, dropouts.
         ``record_mode`` and ``every_channel`` override the level's record mode and its ``deciding_only`` (for
-        records kept whole, as waveforms.npz keeps them); without ``every_channel``, of each CH0 record only the
-        samples the ranging reads are synthesised (the same points, :func:`muls.detection.digitise`)."""
+        records kept whole, as waveforms.npz keeps them). Unless ``every_channel`` or ``whole_records``, only the
+        samples the ranging reads are synthesised (the same points, :func:`muls.detection.digitise`'s
+        ``ranging_only``): of each CH0 record the span of its peak, and of a full record the samples the peak
+        search may read."""
         records, ranging = simulate(self.model, stage.batch, self.seed, record_mode or self.level.record_mode,
                                     deciding_only=self.level.deciding_only and not every_channel,
-                                    ranging_only=not every_channel)
+                                    ranging_only=not (every_channel or whole_records))
         sight, lost = stage.sight, ranging.dropout_cause >= 0
         dropouts = DropoutRecords(pulse_index=stage.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
                                   direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
         return Chunk(stage.slots, georeference(ranging, stage.hits, sight), dropouts, records, stage.footprint)
 
     def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, footprint: bool = False,
-                       every_channel: bool = False) -> Chunk:
+                       every_channel: bool = False, whole_records: bool = False) -> Chunk:
         """One chunk of pulse slots (n,) through the whole flow; ``footprint``: also the nominal beam footprint
-        that coverage needs (None otherwise); ``record_mode``, ``every_channel``: as :meth:`finish_chunk`."""
-        return self.finish_chunk(self.cast_chunk(slots, footprint), record_mode, every_channel)
+        that coverage needs (None otherwise); ``record_mode``, ``every_channel``, ``whole_records``: as
+        :meth:`finish_chunk`."""
+        return self.finish_chunk(self.cast_chunk(slots, footprint), record_mode, every_channel, whole_records)
 
     def lines_of_sight(self, slots: np.ndarray, times: np.ndarray, hits: Hits,
                        true_beam: tuple[np.ndarray, np.ndarray]) -> LinesOfSight:

@@ -136,7 +136,7 @@ def run_level(base: PassSetup, level: FidelityLevel, waveform_pulses: int) -> Le
     if covered is None:
         covered = np.unique(points.pulse_index[points.object_id >= 0]).size / max(n, 1)
     first = np.concatenate(slots)[:waveform_pulses]
-    records = setup.simulate_chunk(first).records
+    records = setup.simulate_chunk(first, whole_records=True).records  # every sample, for the waveforms' R^2
     return LevelRun(level, n / wall_s, n, points, covered, hidden_from_receiver(setup, points), records)
 
 

@@ -65,8 +65,69 @@ def test_ranging_only_ch0_records_give_the_ranges_of_whole_ones(mode, dark_std, 
     kept = part[0].reference > 0
     assert kept.sum(axis=1).max() < 0.6 * kept.shape[1]
     np.testing.assert_array_equal(part[0].reference[kept], whole[0].reference[kept])
-    np.testing.assert_array_equal(part[0].codes, whole[0].codes)
+    held = part[0].codes > 0  # full records: the signal channels too, only where the peak search may read them
+    np.testing.assert_array_equal(part[0].codes[held], whole[0].codes[held])
+    assert held.all() if mode == "windowed" else held.mean() < 0.5
     np.testing.assert_array_equal(find_peaks(model, batch, part[0], echoes)[1], find_peaks(model, batch, whole[0], echoes)[1])
+    np.testing.assert_array_equal(part[1].returns.range_m, whole[1].returns.range_m)
+    np.testing.assert_array_equal(part[1].dropout_cause, whole[1].dropout_cause)
+
+
+@pytest.mark.parametrize("case", ["pool", "low threshold", "dark noise", "daylight", "clean ocean", "gated near"])
+def test_full_records_coded_only_where_the_peak_search_reads_give_the_same_peaks(case):
+    """Full records under ``ranging_only`` get codes only where the peak search may read them (a run may start or go
+    on, a code may clip, and their neighbours), 0 elsewhere: the same peaks, every field, and the same ranges and
+    dropouts as whole records. Cases that put many samples near the bounds: a threshold of 2 sigma (noise runs in
+    every record), dark noise of 12 LSB, strong background light (shot noise over the whole record), clean ocean water's
+    strong backscatter and clipped near targets, and a range gate opening on the column."""
+    from dataclasses import replace
+
+    from muls.peaks import find_peaks
+    from muls.waveform import baseline_values
+
+    ins, water, background = mul2023(), "pool", 0.0
+    if case == "low threshold":
+        ins = replace(ins, processing=replace(ins.processing, threshold_sigma=2.0))
+    elif case == "dark noise":
+        ins = replace(ins, channels=tuple(replace(ch, dark_std_lsb=12.0) for ch in ins.channels))
+    elif case == "daylight":
+        background = 3e-5
+    elif case == "clean ocean":
+        water = "clean_ocean"
+    elif case == "gated near":
+        ins = mul2023(20e-9, 300e-9)
+    model = OpticalModel.build(ins, water_preset(water))
+    n = 400
+    ranges = np.concatenate([np.linspace(0.6, 40.0, n - 20), np.full(20, np.inf)])
+    batch = PulseBatch.flat_target(ins, ranges, reflectance=np.linspace(0.02, 0.9, n), pulse_id=np.arange(n) + 7,
+                                   background_w=np.full(n, background))
+    echoes = model.echoes(batch)
+    whole = simulate(model, batch, 11, "full")
+    part = simulate(model, batch, 11, "full", ranging_only=True)
+    held = part[0].codes > 0
+    assert held.mean() < (0.3 if case == "pool" else 1.0)  # in clear conditions most samples are left out
+    np.testing.assert_array_equal(part[0].codes[held], whole[0].codes[held])
+    # Every sample the search reads in the whole records has its code: over half the threshold above the channel's
+    # calibrated baseline (where the backscatter alone does not clip it) or at the top code, and the samples beside.
+    times, chans = whole[0].sample_times_s(model), model.channels.signal()
+    uncut = np.zeros(times.shape)
+    for w in range(times.shape[0]):
+        baseline_values(uncut[w], times[w], background, model.column)
+    read = np.zeros(held.shape, bool)
+    for c in range(held.shape[1]):
+        base = np.where((chans.gate_open_s[c] <= times) & (times < chans.gate_close_s[c]), uncut, 0.0)
+        expected = chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * base
+        sigma = np.sqrt(chans.dark_std_lsb[c] ** 2 + chans.shot_lsb2_per_w[c] * base + 1.0 / 12.0)
+        code = whole[0].codes[:, c].astype(float)
+        run = (code - expected > 0.5 * ins.processing.threshold_sigma * sigma) & (expected < ins.digitizer.max_code)
+        read[:, c] = run | (code >= ins.digitizer.max_code)
+    read[..., 1:] |= read[..., :-1].copy()
+    read[..., :-1] |= read[..., 1:].copy()
+    np.testing.assert_array_equal(part[0].codes[read], whole[0].codes[read])
+    found, expected = find_peaks(model, batch, part[0], echoes)[0], find_peaks(model, batch, whole[0], echoes)[0]
+    assert expected.pulse.size > n // 2
+    for name in expected.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(found, name), getattr(expected, name), err_msg=name)
     np.testing.assert_array_equal(part[1].returns.range_m, whole[1].returns.range_m)
     np.testing.assert_array_equal(part[1].dropout_cause, whole[1].dropout_cause)
 
@@ -171,7 +232,7 @@ def test_block_draws_equal_the_draws_one_by_one_tails_included():
     """The digitiser draws a window's normals a block at once (``fill_normal_pairs``: the central formula on SIMD
     lanes, then the tails patched); each must equal the draw-by-draw ``normal_half_at`` bit for bit, in both
     halves, with the low half skipped or not, at any first index: else records would depend on the blocking."""
-    from muls.noise import fill_normal_pairs, normal_half_at, seed_key, stream_base
+    from muls.noise import fill_hashes, fill_normal_pairs, fill_normals_of, normal_half_at, seed_key, stream_base
 
     n = 5000
     for pulse, stream, first in ((0, 2, 0), (17, 3, 123), (2**40, 4, 999_983)):
@@ -184,6 +245,30 @@ def test_block_draws_equal_the_draws_one_by_one_tails_included():
         only_high = np.empty(n)
         fill_normal_pairs(base, first, only_high, np.empty(0), tails)
         assert np.array_equal(only_high, expected[0])
+        # the normals of listed positions from their hashes (full records drawn only where read)
+        hashes = np.empty(n, np.uint64)
+        fill_hashes(base, first, hashes)
+        listed = np.sort(np.random.default_rng(pulse).choice(n, n // 3, replace=False))
+        for half in (0, 1):
+            some, flags = np.empty(listed.size), np.empty(listed.size, np.bool_)
+            fill_normals_of(hashes, half, listed, some, flags)
+            assert np.array_equal(some, expected[half][listed])
+
+
+def test_the_table_bound_on_a_normal_lies_above_it_and_close():
+    """``normal_upper_bound`` (a table of 4,096 cells of the 32-bit half) is at least the normal of every half, checked
+    at both ends of every cell and at random halves, and within 0.015 of it where |x| < 2.5: a bound below a draw would
+    leave a code out of a full record that the peak search reads."""
+    from muls.noise import UPPER_BOUND_SHIFT, normal_of_bits, normal_upper_bound
+
+    cells = np.arange(1 << (32 - int(UPPER_BOUND_SHIFT)), dtype=np.uint64)
+    edges = np.concatenate([cells << UPPER_BOUND_SHIFT, ((cells + np.uint64(1)) << UPPER_BOUND_SHIFT) - np.uint64(1)])
+    bits = np.concatenate([edges, np.random.default_rng(2).integers(0, 2**32, 200_000, dtype=np.uint64)])
+    normal = np.array([normal_of_bits(b) for b in bits])
+    bound = np.array([normal_upper_bound(b) for b in bits])
+    assert (bound >= normal).all()
+    central = np.abs(normal) < 2.5
+    assert (bound - normal)[central].max() < 0.015
 
 
 def test_quantisation_rounds_and_clipping_saturates():
