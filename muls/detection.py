@@ -33,7 +33,7 @@ from .noise import (
     stream_base,
     uniform_at,
 )
-from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values, column_integrals_at, uncut_column_value
+from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values, column_integrals_at
 
 RECORD_MODES = ("windowed", "full")
 
@@ -305,7 +305,7 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
         shot_needed = np.empty(n_detectors, np.bool_)
         deciding_scratch = np.empty((3, n_chan), np.bool_)
         cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
-        times, power, baseline = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
+        times, power, baseline, uncut = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
         hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
         read, flags, at = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
         for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
@@ -332,8 +332,18 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                 ahead[i] = ahead[i + 1] + cut_s[i]
             next_cut = 0
             for k in range(n_samples):
-                t = sampling.t0_s + (window_start[w] + k) * dt + sampling.phase_s[p]
-                times[k] = t
+                times[k] = sampling.t0_s + (window_start[w] + k) * dt + sampling.phase_s[p]
+            # The uncut column, on SIMD lanes (uncut_column_value's numbers): where a cut is still ahead, and for the
+            # baseline wherever that is needed.
+            reach = 0
+            if settings.deciding_only or settings.read_samples_only:
+                reach = n_samples
+            elif n_cut > 0:
+                while reach < n_samples and times[reach] < cut_t[n_cut - 1]:
+                    reach += 1
+            baseline_values(uncut[:reach], times[:reach], 0.0, col)
+            for k in range(n_samples):
+                t = times[k]
                 if k > 0:
                     s1 = (s1 + dt * sa) * ra
                     sa *= ra
@@ -355,9 +365,11 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                     next_cut += 1
                 power[k] = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
                 if next_cut < n_cut:
-                    power[k] += ahead[next_cut] * uncut_column_value(t, col)
+                    power[k] += ahead[next_cut] * uncut[k]
+            if settings.deciding_only or settings.read_samples_only:
+                for k in range(n_samples):  # the processor's calibrated baseline, as baseline_values gives it
+                    baseline[k] = cuts.background_w[p] + uncut[k]
             if settings.deciding_only:
-                baseline_values(baseline, times, cuts.background_w[p], col)
                 first_echo, last_echo = np.inf, -np.inf
                 for j in range(offsets[p], offsets[p + 1]):
                     if energy[j] > 0.0:
@@ -375,8 +387,6 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
             # current).
             pulse_id, first_index = sampling.pulse_id[p], window_start[w]
             if settings.read_samples_only:
-                if not settings.deciding_only:
-                    baseline_values(baseline, times, cuts.background_w[p], col)
                 shot_needed[:] = False
                 for c in range(n_chan):
                     shot_needed[chans.detector[c]] |= synthesised[w, c]
