@@ -17,7 +17,7 @@ def _chunk(radiance):
         "water.background_radiance_w_m2_sr_nm": radiance, "survey.max_pulses": 200,
         "instrument.gate_delay_ns": 80, "instrument.gate_width_ns": 400})
     setup = PassSetup.build(config, PassOptions())
-    return setup, setup.simulate_chunk(next(setup.slot_chunks()))
+    return setup, setup.simulate_chunk(next(setup.slot_chunks()), whole_records=True)
 
 
 def test_background_light_raises_the_far_channels_baseline_by_eqs_8_to_10():
