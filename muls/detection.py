@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from .channel_codes import channel_codes, quantise, ranging_codes
 from .channels import gate_open_at, level_lsb
 from .deciding_channels import deciding_channels
 from .errors import check_choice
@@ -26,9 +27,6 @@ from .noise import (
     REFERENCE_STREAM,
     fill_hashes,
     fill_normal_pairs,
-    fill_normals_of,
-    half_bits,
-    normal_upper_bound,
     seed_key,
     stream_base,
     uniform_at,
@@ -174,8 +172,8 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     ``Records.synthesised`` says which. ``ranging_only``: only the samples the ranging may read get their codes,
     the others 0: of each CH0 record the samples around its peak (:func:`_reference`), and of ``full`` records
     the samples where a run of the peak search may start or go on or a code may clip, and those beside them
-    (:func:`_ranging_codes`; windows are mostly echo, and draw faster whole). The same peaks and ranges, the records
-    not whole.
+    (:func:`muls.channel_codes.ranging_codes`; windows are mostly echo, and draw faster whole). The same peaks and
+    ranges, the records not whole.
     """
     ins = model.instrument
     dig = ins.digitizer
@@ -206,13 +204,6 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
 
 #: Windows (or CH0 records) per block of the digitiser kernels: each block allocates its work arrays once.
 WINDOW_BLOCK = 64
-
-
-@numba.njit(cache=True, inline="always")
-def _quantise(u, max_code):
-    """MULS Eq. 13: rounding, then clipping to [0, 2^bits - 1], as an int32 (a float-to-int conversion that
-    vectorises; the code then fits any integer record type)."""
-    return np.int32(min(max(math.floor(u + 0.5), 0.0), max_code))
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
@@ -250,7 +241,7 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
             fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM), first,
                               normal[: last + 1 - first], no_low, tails)
             for k in range(first, last + 1):
-                reference[p, k] = _quantise(levels[k] + dark_mean + noise_scale * dark_std * normal[k - first],
+                reference[p, k] = quantise(levels[k] + dark_mean + noise_scale * dark_std * normal[k - first],
                                             max_code)
 
 
@@ -275,7 +266,7 @@ class DigitiserSettings(NamedTuple):
     """Scalars of the digitiser kernel: the top code [LSB], the noise's scale (1, or 0 for no noise), whether only
     the channels that can decide a return are synthesised (:mod:`muls.deciding_channels`), the threshold [sigma]
     that decides it and that the peak search uses, and whether only the samples the peak search may read get their
-    codes (:func:`_ranging_codes`)."""
+    codes (:func:`muls.channel_codes.ranging_codes`)."""
 
     max_code: float
     noise_scale: float
@@ -307,7 +298,7 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
         cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
         times, power, baseline, uncut = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
         hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
-        read, flags, at = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
+        read, in_tail, listed = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
         for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
             p = window_pulse[w]
             # Echoes of pulse p (by delay) as three running sums over those started by time t:
@@ -335,13 +326,13 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                 times[k] = sampling.t0_s + (window_start[w] + k) * dt + sampling.phase_s[p]
             # The uncut column, on SIMD lanes (uncut_column_value's numbers): where a cut is still ahead, and for the
             # baseline wherever that is needed.
-            reach = 0
+            uncut_until = 0
             if settings.deciding_only or settings.read_samples_only:
-                reach = n_samples
+                uncut_until = n_samples
             elif n_cut > 0:
-                while reach < n_samples and times[reach] < cut_t[n_cut - 1]:
-                    reach += 1
-            baseline_values(uncut[:reach], times[:reach], 0.0, col)
+                while uncut_until < n_samples and times[uncut_until] < cut_t[n_cut - 1]:
+                    uncut_until += 1
+            baseline_values(uncut[:uncut_until], times[:uncut_until], 0.0, col)
             for k in range(n_samples):
                 t = times[k]
                 if k > 0:
@@ -385,40 +376,47 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
             # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per
             # detector (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's
             # current).
-            pulse_id, first_index = sampling.pulse_id[p], window_start[w]
+            shot_needed[:] = False
+            for c in range(n_chan):
+                shot_needed[chans.detector[c]] |= synthesised[w, c]
+            first_index = window_start[w]
             if settings.read_samples_only:
-                shot_needed[:] = False
-                for c in range(n_chan):
-                    shot_needed[chans.detector[c]] |= synthesised[w, c]
-                for j in range(n_pairs):
-                    if synthesised[w, 2 * j] or (2 * j + 1 < n_chan and synthesised[w, 2 * j + 1]):
-                        fill_hashes(stream_base(sampling.key, pulse_id, FIRST_SIGNAL_STREAM + j), first_index, hashes[j])
-                for j in range(n_shot_pairs):
-                    if shot_needed[2 * j] or (2 * j + 1 < n_detectors and shot_needed[2 * j + 1]):
-                        fill_hashes(stream_base(sampling.key, pulse_id, FIRST_SIGNAL_STREAM + n_pairs + j), first_index,
-                                    hashes[n_pairs + j])
+                _hash_pairs(hashes[:n_pairs], synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index)
+                _hash_pairs(hashes[n_pairs:], shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index)
                 for c in range(n_chan):
                     if synthesised[w, c]:
                         d = chans.detector[c]
-                        _ranging_codes(codes[w, c], power, baseline, times, hashes[c // 2], c % 2, hashes[n_pairs + d // 2],
-                                       d % 2, chans, c, max_code, noise_scale, settings.k_sigma, read, at, dark_normal[0],
-                                       shot_normal[0], flags)
+                        ranging_codes(codes[w, c], power, baseline, times, hashes[c // 2], c % 2, hashes[n_pairs + d // 2],
+                                      d % 2, chans, c, max_code, noise_scale, settings.k_sigma, read, listed,
+                                      dark_normal[0], shot_normal[0], in_tail)
                     else:
                         codes[w, c, :] = 0
                 continue
             # Every sample: drawn a window at once for the pairs a synthesised channel needs.
-            shot_needed[:] = False
-            for c in range(n_chan):
-                shot_needed[chans.detector[c]] |= synthesised[w, c]
             _draw_pairs(dark_normal, synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index, no_low, tails)
             _draw_pairs(shot_normal, shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index, no_low,
                         tails)
             for c in range(n_chan):
                 if synthesised[w, c]:
-                    _channel_codes(codes[w, c], power, times, dark_normal[c], shot_normal[chans.detector[c]], chans, c,
-                                   max_code, noise_scale)
+                    channel_codes(codes[w, c], power, times, dark_normal[c], shot_normal[chans.detector[c]], chans, c,
+                                  max_code, noise_scale)
                 else:
                     codes[w, c, :] = 0
+
+
+@numba.njit(cache=True, inline="always")
+def _pair_needed(needed, j):
+    """Whether row 2j or 2j + 1 of ``needed`` (k,) is set (the rows that share stream pair j)."""
+    return needed[2 * j] or (2 * j + 1 < needed.shape[0] and needed[2 * j + 1])
+
+
+@numba.njit(cache=True, inline="always")
+def _hash_pairs(hashes, needed, sampling, p, first_stream, first_index):
+    """Row j of ``hashes`` (m, n): the positions ``first_index`` on of stream ``first_stream + j`` of pulse ``p``, for
+    the pairs j a ``needed`` (k,) row (2j or 2j + 1) asks for (as :func:`_draw_pairs` draws them)."""
+    for j in range(hashes.shape[0]):
+        if _pair_needed(needed, j):
+            fill_hashes(stream_base(sampling.key, sampling.pulse_id[p], first_stream + j), first_index, hashes[j])
 
 
 @numba.njit(cache=True, inline="always")
@@ -427,66 +425,6 @@ def _draw_pairs(normals, needed, sampling, p, first_stream, first_index, no_low,
     positions ``first_index`` on, for the pairs with a ``needed`` (k,) row; a half no row needs is not drawn."""
     for j in range(normals.shape[0] // 2):
         low = 2 * j + 1 < needed.shape[0] and needed[2 * j + 1]
-        if needed[2 * j] or low:
+        if _pair_needed(needed, j):
             fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], first_stream + j), first_index,
                               normals[2 * j], normals[2 * j + 1] if low else no_low, tails)
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _channel_codes(out, power, times, dark_normal, shot_normal, chans, c, max_code, noise_scale):
-    """One channel's codes (n,) of a window from the power [W] at its sample times [s] and its two normals: no
-    branch but selects, so the loop runs on SIMD lanes."""
-    dark_std, shot = chans.dark_std_lsb[c], chans.shot_lsb2_per_w[c]
-    for k in range(out.shape[0]):
-        gated = power[k] if gate_open_at(chans, c, times[k]) else 0.0
-        level = level_lsb(chans, c, gated)
-        noise = dark_std * dark_normal[k] + math.sqrt(shot * gated) * shot_normal[k]
-        out[k] = _quantise(level + noise_scale * noise, max_code)  # MULS Eq. 13
-
-
-#: How far [LSB] :func:`_ranging_codes` keeps its bound on a code above the code's noise-free reach: far more than the
-#: rounding of the sums it adds up, so the bound holds in floating point too.
-READ_MARGIN_LSB = 1e-3
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _ranging_codes(out, power, baseline, times, dark_hashes, dark_half, shot_hashes, shot_half, chans, c, max_code,
-                   noise_scale, k_sigma, read, at, dark_normal, shot_normal, tails):
-    """One channel's codes (n,) of a window where the peak search (:func:`muls.peaks._peaks`) may read them, 0
-    elsewhere: the same codes as :func:`_channel_codes` there, with the normals computed only there.
-
-    The search reads a code where a run may start or go on (its residual over the baseline above half the threshold,
-    ``k_sigma`` / 2 of the processor's sigma), where it may be clipped (the top code), and the samples next to those
-    (a run's ends, the three-point fit, a plateau's edges). A code cannot be either where even its largest possible
-    noise cannot take it there: each normal at most :func:`muls.noise.normal_upper_bound` of its bits (read from the
-    hash, not drawn). The echo model the search takes off a residual is never negative, and a code of 0 lies under
-    every run's level and the top code, so the search finds the same runs. ``dark_hashes``, ``shot_hashes`` (n,): the
-    positions of the channel's dark stream and its detector's shot stream, whose halves ``dark_half`` and
-    ``shot_half`` are this channel's; ``read``, ``tails`` (n,) bool, ``at`` (n,) int64, ``dark_normal``, ``shot_normal``
-    (n,) scratch."""
-    gate_open, gate_close = chans.gate_open_s[c], chans.gate_close_s[c]
-    dark_mean, lsb_per_w = chans.dark_mean_lsb[c], chans.lsb_per_w[c]
-    dark_std, shot = chans.dark_std_lsb[c], chans.shot_lsb2_per_w[c]
-    n = out.shape[0]
-    for k in range(n):
-        is_open = (gate_open <= times[k]) & (times[k] < gate_close)
-        gated = power[k] if is_open else 0.0
-        base = baseline[k] if is_open else 0.0
-        noise_most = (dark_std * normal_upper_bound(half_bits(dark_hashes[k], dark_half))
-                      + math.sqrt(shot * gated) * normal_upper_bound(half_bits(shot_hashes[k], shot_half)))
-        reach = dark_mean + lsb_per_w * gated + noise_scale * noise_most + 0.5 + READ_MARGIN_LSB  # MULS Eq. 13
-        run = reach - (dark_mean + lsb_per_w * base) > 0.5 * k_sigma * math.sqrt(dark_std**2 + shot * base + 1.0 / 12.0)
-        read[k] = run | (reach >= max_code)
-        out[k] = 0
-    m = 0
-    for k in range(n):  # the samples to read and their neighbours, listed without a branch
-        at[m] = k
-        m += read[k] | read[max(k - 1, 0)] | read[min(k + 1, n - 1)]
-    listed = at[:m]
-    fill_normals_of(dark_hashes, dark_half, listed, dark_normal, tails)
-    fill_normals_of(shot_hashes, shot_half, listed, shot_normal, tails)
-    for i in range(m):
-        k = at[i]
-        gated = power[k] if gate_open_at(chans, c, times[k]) else 0.0
-        noise = dark_std * dark_normal[i] + math.sqrt(shot * gated) * shot_normal[i]
-        out[k] = _quantise(level_lsb(chans, c, gated) + noise_scale * noise, max_code)  # MULS Eq. 13
