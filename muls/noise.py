@@ -185,20 +185,22 @@ def fill_normal_pairs(base, first_index, high, low, tails):
 
     A block at once costs about two thirds of draw by draw: the first loop has no branch (the central formula
     everywhere; numpy's error model drops the division's zero check), so it runs on SIMD lanes; the second patches
-    the draws in the tails (one position in ten), hashing them again.
+    the draws in the tails (one position in ten), hashing them again. The first loop comes in two copies, with and
+    without the low half: one loop that tests for it inside kept a high half alone 30 % slower.
     """
     n, base = high.shape[0], np.uint64(base)  # a Python int would make numba mix int64 and uint64 into float64
     both = low.shape[0] > 0
-    for k in range(n):
-        h = hash_at(base, first_index + k)
-        p_high = centred_unit(half_bits(h, 0))
-        high[k] = _central_normal(p_high)
-        tail = _in_tail(p_high)
-        if both:
-            p_low = centred_unit(half_bits(h, 1))
-            low[k] = _central_normal(p_low)
-            tail |= _in_tail(p_low)
-        tails[k] = np.uint64(tail)
+    if both:
+        for k in range(n):
+            h = hash_at(base, first_index + k)
+            p_high, p_low = centred_unit(half_bits(h, 0)), centred_unit(half_bits(h, 1))
+            high[k], low[k] = _central_normal(p_high), _central_normal(p_low)
+            tails[k] = np.uint64(_in_tail(p_high) | _in_tail(p_low))
+    else:
+        for k in range(n):
+            p_high = centred_unit(half_bits(hash_at(base, first_index + k), 0))
+            high[k] = _central_normal(p_high)
+            tails[k] = np.uint64(_in_tail(p_high))
     for k in range(n):
         if tails[k] != 0:
             h = hash_at(base, first_index + k)

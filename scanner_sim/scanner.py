@@ -134,8 +134,18 @@ class Scanner:
         Returns (beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir), each (n, 3) float64 world [m].
         """
         times_s = poses.time_s if times_s is None else times_s
-        bo, bd, ro, rd = self.directions(times_s)
+        bo, bd, ro, _ = self.directions(times_s)
         R, p = poses.rotation, poses.position
-        rot = lambda v: np.einsum("nij,nj->ni", R, v)  # noqa: E731
+        beam_dir = _rotate(R, bd)
         shaft = np.einsum("nij,j->ni", R, self.shaft_axis)
-        return p + rot(bo), rot(bd), shaft, p + rot(ro), rot(rd)
+        return p + _rotate(R, bo), beam_dir, shaft, p + _rotate(R, ro), beam_dir.copy()  # the axes are parallel
+
+    def beam_rays(self, poses):
+        """The beam's rays alone, as :meth:`world_rays` gives them: (beam_origin, beam_dir), each (n, 3) world."""
+        bo, bd, _, _ = self.directions(poses.time_s)
+        return poses.position + _rotate(poses.rotation, bo), _rotate(poses.rotation, bd)
+
+
+def _rotate(rotation, vectors):
+    """(n, 3): each of ``vectors`` (n, 3) turned by its matrix of ``rotation`` (n, 3, 3)."""
+    return np.einsum("nij,nj->ni", rotation, vectors)

@@ -191,7 +191,8 @@ def trajectory_table(setup, rate_hz: float = TRAJECTORY_RATE_HZ) -> dict[str, np
     t0 = setup.first_slot / setup.scanner.pulse_rate_hz
     t1 = setup.end_slot / setup.scanner.pulse_rate_hz
     t = np.arange(t0, t1, 1.0 / rate_hz)
-    true, est = setup.trajectory.poses(t), setup.trajectory.poses(t, estimated=True)
+    true = setup.trajectory.poses(t)
+    est = setup.trajectory.estimate_of(true)
 
     def rpy(p):
         return np.degrees(np.c_[p.roll_rad, p.pitch_rad, p.yaw_rad])

@@ -40,7 +40,7 @@ from .scanner import Scanner
 from .scene import Scene, build_scene
 from .seabed_grid import seabed_grid_of
 from .setup_checks import build_trajectory
-from .trajectory import Trajectory
+from .trajectory import Poses, Trajectory
 
 
 @dataclass(frozen=True)
@@ -161,14 +161,14 @@ class PassSetup:
         the muls input, each pulse's estimated line of sight with the truth along it, and (``footprint``) the
         nominal beam footprint that coverage needs. Only Embree and ray kernels that release the GIL: it runs
         in a thread beside the physics of the chunk before (:func:`pass_chunks`)."""
-        times = slots / self.scanner.pulse_rate_hz
-        beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(self.trajectory.poses(times))
+        poses = self.trajectory.poses(slots / self.scanner.pulse_rate_hz)
+        beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(poses)
         cast = cast_auto if self.level.adaptive else cast_beams
         hits = cast(self.caster, self.scene, beam_o, beam_d, shaft, rx_o, rx_d, self.pattern,
                     self.model.instrument.geometry, self.level.shadow_rays)
         batch = pulse_batch(hits, slots, self.model, self.config.water.background_radiance_w_m2_sr_nm,
                             self.level.column_cut)
-        return RayStage(slots, hits, batch, self.lines_of_sight(slots, times, hits, (beam_o, beam_d)),
+        return RayStage(slots, hits, batch, self.lines_of_sight(slots, poses, hits, (beam_o, beam_d)),
                         nominal_footprint(hits) if footprint else None)
 
     def finish_chunk(self, stage: RayStage, record_mode: str | None = None, every_channel: bool = False,
@@ -194,15 +194,15 @@ class PassSetup:
         :meth:`finish_chunk`."""
         return self.finish_chunk(self.cast_chunk(slots, footprint), record_mode, every_channel, whole_records)
 
-    def lines_of_sight(self, slots: np.ndarray, times: np.ndarray, hits: Hits,
+    def lines_of_sight(self, slots: np.ndarray, poses: Poses, hits: Hits,
                        true_beam: tuple[np.ndarray, np.ndarray]) -> LinesOfSight:
         """Each pulse's estimated beam, with the first truth surface along it. Without navigation noise the
         estimated beam is the true beam axis (``true_beam``: its origins and directions (n, 3), as the ray stage
-        cast them), whose first hit the beam cast already holds (sub-ray 0 of every pattern is the axis), so only a
-        noisy navigation needs its poses, its rays and a cast of its own."""
-        noisy = self.trajectory.has_navigation_noise
+        cast them from the true ``poses``), whose first hit the beam cast already holds (sub-ray 0 of every pattern is
+        the axis), so only a noisy navigation needs its estimated poses, its beam and a cast of its own."""
+        noisy, times = self.trajectory.has_navigation_noise, poses.time_s
         if noisy:
-            origin, direction, _, _, _ = self.scanner.world_rays(self.trajectory.poses(times, estimated=True))
+            origin, direction = self.scanner.beam_rays(self.trajectory.estimate_of(poses))
         else:
             origin, direction = true_beam
         true_range, first_object = np.full(slots.size, np.nan), np.full(slots.size, -1)

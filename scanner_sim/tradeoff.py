@@ -92,8 +92,9 @@ def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     if not known.any():
         return out
     times = points.gps_time_s[known]
-    origin, direction, _, _, _ = setup.scanner.world_rays(setup.trajectory.poses(times, estimated=True))
-    _, _, _, rx_origin, _ = setup.scanner.world_rays(setup.trajectory.poses(times))
+    truth = setup.trajectory.poses(times)
+    origin, direction = setup.scanner.beam_rays(setup.trajectory.estimate_of(truth))
+    _, _, _, rx_origin, _ = setup.scanner.world_rays(truth)
     local = origin - setup.scene.local_origin
     ray, tri, _ = setup.caster.first_hits(local.astype(np.float32), direction.astype(np.float32))
     first_object = np.full(times.size, -1)

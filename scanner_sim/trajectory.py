@@ -207,16 +207,22 @@ class Trajectory:
                 2 * math.pi * t / a.pitch_period_s)
             roll = roll + math.radians(a.roll_deg) + math.radians(a.roll_amplitude_deg) * np.sin(
                 2 * math.pi * t / a.roll_period_s)
-        position = np.c_[xy, z]
-        if estimated and self._noise is not None:
-            grid, err = self._noise
-            e = np.stack([np.interp(t, grid, err[:, k]) for k in range(6)], axis=1)
-            position = position + e[:, :3]
-            roll, pitch, yaw = roll + e[:, 3], pitch + e[:, 4], yaw + e[:, 5]
         speed = np.full(len(t), self.speed_m_s)
         if not self.static:
             speed[(t < 0) | (t * self.speed_m_s > self.length_m)] = 0.0
-        return Poses(t, position, rotation_matrices(yaw, pitch, roll), yaw, pitch, roll, speed)
+        truth = Poses(t, np.c_[xy, z], rotation_matrices(yaw, pitch, roll), yaw, pitch, roll, speed)
+        return self.estimate_of(truth) if estimated else truth
+
+    def estimate_of(self, truth: Poses) -> Poses:
+        """The navigation's estimate of the true poses ``truth`` (at their times): ``truth`` itself without
+        navigation noise, else the truth plus the noise's position and attitude errors then."""
+        if self._noise is None:
+            return truth
+        grid, err = self._noise
+        e = np.stack([np.interp(truth.time_s, grid, err[:, k]) for k in range(6)], axis=1)
+        roll, pitch, yaw = truth.roll_rad + e[:, 3], truth.pitch_rad + e[:, 4], truth.yaw_rad + e[:, 5]
+        return Poses(truth.time_s, truth.position + e[:, :3], rotation_matrices(yaw, pitch, roll), yaw, pitch, roll,
+                     truth.speed_m_s)
 
 
 def trajectory_of(config, scene=None) -> Trajectory:
