@@ -106,7 +106,7 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes:
     synthesised = records.synthesised if records.synthesised is not None else np.ones((n_windows, n_chan), np.bool_)
     _peaks(records.codes, synthesised, records.window_pulse, records.window_start, records.phase_s, -dig.pretrigger_s,
            dig.sample_interval_s, model.column, batch.background_w, chans.signal(), settings, model.fit_table,
-           model.clip_table, out)
+           model.clip_table, out, records.mode == "full")
     ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], fit, model.fit_table)
     # Gather the filled slots: slot s holds counts[s] peaks from position s * MAX_PEAKS_PER_WINDOW.
     counts = out.counts
@@ -257,7 +257,10 @@ def _reference_peaks(reference, dark_mean, fit, table):
 
 @numba.njit(cache=True, parallel=True, nogil=True)
 def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
-           clip_table, out):
+           clip_table, out, sparse):
+    """The peak search over every window and channel (module doc), into ``out``. ``sparse``: records mostly 0 (full
+    records coded where the search reads, :func:`muls.channel_codes.ranging_codes`): a channel's residuals are
+    computed, and its runs looked for, only within a sample of its nonzero codes (:func:`_code_segments`)."""
     n_windows, n_chan, n_samples = codes.shape
     cap = out.window.shape[0] // max(1, n_windows * n_chan)
     basis = col.basis
@@ -268,6 +271,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
         resid, sigma = np.empty(n_samples), np.empty(n_samples)
         echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
         open_, blind = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_)
+        seg_first, seg_end = np.zeros(n_samples // 2 + 1, np.int64), np.full(n_samples // 2 + 1, n_samples)
         for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
             p = window_pulse[w]
             first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
@@ -275,91 +279,107 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                 first += 1
             if first == n_chan:
                 continue
-            for k in range(n_samples):
-                times[k] = t0 + (window_start[w] + k) * dt + phase[p]
-            baseline_values(base_w, times, background[p], col)
+            if not sparse:
+                for k in range(n_samples):
+                    times[k] = t0 + (window_start[w] + k) * dt + phase[p]
+                baseline_values(base_w, times, background[p], col)
             for c in range(first, n_chan):
                 slot = w * n_chan + c
                 if c > first and not _may_run(codes, synthesised, w, c, chans, k_sigma):
                     continue
-                if _residuals(codes[w, c], times, base_w, chans, c, max_code, open_, blind, sigma, resid, echoes) == 0:
-                    continue  # blind in the whole window: every residual is zero
-                k = 0
-                while k < n_samples:
-                    if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
-                        k += 1
-                        continue
-                    start = k
-                    top = k
-                    clipped_first = -1
-                    clipped_last = -1
-                    while k < n_samples and resid[k] - echoes[k] > 0.5 * k_sigma * sigma[k]:
-                        if resid[k] - echoes[k] > resid[top] - echoes[top]:
-                            top = k
-                        if codes[w, c, k] >= max_code:
-                            if clipped_first < 0:
-                                clipped_first = k
-                            clipped_last = k
-                        k += 1
-                    # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
-                    # threshold there, over what the echoes already found leave if their shape is a little off.
-                    # A clipped run may run on past the window's end once its plateau has ended inside it: the
-                    # plateau and its two clip levels alone time it, whatever the tail does after.
-                    if start == 0 or (k >= n_samples and not (clipped_first >= 0 and clipped_last < n_samples - 1)):
-                        continue
-                    if clipped_first < 0 and (top == start or not open_[top - 1]):
-                        continue  # no rising edge inside the gate: a gate opening on a tail, not an echo
-                    if clipped_first >= 0:
-                        # The plateau may have begun before the run did (clipped samples with a small residual on a
-                        # high baseline): it must rise from a sample the channel sees, or its width is unknown.
-                        # A plateau that runs through samples the backscatter alone clips began in the column.
-                        through_blind = False
-                        while clipped_first > 0 and codes[w, c, clipped_first - 1] >= max_code:
-                            clipped_first -= 1
-                            through_blind = through_blind or blind[clipped_first]
-                        if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
+                # The stretches of samples where a run may lie or the search may read: the whole window, or within a
+                # sample of a nonzero code (a code of 0 lies under every run's level, so no run holds one).
+                n_seg, seen = 1, 0
+                if not sparse:
+                    seen = _residuals(codes[w, c], times, base_w, chans, c, max_code, open_, blind, sigma, resid, echoes)
+                else:
+                    n_seg = _code_segments(codes[w, c], seg_first, seg_end)
+                    for g in range(n_seg):  # the same numbers as the whole window's, sample by sample
+                        a, b = seg_first[g], seg_end[g]
+                        for k in range(a, b):
+                            times[k] = t0 + (window_start[w] + k) * dt + phase[p]
+                        baseline_values(base_w[a:b], times[a:b], background[p], col)
+                        seen += _residuals(codes[w, c, a:b], times[a:b], base_w[a:b], chans, c, max_code, open_[a:b],
+                                           blind[a:b], sigma[a:b], resid[a:b], echoes[a:b])
+                if seen == 0:
+                    continue  # blind wherever a run may lie: every residual there is zero
+                for g in range(n_seg):
+                    k, end = seg_first[g], seg_end[g]
+                    while k < end:
+                        if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
+                            k += 1
                             continue
-                        # A plateau that runs on into samples the backscatter alone clips ends there only in the
-                        # residual: its width, so its amplitude and time, are unknown (issue 12, blind-zone edge).
-                        if blind[clipped_last + 1] and codes[w, c, clipped_last + 1] >= max_code:
+                        start = k
+                        top = k
+                        clipped_first = -1
+                        clipped_last = -1
+                        while k < n_samples and resid[k] - echoes[k] > 0.5 * k_sigma * sigma[k]:
+                            if resid[k] - echoes[k] > resid[top] - echoes[top]:
+                                top = k
+                            if codes[w, c, k] >= max_code:
+                                if clipped_first < 0:
+                                    clipped_first = k
+                                clipped_last = k
+                            k += 1
+                        # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
+                        # threshold there, over what the echoes already found leave if their shape is a little off.
+                        # A clipped run may run on past the window's end once its plateau has ended inside it: the
+                        # plateau and its two clip levels alone time it, whatever the tail does after.
+                        if start == 0 or (k >= n_samples and not (clipped_first >= 0 and clipped_last < n_samples - 1)):
                             continue
-                    if blind[top - 1]:
-                        continue
-                    height = resid[top] - echoes[top]
-                    if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
-                        continue
-                    if counts[slot] >= cap:
-                        continue
-                    if clipped_first >= 0:
-                        # Clipped: the plateau and the clip levels at its ends (over a baseline that may slope) give
-                        # amplitude and peak time through the known pulse shape. A clip level that the echoes found
-                        # before already explain leaves the plateau's edge, so its width, unknown.
-                        level_first = resid[clipped_first] - echoes[clipped_first]
-                        level_last = resid[clipped_last] - echoes[clipped_last]
-                        if not (level_first > 0.0 and level_last > 0.0):
+                        if clipped_first < 0 and (top == start or not open_[top - 1]):
+                            continue  # no rising edge inside the gate: a gate opening on a tail, not an echo
+                        if clipped_first >= 0:
+                            # The plateau may have begun before the run did (clipped samples with a small residual on a
+                            # high baseline): it must rise from a sample the channel sees, or its width is unknown.
+                            # A plateau that runs through samples the backscatter alone clips began in the column.
+                            through_blind = False
+                            while clipped_first > 0 and codes[w, c, clipped_first - 1] >= max_code:
+                                clipped_first -= 1
+                                through_blind = through_blind or blind[clipped_first]
+                            if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
+                                continue
+                            # A plateau that runs on into samples the backscatter alone clips ends there only in the
+                            # residual: its width, so its amplitude and time, are unknown (issue 12, blind-zone edge).
+                            if blind[clipped_last + 1] and codes[w, c, clipped_last + 1] >= max_code:
+                                continue
+                        if blind[top - 1]:
                             continue
-                        idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_table)
-                        idx += window_start[w]
-                        # Plain peak detection reports the first sample at the top code; the plateau's model
-                        # still places the echo that is taken off before the search goes on.
-                        found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
-                    else:
-                        d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
-                                           settings.fit, fit_table)
-                        idx = float(window_start[w] + top) + d
-                        found = idx
-                        amp = height / ratio
-                        k = top + 1  # look again behind this echo once its modelled shape is taken off
-                    u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
-                    _add_echo(echoes, top + 1, u, dt, amp / settings.peak_density, basis)
-                    j = slot * cap + counts[slot]
-                    out_w[j] = w
-                    out_c[j] = c
-                    out_idx[j] = found
-                    out_amp[j] = amp
-                    out_snr[j] = amp / sigma[top]
-                    out_sat[j] = clipped_first >= 0
-                    counts[slot] += 1
+                        height = resid[top] - echoes[top]
+                        if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
+                            continue
+                        if counts[slot] >= cap:
+                            continue
+                        if clipped_first >= 0:
+                            # Clipped: the plateau and the clip levels at its ends (over a baseline that may slope) give
+                            # amplitude and peak time through the known pulse shape. A clip level that the echoes found
+                            # before already explain leaves the plateau's edge, so its width, unknown.
+                            level_first = resid[clipped_first] - echoes[clipped_first]
+                            level_last = resid[clipped_last] - echoes[clipped_last]
+                            if not (level_first > 0.0 and level_last > 0.0):
+                                continue
+                            idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_table)
+                            idx += window_start[w]
+                            # Plain peak detection reports the first sample at the top code; the plateau's model
+                            # still places the echo that is taken off before the search goes on.
+                            found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
+                        else:
+                            d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
+                                               settings.fit, fit_table)
+                            idx = float(window_start[w] + top) + d
+                            found = idx
+                            amp = height / ratio
+                            k = top + 1  # look again behind this echo once its modelled shape is taken off
+                        u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
+                        _add_echo(echoes, top + 1, u, dt, amp / settings.peak_density, basis)
+                        j = slot * cap + counts[slot]
+                        out_w[j] = w
+                        out_c[j] = c
+                        out_idx[j] = found
+                        out_amp[j] = amp
+                        out_snr[j] = amp / sigma[top]
+                        out_sat[j] = clipped_first >= 0
+                        counts[slot] += 1
 
 
 @numba.njit(cache=True, nogil=True)
@@ -398,6 +418,28 @@ def _may_run(codes, synthesised, w, c, chans, k_sigma):
     for k in range(codes.shape[2]):
         highest = max(highest, codes[w, c, k])
     return highest - chans.dark_mean_lsb[c] > 0.5 * k_sigma * processor_sigma_lsb(chans, c, 0.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _code_segments(row, seg_first, seg_end):
+    """The stretches of ``row`` (n,) codes within a sample of a nonzero code, merged where they touch: their first
+    samples and ends (exclusive) into ``seg_first``, ``seg_end``; returns how many. A run of the peak search lies
+    inside one (its samples' codes are nonzero), and so does every sample the search reads around a run."""
+    n, m, k = row.shape[0], 0, 0
+    while k < n:
+        if row[k] == 0:
+            k += 1
+            continue
+        a = max(k - 1, 0)
+        while k < n and row[k] != 0:
+            k += 1
+        b = min(k + 1, n)
+        if m > 0 and a <= seg_end[m - 1]:
+            seg_end[m - 1] = b
+        else:
+            seg_first[m], seg_end[m] = a, b
+            m += 1
+    return m
 
 
 @numba.njit(cache=True, inline="always")

@@ -132,6 +132,49 @@ def test_full_records_coded_only_where_the_peak_search_reads_give_the_same_peaks
     np.testing.assert_array_equal(part[1].dropout_cause, whole[1].dropout_cause)
 
 
+@pytest.mark.parametrize("case", ["pool", "low threshold", "clean ocean", "gated near"])
+def test_the_search_within_a_sample_of_nonzero_codes_finds_what_the_search_of_every_sample_finds(case):
+    """On full records coded only where the search reads (mostly 0), the peak search that computes residuals and looks
+    for runs only within a sample of a nonzero code finds, field for field, the peaks of the search over every sample
+    of the same records (the records relabelled ``windowed`` take that one): a code of 0 is under every run."""
+    from dataclasses import replace
+
+    from muls.peaks import find_peaks
+
+    ins, water = mul2023(), "pool"
+    if case == "low threshold":
+        ins = replace(ins, processing=replace(ins.processing, threshold_sigma=2.0))
+    elif case == "clean ocean":
+        water = "clean_ocean"
+    elif case == "gated near":
+        ins = mul2023(20e-9, 300e-9)
+    model = OpticalModel.build(ins, water_preset(water))
+    n = 300
+    batch = PulseBatch.flat_target(ins, np.linspace(0.6, 40.0, n), reflectance=np.linspace(0.02, 0.9, n),
+                                   pulse_id=np.arange(n) + 3)
+    echoes = model.echoes(batch)
+    records = simulate(model, batch, 4, "full", ranging_only=True)[0]
+    assert (records.codes > 0).mean() < (0.3 if case == "pool" else 1.0)
+    sparse, dense = find_peaks(model, batch, records, echoes)[0], find_peaks(model, batch, replace(records, mode="windowed"),
+                                                                             echoes)[0]
+    assert dense.pulse.size > n // 2
+    for name in dense.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(sparse, name), getattr(dense, name), err_msg=name)
+
+
+def test_code_segments_cover_each_nonzero_code_and_its_neighbours_and_merge_where_they_touch():
+    """By hand: stretches within a sample of a nonzero code; two stretches two zeros apart share a zero and merge,
+    three apart stay two; a record's ends clip them."""
+    from muls.peaks import _code_segments
+
+    row = np.array([5, 0, 0, 0, 0, 7, 7, 0, 0, 3, 0, 0, 0, 0, 0, 0, 0, 9], np.uint16)
+    first, end = np.zeros(10, np.int64), np.zeros(10, np.int64)
+    m = _code_segments(row, first, end)
+    assert [(int(a), int(b)) for a, b in zip(first[:m], end[:m])] == [(0, 2), (4, 11), (16, 18)]
+    assert _code_segments(np.zeros(6, np.uint16), first, end) == 0
+    assert _code_segments(np.ones(6, np.uint16), first, end) == 1 and (first[0], end[0]) == (0, 6)
+
+
 def test_the_peak_fits_table_lookup_is_numpys_interp_bit_for_bit():
     """The compiled lookup of the three-point fit's table (``bracket`` and ``interp_at``, in place of numba's scalar
     np.interp) gives numpy.interp's values exactly: inside the grid, on its points, beyond both ends, at +-inf and NaN."""
