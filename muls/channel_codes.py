@@ -47,8 +47,9 @@ def ranging_codes(out, power, baseline, times, dark_hashes, dark_half, shot_hash
     ``k_sigma`` / 2 of the processor's sigma), where it may be clipped (the top code), and the samples next to those
     (a run's ends, the three-point fit, a plateau's edges). A code cannot be either where even its largest possible
     noise cannot take it there: each normal at most :func:`muls.noise.normal_upper_bound` of its bits (read from the
-    hash, not drawn). The echo model the search takes off a residual is never negative, and a code of 0 lies under
-    every run's level and the top code, so the search finds the same runs. ``dark_hashes``, ``shot_hashes`` (n,): the
+    hash, not drawn), and a code is an integer, so one over the run level must reach the least integer over it. The
+    echo model the search takes off a residual is never negative, and a code of 0 lies under every run's level and the
+    top code, so the search finds the same runs. ``dark_hashes``, ``shot_hashes`` (n,): the
     positions of the channel's dark stream and its detector's shot stream, whose halves ``dark_half`` and
     ``shot_half`` are this channel's; ``read``, ``tails`` (n,) bool, ``at`` (n,) int64, ``dark_normal``, ``shot_normal``
     (n,) scratch."""
@@ -65,8 +66,10 @@ def ranging_codes(out, power, baseline, times, dark_hashes, dark_half, shot_hash
         noise_most = (dark_std * normal_upper_bound(half_bits(dark_hashes[k], dark_half))
                       + math.sqrt(shot * gated) * normal_upper_bound(half_bits(shot_hashes[k], shot_half)))
         reach = dark_mean + lsb_per_w * gated + noise_scale * noise_most + 0.5 + READ_MARGIN_LSB  # MULS Eq. 13
-        run = reach - (dark_mean + lsb_per_w * base) > 0.5 * k_sigma * math.sqrt(dark_std**2 + shot * base + 1.0 / 12.0)
-        read[k] = run | (reach >= max_code)
+        # A run holds codes over the baseline's level by more than half the threshold: integers from the least such
+        # one up (the floor taken a hair low, so that rounding in the sum cannot raise it).
+        level = dark_mean + lsb_per_w * base + 0.5 * k_sigma * math.sqrt(dark_std**2 + shot * base + 1.0 / 12.0)
+        read[k] = (reach >= math.floor(level - READ_MARGIN_LSB) + 1.0) | (reach >= max_code)
         out[k] = 0
     m = 0
     for k in range(n):  # the samples to read and their neighbours, listed without a branch
