@@ -150,7 +150,7 @@ def test_regression_a_clipped_echos_tail_does_not_take_the_next_returns_truth():
     second echo does: the second return, ranged correctly at 2.97 m, got the first surface's class, object and
     truth, a +1.17 m range error (300 of 600 points). At a peak the signal's slope is zero, so an echo well down
     its tail cannot have made it; the peak's echo is now the most powerful of those still rising or within half
-    their maximum past it (muls.peaks.dominant_echo). Each point of the two surfaces ranged on every pulse lies on
+    their maximum past it (muls.peak_echoes.dominant_echo). Each point of the two surfaces ranged on every pulse lies on
     the surface it is attributed to (a few weak returns of the deepest, 10.2 m down, scatter by up to 0.3 m)."""
     objects = _staircase(1.8, 1.2)
     points = _points(_static_scene(objects, fidelity="reference", pulses=300))
