@@ -322,8 +322,7 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
             for i in range(n_cut - 1, -1, -1):
                 ahead[i] = ahead[i + 1] + cut_s[i]
             next_cut = 0
-            for k in range(n_samples):
-                times[k] = sampling.t0_s + (window_start[w] + k) * dt + sampling.phase_s[p]
+            sample_times(times, 0, n_samples, sampling.t0_s, dt, window_start[w], sampling.phase_s[p])
             # The uncut column, on SIMD lanes (uncut_column_value's numbers): where a cut is still ahead, and for the
             # baseline wherever that is needed.
             uncut_until = 0
@@ -402,6 +401,14 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                                   max_code, noise_scale)
                 else:
                     codes[w, c, :] = 0
+
+
+@numba.njit(cache=True, inline="always")
+def sample_times(out, first, end, t0_s, dt_s, first_index, phase_s):
+    """out[k] = t0_s + (first_index + k) dt_s + phase_s [s] for first <= k < end: the times of samples of a window
+    whose sample 0 is sample ``first_index`` of its record (:class:`Sampling`; :meth:`Records.sample_times_s`)."""
+    for k in range(first, end):
+        out[k] = t0_s + (first_index + k) * dt_s + phase_s
 
 
 @numba.njit(cache=True, inline="always")

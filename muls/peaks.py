@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from .channels import processor_sigma_lsb
-from .detection import WINDOW_BLOCK, Records
+from .detection import WINDOW_BLOCK, Records, sample_times
 from .lookup import bracket, interp_at, on_geometric_grid, on_log_grid, steps_per_log
 from .peak_echoes import dominant_echo
 from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values
@@ -228,7 +228,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
         resid, sigma = np.empty(n_samples), np.empty(n_samples)
         echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
         open_, blind = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_)
-        seg_first, seg_end = np.zeros(n_samples // 2 + 1, np.int64), np.full(n_samples // 2 + 1, n_samples)
+        seg_first, seg_end = np.empty(n_samples // 2 + 1, np.int64), np.empty(n_samples // 2 + 1, np.int64)
         for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
             p = window_pulse[w]
             first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
@@ -237,8 +237,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
             if first == n_chan:
                 continue
             if not sparse:
-                for k in range(n_samples):
-                    times[k] = t0 + (window_start[w] + k) * dt + phase[p]
+                sample_times(times, 0, n_samples, t0, dt, window_start[w], phase[p])
                 baseline_values(base_w, times, background[p], col)
             for c in range(first, n_chan):
                 slot = w * n_chan + c
@@ -248,13 +247,13 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                 # sample of a nonzero code (a code of 0 lies under every run's level, so no run holds one).
                 n_seg, seen = 1, 0
                 if not sparse:
+                    seg_first[0], seg_end[0] = 0, n_samples
                     seen = _residuals(codes[w, c], times, base_w, chans, c, max_code, open_, blind, sigma, resid, echoes)
                 else:
                     n_seg = _code_segments(codes[w, c], seg_first, seg_end)
                     for g in range(n_seg):  # the same numbers as the whole window's, sample by sample
                         a, b = seg_first[g], seg_end[g]
-                        for k in range(a, b):
-                            times[k] = t0 + (window_start[w] + k) * dt + phase[p]
+                        sample_times(times, a, b, t0, dt, window_start[w], phase[p])
                         baseline_values(base_w[a:b], times[a:b], background[p], col)
                         seen += _residuals(codes[w, c, a:b], times[a:b], base_w[a:b], chans, c, max_code, open_[a:b],
                                            blind[a:b], sigma[a:b], resid[a:b], echoes[a:b])

@@ -73,17 +73,11 @@ def test_ranging_only_ch0_records_give_the_ranges_of_whole_ones(mode, dark_std, 
     np.testing.assert_array_equal(part[1].dropout_cause, whole[1].dropout_cause)
 
 
-@pytest.mark.parametrize("case", ["pool", "low threshold", "dark noise", "daylight", "clean ocean", "gated near"])
-def test_full_records_coded_only_where_the_peak_search_reads_give_the_same_peaks(case):
-    """Full records under ``ranging_only`` get codes only where the peak search may read them (a run may start or go
-    on, a code may clip, and their neighbours), 0 elsewhere: the same peaks, every field, and the same ranges and
-    dropouts as whole records. Cases that put many samples near the bounds: a threshold of 2 sigma (noise runs in
-    every record), dark noise of 12 LSB, strong background light (shot noise over the whole record), clean ocean water's
-    strong backscatter and clipped near targets, and a range gate opening on the column."""
+def _sparse_case(case):
+    """(instrument, water preset, background light [W]) of a case that puts many full-record samples near the bounds
+    of what the peak search reads: the prototype in pool water, a 2-sigma threshold, 12 LSB of dark noise, strong
+    background light, clean ocean water, or a range gate opening on the column."""
     from dataclasses import replace
-
-    from muls.peaks import find_peaks
-    from muls.waveform import baseline_values
 
     ins, water, background = mul2023(), "pool", 0.0
     if case == "low threshold":
@@ -96,6 +90,21 @@ def test_full_records_coded_only_where_the_peak_search_reads_give_the_same_peaks
         water = "clean_ocean"
     elif case == "gated near":
         ins = mul2023(20e-9, 300e-9)
+    return ins, water, background
+
+
+@pytest.mark.parametrize("case", ["pool", "low threshold", "dark noise", "daylight", "clean ocean", "gated near"])
+def test_full_records_coded_only_where_the_peak_search_reads_give_the_same_peaks(case):
+    """Full records under ``ranging_only`` get codes only where the peak search may read them (a run may start or go
+    on, a code may clip, and their neighbours), 0 elsewhere: the same peaks, every field, and the same ranges and
+    dropouts as whole records. Cases that put many samples near the bounds: a threshold of 2 sigma (noise runs in
+    every record), dark noise of 12 LSB, strong background light (shot noise over the whole record), clean ocean water's
+    strong backscatter and clipped near targets, and a range gate opening on the column."""
+
+    from muls.peaks import find_peaks
+    from muls.waveform import baseline_values
+
+    ins, water, background = _sparse_case(case)
     model = OpticalModel.build(ins, water_preset(water))
     n = 400
     ranges = np.concatenate([np.linspace(0.6, 40.0, n - 20), np.full(20, np.inf)])
@@ -141,13 +150,7 @@ def test_the_search_within_a_sample_of_nonzero_codes_finds_what_the_search_of_ev
 
     from muls.peaks import find_peaks
 
-    ins, water = mul2023(), "pool"
-    if case == "low threshold":
-        ins = replace(ins, processing=replace(ins.processing, threshold_sigma=2.0))
-    elif case == "clean ocean":
-        water = "clean_ocean"
-    elif case == "gated near":
-        ins = mul2023(20e-9, 300e-9)
+    ins, water, _ = _sparse_case(case)
     model = OpticalModel.build(ins, water_preset(water))
     n = 300
     batch = PulseBatch.flat_target(ins, np.linspace(0.6, 40.0, n), reflectance=np.linspace(0.02, 0.9, n),
