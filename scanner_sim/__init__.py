@@ -9,12 +9,11 @@ The Python API (``docs/python-api.md``)::
 """
 
 import muls  # noqa: F401  first: it sets where numba caches kernels (muls/kernel_cache.py)
-
-from .config import ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes
-from .records import DropoutRecords, PointRecords
-from .scene import Scene, build_scene
-from .survey import PassOptions, PassResult, PassSetup, run_pass, simulate_pass
-from .version import __version__
+from scanner_sim.config import ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes
+from scanner_sim.survey.pipeline import PassOptions, PassResult, PassSetup, run_pass, simulate_pass
+from scanner_sim.survey.point_records import DropoutRecords, PointRecords
+from scanner_sim.version import __version__
+from scanner_sim.world.scene import Scene, build_scene
 
 __all__ = [
     "ConfigError", "DropoutRecords", "PassOptions", "PassResult", "PassSetup", "PointRecords", "Scene",

@@ -34,9 +34,8 @@ from muls.command import (
     run_guarded,
     seed,
 )
-
-from .beams import SUBRAY_COUNTS
-from .fidelity import FIDELITY_LEVELS
+from scanner_sim.fidelity import FIDELITY_LEVELS
+from scanner_sim.rays.beams import SUBRAY_COUNTS
 
 SUBCOMMANDS: dict[str, Callable] = {}
 
@@ -59,7 +58,7 @@ def _add_scenes(sub):
 
 
 def _cmd_scenes(args) -> int:
-    from .config import load_scene, shipped_scenes
+    from scanner_sim.config import load_scene, shipped_scenes
 
     for name in shipped_scenes():
         cfg = load_scene(name)
@@ -78,15 +77,15 @@ def _add_validate(sub):
 
 
 def _cmd_validate(args) -> int:
-    from .config import load_scene
+    from scanner_sim.config import load_scene
 
     cfg = load_scene(args.scene)
     cfg.water_model()
     inst = cfg.instrument_model()
     extra = ""
     if args.build:
-        from .scene import build_scene
-        from .setup_checks import build_trajectory
+        from scanner_sim.motion.track_checks import build_trajectory
+        from scanner_sim.world.scene import build_scene
 
         scene = build_scene(cfg)
         traj = build_trajectory(cfg, scene)
@@ -116,8 +115,7 @@ def _cmd_overlap(args) -> int:
 
     from muls.errors import ParameterError
     from muls.presets import instrument_preset, water_preset
-
-    from .overlap import raycast_overlap
+    from scanner_sim.studies.raycast_overlap import raycast_overlap
 
     dist = np.asarray(args.distances_m, float)
     if np.any(~np.isfinite(dist)) or np.any(dist <= 0):
@@ -137,7 +135,7 @@ def _cmd_overlap(args) -> int:
         "full_overlap_m": round(geometry.full_overlap_m, 4),
     }
     if args.out:
-        from .viz import plot_overlap
+        from scanner_sim.render.viz import plot_overlap
 
         dense = np.linspace(0.0, float(dist.max()) * 1.05, 400)
         plot_overlap(args.out, dist, ray, ana, title=f"Beam / receiver-FOV overlap, {args.instrument} geometry",
@@ -168,7 +166,7 @@ def _add_bench_rays(sub):
 
 
 def _cmd_bench_rays(args) -> int:
-    from .raybench import bench_rays
+    from scanner_sim.perf.raybench import bench_rays
 
     result = bench_rays(args.scene, args.pulses, args.subrays, args.repeat)
     if args.json:
@@ -189,13 +187,13 @@ def _add_schema(sub):
 
 
 def _cmd_schema(args) -> int:
-    from .config import scene_json_schema
+    from scanner_sim.config import scene_json_schema
 
     text = json.dumps(scene_json_schema(), indent=2) + "\n"
     if args.out is None:
         sys.stdout.write(text)
         return 0
-    from .io import write_text
+    from scanner_sim.io import write_text
 
     write_text(args.out, text)
     print(args.out)
@@ -234,8 +232,8 @@ def scene_overrides(args, config) -> dict:
     """The scene keys that ``run``'s options set, by dotted name (validated later with the scene)."""
     import yaml
 
-    from .config.errors import shown
-    from .config.loading import _StrictLoader
+    from scanner_sim.config.errors import shown
+    from scanner_sim.config.loading import _StrictLoader
 
     changes = {}
     for item in args.set:
@@ -278,8 +276,8 @@ def _first_run_notice() -> None:
 def _cmd_run(args) -> int:
     from pathlib import Path
 
-    from .config import load_scene
-    from .survey import PassOptions, run_pass
+    from scanner_sim.config import load_scene
+    from scanner_sim.survey.pipeline import PassOptions, run_pass
 
     config = load_scene(args.scene)
     config = config.with_overrides(scene_overrides(args, config))
@@ -318,13 +316,13 @@ def _add_bench(sub):
                    help="timed passes per level (the best is kept, the median reported beside it)")
     p.add_argument("--no-large-seabed", action="store_true", help="skip the two-million-triangle seabed case")
     p.add_argument("--profile", choices=list(FIDELITY_LEVELS), metavar="LEVEL",
-                   help="instead: CPU seconds per stage of one pass at LEVEL on one numba thread (scanner_sim.profiling)")
+                   help="instead: CPU seconds per stage of one pass at LEVEL on one numba thread (scanner_sim.perf.profiling)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench)
 
 
 def _cmd_bench(args) -> int:
-    from .bench import bench_pass
+    from scanner_sim.perf.bench import bench_pass
 
     if args.profile:
         return _print_profile(args)
@@ -347,7 +345,7 @@ def _cmd_bench(args) -> int:
 
 
 def _print_profile(args) -> int:
-    from .profiling import stage_profile
+    from scanner_sim.perf.profiling import stage_profile
 
     result = stage_profile(args.scene, args.profile, args.pulses)
     if args.json:
@@ -364,7 +362,7 @@ def _print_profile(args) -> int:
 # -- tradeoff -------------------------------------------------------------------------------------------
 @subcommand("tradeoff")
 def _add_tradeoff(sub):
-    from .tradeoff import DEFAULT_PULSES, DEFAULT_REPEAT, DEFAULT_WAVEFORM_PULSES, KNOBS
+    from scanner_sim.studies.tradeoff import DEFAULT_PULSES, DEFAULT_REPEAT, DEFAULT_WAVEFORM_PULSES, KNOBS
 
     p = sub.add_parser("tradeoff", help="speed against accuracy: each fidelity level and knob on the same pulses, "
                        "against the truth and the reference level (chart, table, JSON)")
@@ -389,8 +387,8 @@ def _add_tradeoff(sub):
 def _cmd_tradeoff(args) -> int:
     from pathlib import Path
 
-    from .config import load_scene
-    from .tradeoff import markdown_table, tradeoff, write_tradeoff
+    from scanner_sim.config import load_scene
+    from scanner_sim.studies.tradeoff import markdown_table, tradeoff, write_tradeoff
 
     config = load_scene(args.scene)
     out = Path(args.out or Path(config.output_dir) / "tradeoff")
@@ -432,8 +430,8 @@ def _cmd_view(args) -> int:
 
     import laspy
 
-    from . import viz
-    from .io import read_las, read_scene_ply
+    from scanner_sim.io import read_las, read_scene_ply
+    from scanner_sim.render import viz
 
     las = Path(args.las)
     if not las.is_file():
@@ -484,9 +482,9 @@ def _add_swath(sub):
 def _cmd_swath(args) -> int:
     from pathlib import Path
 
-    from .io import read_las
-    from .records import PointRecords
-    from .swath import swath_consistency
+    from scanner_sim.io import read_las
+    from scanner_sim.metrics.swath import swath_consistency
+    from scanner_sim.survey.point_records import PointRecords
 
     path = Path(args.path)
     if path.is_file():
@@ -514,8 +512,8 @@ def _cmd_swath(args) -> int:
 # -- coverage -------------------------------------------------------------------------------------------
 @subcommand("coverage")
 def _add_coverage(sub):
-    from .coverage import CoverageSettings
-    from .coverage_study import DEFAULT_INSTRUMENTS, DEFAULT_WATERS, GATE_MODES, INSTRUMENTS
+    from scanner_sim.metrics.coverage import CoverageSettings
+    from scanner_sim.studies.coverage_study import DEFAULT_INSTRUMENTS, DEFAULT_WATERS, GATE_MODES, INSTRUMENTS
 
     p = sub.add_parser("coverage", help="mapping coverage per water type x altitude x instrument, with its report")
     p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
@@ -546,10 +544,10 @@ def _add_coverage(sub):
 def _cmd_coverage(args) -> int:
     from pathlib import Path
 
-    from .config import load_scene
-    from .coverage import CoverageSettings
-    from .coverage_study import StudyPlan, run_study
-    from .report import main_table, markdown_table
+    from scanner_sim.config import load_scene
+    from scanner_sim.metrics.coverage import CoverageSettings
+    from scanner_sim.render.report import main_table, markdown_table
+    from scanner_sim.studies.coverage_study import StudyPlan, run_study
 
     config = load_scene(args.scene)
     plan = StudyPlan(tuple(args.waters), tuple(args.altitudes_m) if args.altitudes_m else (None,),
@@ -578,7 +576,7 @@ def _add_dask_arguments(p) -> None:
 
 def _workers(args) -> int:
     """--workers, by default one per core."""
-    from .pass_runner import default_workers
+    from scanner_sim.runs.tasks import default_workers
 
     return default_workers() if args.workers is None else args.workers
 
@@ -598,8 +596,8 @@ def _add_campaign(sub):
 def _cmd_campaign(args) -> int:
     from pathlib import Path
 
-    from .campaign import load_campaign, run_campaign
-    from .pass_runner import maybe_client
+    from scanner_sim.runs.campaign import load_campaign, run_campaign
+    from scanner_sim.runs.tasks import maybe_client
 
     campaign = load_campaign(args.campaign)
     out = Path(args.out or Path("out") / "campaigns" / campaign.name)
@@ -629,7 +627,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Entry point of ``scanner-sim``; returns the exit code: 0, 1 (a failure such as a full disk), 2 (bad
     input), 130 (Ctrl-C) or 143 (SIGTERM), with one line on stderr for anything but 0 (``docs/errors.md``)."""
-    from .raycast import tune_memory
+    from scanner_sim.rays.cast import tune_memory
 
     tune_memory()  # reuse chunk-sized arrays instead of page-faulting them anew (measured, see raycast)
     args, code = parse_guarded(build_parser(), argv)

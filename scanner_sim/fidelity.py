@@ -31,7 +31,7 @@ class FidelityLevel:
     each hit to the receiver aperture (parallax shadows); without them only the FOV cone is checked.
     record_mode: ``"windowed"`` (samples around the echoes) or ``"full"`` (every sample of every channel),
     ``muls.detection.RECORD_MODES``. column_cut: where the water column stops, one of :data:`COLUMN_CUTS`
-    (:func:`column_cuts`). adaptive: decide per pulse (:mod:`scanner_sim.auto_level`): where all ``subrays`` hit one
+    (:func:`column_cuts`). adaptive: decide per pulse (:mod:`scanner_sim.rays.auto`): where all ``subrays`` hit one
     surface within 5 cm of range, two echoes with their delays' energy, mean, variance and skewness, else one per
     sub-ray. deciding_only: synthesise and search in each record window only the channels that can decide a return
     (:mod:`muls.deciding_channels`).

@@ -1,6 +1,6 @@
 """The ``auto`` level: balanced's hits, the seabed's found on its height field where that is proven exact, and
 each simple footprint's sub-ray echoes replaced by the two-point Gauss quadrature of their delays
-(scanner_sim.echo_collapse), the rest kept."""
+(scanner_sim.rays.collapse), the rest kept."""
 
 from pathlib import Path
 
@@ -8,18 +8,18 @@ import numpy as np
 import pytest
 
 from muls.presets import mul2023
-from scanner_sim import auto_level
-from scanner_sim.auto_level import cast_auto
-from scanner_sim.beams import beam_pattern
 from scanner_sim.config import load_scene
-from scanner_sim.echo_collapse import HIT_FIELDS, SIMPLE_SPREAD_M, simple_pulses, two_point_rule
 from scanner_sim.fidelity import FIDELITY_LEVELS
-from scanner_sim.raycast import Hits, RayCaster, cast_beams
-from scanner_sim.scene import LABELS, Part, Scene, panel_mesh, tube
-from scanner_sim.seabed_grid import seabed_grid
-from scanner_sim.survey import PassOptions, PassSetup, hit_echo_range_m
-from scanner_sim.terrain import HeightField
-from scanner_sim.tradeoff import with_level
+from scanner_sim.rays import auto as auto_level
+from scanner_sim.rays.auto import cast_auto
+from scanner_sim.rays.beams import beam_pattern
+from scanner_sim.rays.cast import Hits, RayCaster, cast_beams
+from scanner_sim.rays.collapse import HIT_FIELDS, SIMPLE_SPREAD_M, simple_pulses, two_point_rule
+from scanner_sim.rays.seabed_grid import seabed_grid
+from scanner_sim.studies.tradeoff import with_level
+from scanner_sim.survey.pipeline import PassOptions, PassSetup, hit_echo_range_m
+from scanner_sim.world.scene import LABELS, Part, Scene, panel_mesh, tube
+from scanner_sim.world.terrain import HeightField
 
 FAILURES = Path(__file__).resolve().parent.parent / "scenes" / "failures"
 M = 7

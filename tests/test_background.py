@@ -5,7 +5,7 @@ import math
 import pytest
 
 from scanner_sim.config import ConfigError, load_scene
-from scanner_sim.survey import PassOptions, PassSetup
+from scanner_sim.survey.pipeline import PassOptions, PassSetup
 
 RADIANCE = 0.5  # L_b [W/(m^2 sr nm)]
 

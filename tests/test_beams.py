@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from muls.presets import mul2023
-from scanner_sim.beams import SUBRAY_COUNTS, beam_pattern, subrays
-from scanner_sim.overlap import raycast_overlap
+from scanner_sim.rays.beams import SUBRAY_COUNTS, beam_pattern, subrays
+from scanner_sim.studies.raycast_overlap import raycast_overlap
 
 GEOMETRY = mul2023().geometry
 OVERLAP_TOLERANCE = 0.03  # issue 3 acceptance: ray-cast overlap within 0.03 of Eq. 11 with >= 61 sub-rays

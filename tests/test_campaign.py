@@ -16,11 +16,11 @@ from signal import SIGKILL
 import pytest
 import yaml
 
-from scanner_sim.campaign import load_campaign, parse_campaign
 from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, load_scene
-from scanner_sim.pass_runner import TIMING_KEYS, dask_client, run_pass_segmented
-from scanner_sim.survey import PassOptions, run_pass
+from scanner_sim.runs.campaign import load_campaign, parse_campaign
+from scanner_sim.runs.tasks import TIMING_KEYS, dask_client, run_pass_segmented
+from scanner_sim.survey.pipeline import PassOptions, run_pass
 
 EXAMPLE = SCENES_DIR / "campaigns" / "example_campaign.yaml"
 #: The files whose bytes must match the serial pass's (summary.json is compared without its timings).
@@ -123,7 +123,7 @@ def test_a_worker_killed_mid_campaign_costs_only_its_task(client, example_run, t
 
     def run():
         try:
-            from scanner_sim.campaign import run_campaign
+            from scanner_sim.runs.campaign import run_campaign
 
             run_campaign(campaign, out, client, progress=False)
         except Exception as exc:  # reported below
@@ -160,7 +160,7 @@ def test_a_rerun_skips_complete_passes_and_redoes_the_rest(client, example_run, 
     stale["seed"] = 99  # written by a pass of other inputs
     (third / "summary.json").write_text(json.dumps(stale))
     kept = (out / campaign.jobs[3].name / "points.las").stat().st_mtime_ns
-    from scanner_sim.campaign import run_campaign
+    from scanner_sim.runs.campaign import run_campaign
 
     result = run_campaign(campaign, out, client, progress=False)
     assert [p["status"] for p in result["passes"]] == ["ran", "ran", "ran", "skipped"]
@@ -248,7 +248,7 @@ def test_the_docs_show_the_shipped_example_file():
 
 
 def test_a_campaign_of_segmented_passes_in_this_process(tmp_path):
-    from scanner_sim.campaign import run_campaign
+    from scanner_sim.runs.campaign import run_campaign
 
     campaign = parse_campaign({"scene": "cable_survey", "sweep": {"seed": [5]},
                                "options": {"max_pulses": 3000, "chunk_pulses": 1000, "segments": 2,

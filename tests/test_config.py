@@ -8,7 +8,6 @@ import yaml
 
 from muls.detection import RECORD_MODES
 from muls.errors import ParameterError
-from scanner_sim.beams import SUBRAY_COUNTS
 from scanner_sim.config import (
     SCENES_DIR,
     ConfigError,
@@ -24,6 +23,7 @@ from scanner_sim.config import (
     shipped_scenes,
 )
 from scanner_sim.fidelity import FIDELITY_LEVELS, fidelity_level
+from scanner_sim.rays.beams import SUBRAY_COUNTS
 
 SHIPPED = ["cable_survey", "mine_field", "seabed_lawnmower", "pool_panel", "pond_panel"]
 

@@ -5,7 +5,7 @@ import pytest
 
 from muls.errors import ParameterError
 from scanner_sim.config import load_scene, parse_scene
-from scanner_sim.coverage import (
+from scanner_sim.metrics.coverage import (
     COVERED,
     GAP_CAUSES,
     NOT_REACHED,
@@ -15,9 +15,9 @@ from scanner_sim.coverage import (
     Footprint,
     PlanGrid,
 )
-from scanner_sim.records import DROPOUT_CAUSES, DropoutRecords, PointRecords
-from scanner_sim.scene import build_scene
-from scanner_sim.survey import PassOptions, run_pass
+from scanner_sim.survey.pipeline import PassOptions, run_pass
+from scanner_sim.survey.point_records import DROPOUT_CAUSES, DropoutRecords, PointRecords
+from scanner_sim.world.scene import build_scene
 
 CELL = 0.25
 

@@ -17,7 +17,7 @@ from matplotlib import image as mpimg
 from muls.errors import ParameterError
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
-from scanner_sim.coverage_study import StudyPlan, combination_config, combination_name
+from scanner_sim.studies.coverage_study import StudyPlan, combination_config, combination_name
 
 
 @pytest.fixture(scope="module")
@@ -135,7 +135,7 @@ def _hex_rgb(colour):
 def test_report_opens_in_headless_chromium_with_every_picture(small_study, tmp_path):
     """Chromium renders the page; the screenshot shows the map's covered teal and the renders' navy.
     .ci/run installs Chromium and sets MULS_REQUIRE_CHROMIUM=1, so CI never skips this."""
-    from scanner_sim.viz import COVERAGE_COLOURS
+    from scanner_sim.render.viz import COVERAGE_COLOURS
 
     browser = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
     if browser is None:
@@ -156,8 +156,8 @@ def test_report_opens_in_headless_chromium_with_every_picture(small_study, tmp_p
 
 
 def test_coverage_map_colours_cells_by_cause(tmp_path):
-    from scanner_sim.coverage import GAP_CAUSES
-    from scanner_sim.viz import COVERAGE_COLOURS, plot_coverage_map
+    from scanner_sim.metrics.coverage import GAP_CAUSES
+    from scanner_sim.render.viz import COVERAGE_COLOURS, plot_coverage_map
 
     state = np.full((40, 80), -2)
     state[10:30, 10:70] = -1
@@ -225,7 +225,7 @@ def test_coverage_falls_with_turbidity_and_altitude_and_multichannel_wins(scene,
 
 
 def run_study_quietly(scene, out):
-    from scanner_sim.coverage_study import run_study
+    from scanner_sim.studies.coverage_study import run_study
 
     plan = StudyPlan(altitudes_m=ALTITUDES_M, instruments=("mul2023", "single_channel"))
     return run_study(load_scene(scene), plan, out, max_pulses=20000, render=False, progress=False)

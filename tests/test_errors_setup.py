@@ -14,8 +14,8 @@ import yaml
 from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, load_scene, parse_scene
 from scanner_sim.config.errors import SetupWarning
-from scanner_sim.scene import build_scene
-from scanner_sim.setup_checks import MAX_LEGS, MAX_PASS_PULSES, build_trajectory, check_pass_budget, estimate_pass
+from scanner_sim.motion.track_checks import MAX_LEGS, MAX_PASS_PULSES, build_trajectory, check_pass_budget, estimate_pass
+from scanner_sim.world.scene import build_scene
 
 MINE_FIELD = yaml.safe_load((SCENES_DIR / "mine_field.yaml").read_text())
 

@@ -3,10 +3,10 @@
 
 import pytest
 
-from scanner_sim.bench import bench_pass
 from scanner_sim.fidelity import FIDELITY_LEVELS
-from scanner_sim.profiling import stage_profile
-from scanner_sim.raybench import bench_rays
+from scanner_sim.perf.bench import bench_pass
+from scanner_sim.perf.profiling import stage_profile
+from scanner_sim.perf.raybench import bench_rays
 
 
 def test_bench_reports_both_throughputs():

@@ -7,10 +7,10 @@ import pytest
 from muls.peaks import Peaks
 from muls.ranging import Ranging
 from scanner_sim.config import parse_scene
-from scanner_sim.points import NO_OBJECT, NOISE_CLASS, LinesOfSight, georeference
-from scanner_sim.raycast import Hits
-from scanner_sim.scene import LABELS
-from scanner_sim.survey import PassOptions, PassSetup
+from scanner_sim.rays.cast import Hits
+from scanner_sim.survey.georeference import NO_OBJECT, NOISE_CLASS, LinesOfSight, georeference
+from scanner_sim.survey.pipeline import PassOptions, PassSetup
+from scanner_sim.world.scene import LABELS
 
 STEP_M = 1.0
 UPPER_Z, LIDAR_Z = -5.0, -1.0

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from muls.presets import mul2023
-from scanner_sim.beams import beam_pattern
-from scanner_sim.raycast import RayCaster, cast_beams
-from scanner_sim.scene import LABELS, Part, Scene, frustum, panel_mesh
+from scanner_sim.rays.beams import beam_pattern
+from scanner_sim.rays.cast import RayCaster, cast_beams
+from scanner_sim.world.scene import LABELS, Part, Scene, frustum, panel_mesh
 
 GEOMETRY = mul2023().geometry
 FLOAT32_RANGE_TOL_M = 2e-6  # float32 spacing near 10 m is 1e-6 m
@@ -58,7 +58,7 @@ def test_all_subrays_range_exactly_on_a_plane(tilt_deg):
     assert len(hits) == 91
     n = np.array([0.0, -math.sin(tilt), math.cos(tilt)])
     # Recompute sub-ray origins/directions and the exact plane distance.
-    from scanner_sim.beams import subrays
+    from scanner_sim.rays.beams import subrays
 
     o, d = subrays(origin[None], np.array([[0, 0, -1.0]]), np.array([[1.0, 0, 0]]), beam_pattern(91),
                    0.5 * GEOMETRY.beam_diameter_m, 0.5 * GEOMETRY.beam_divergence_full_rad)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from scanner_sim.scanner import Scanner
+from scanner_sim.motion.scanner import Scanner
 
 PRF = 5000.0
 

@@ -5,10 +5,10 @@ import pytest
 import yaml
 
 from scanner_sim.config import SCENES_DIR, load_scene, parse_scene
-from scanner_sim.materials import LABELS, MATERIALS
-from scanner_sim.raycast import RayCaster
-from scanner_sim.scene import build_scene, cable_centreline, tube
-from scanner_sim.terrain import generate_heightfield
+from scanner_sim.rays.cast import RayCaster
+from scanner_sim.world.materials import LABELS, MATERIALS
+from scanner_sim.world.scene import build_scene, cable_centreline, tube
+from scanner_sim.world.terrain import generate_heightfield
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +19,7 @@ def mine_scene():
 def test_height_query_matches_the_mesh_the_rays_see():
     rng = np.random.default_rng(1)
     hf = generate_heightfield((100.0, 50.0), (10, 6), 0.2, 10.0, 0.2, 3.0, 0.7, 0.05, 0.6, 10.0, 0.1, rng)
-    from scanner_sim.scene import Part, Scene
+    from scanner_sim.world.scene import Part, Scene
 
     v, f = hf.mesh()
     scene = Scene([Part("seabed", "seabed", v, f, LABELS["seabed"], 0.14)], hf)

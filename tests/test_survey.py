@@ -13,9 +13,9 @@ import trimesh
 
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
-from scanner_sim.records import DROPOUT_CAUSES
-from scanner_sim.scene import LABELS
-from scanner_sim.survey import PassOptions, PassSetup, last_cut, run_pass
+from scanner_sim.survey.pipeline import PassOptions, PassSetup, last_cut, run_pass
+from scanner_sim.survey.point_records import DROPOUT_CAUSES
+from scanner_sim.world.scene import LABELS
 
 POOL_P95_MAX_M = 0.15
 INDEPENDENT_TOL_M = 0.01

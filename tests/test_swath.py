@@ -8,8 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from scanner_sim import swath
-from scanner_sim.records import PointRecords
+from scanner_sim.metrics import swath
+from scanner_sim.survey.point_records import PointRecords
 
 try:
     import open3d  # noqa: F401

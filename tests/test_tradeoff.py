@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scanner_sim.accuracy import vs_reference
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
 from scanner_sim.fidelity import FIDELITY_LEVELS
-from scanner_sim.report import tradeoff_section
-from scanner_sim.survey import PassOptions, PassSetup
-from scanner_sim.tradeoff import CONVERGENCE_SUBRAYS, with_level
+from scanner_sim.render.report import tradeoff_section
+from scanner_sim.studies.accuracy import vs_reference
+from scanner_sim.studies.tradeoff import CONVERGENCE_SUBRAYS, with_level
+from scanner_sim.survey.pipeline import PassOptions, PassSetup
 
 FAILURES = Path(__file__).resolve().parent.parent / "scenes" / "failures"
 
@@ -46,7 +46,7 @@ def test_every_level_has_its_speed_and_both_sets_of_metrics(step_edges):
 def test_more_timed_passes_change_only_the_speeds():
     """A seed fixes the points, so timing each run once or three times (round-robin, the fastest kept) gives the
     same metrics; only pulses_per_s may move, and the JSON says how many passes timed it."""
-    from scanner_sim.tradeoff import tradeoff
+    from scanner_sim.studies.tradeoff import tradeoff
 
     config = load_scene(FAILURES / "step_edges.yaml")
     once, thrice = (tradeoff(config, ("fast", "auto"), (), pulses=300, waveform_pulses=100, convergence=False,
@@ -107,7 +107,7 @@ def test_the_reference_has_converged_on_the_cable_survey():
 def test_points_on_a_plate_hidden_from_the_receiver_count_as_hidden():
     """The hidden-plate failure scene without shadow rays (fast before issue 12): a point per pulse, every one on
     the plate the visor hides from the receiver; the eight-surface staircase's returns behind edges are not."""
-    from scanner_sim.tradeoff import hidden_from_receiver
+    from scanner_sim.studies.tradeoff import hidden_from_receiver
 
     blind = replace(FIDELITY_LEVELS["fast"], shadow_rays=False)
     for scene, hidden in (("hidden_plate", 1.0), ("eight_surfaces", 0.0)):

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from scanner_sim.config import NavigationNoiseConfig, build, load_scene
-from scanner_sim.setup_checks import build_trajectory
-from scanner_sim.terrain import generate_heightfield
-from scanner_sim.trajectory import Trajectory, lawnmower_waypoints
+from scanner_sim.motion.track_checks import build_trajectory
+from scanner_sim.motion.trajectory import Trajectory, lawnmower_waypoints
+from scanner_sim.world.terrain import generate_heightfield
 
 #: Stated tolerance of constant-altitude following (docs/scene-format.md): over fractal relief of 0.3 m rms
 #: (10 m features, Hurst 0.7) plus 3 cm ripples, followed with follow_length_m = 1.5 m, the altitude above
@@ -85,7 +85,7 @@ def test_navigation_noise_is_seeded_chunk_independent_and_truth_is_kept():
 
 
 def test_shipped_cable_survey_altitude(tmp_path):
-    from scanner_sim.scene import build_scene
+    from scanner_sim.world.scene import build_scene
 
     cfg = load_scene("cable_survey")
     scene = build_scene(cfg)

@@ -7,9 +7,10 @@ import itertools
 import numpy as np
 import pytest
 
-from scanner_sim import cli, io, viz
-from scanner_sim.records import PointRecords
-from scanner_sim.scene import LABELS
+from scanner_sim import cli, io
+from scanner_sim.render import viz
+from scanner_sim.survey.point_records import PointRecords
+from scanner_sim.world.scene import LABELS
 
 OFFSET = np.array([500_000.0, 6_000_000.0, -40.0])
 SIZE = (400, 260)  # --window-size: small, so the renders stay fast

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from scanner_sim import viz
+from scanner_sim.render import viz
 
 OFFSET = np.array([500_000.0, 6_000_000.0, -40.0])
 #: A picture with fewer distinct colours than this is a blank or a failed render.
@@ -70,7 +70,7 @@ def test_render_rejects_bad_input(tmp_path):
 
 
 def test_class_table_reads_the_scene_labels():
-    from scanner_sim.scene import LABELS
+    from scanner_sim.world.scene import LABELS
 
     table = viz.class_table()
     assert table[LABELS["cable"]] == "cable" and table[LABELS["seabed"]] == "seabed"
@@ -104,7 +104,7 @@ def test_plot_waveforms_and_overlap(tmp_path):
 
 def test_importing_scanner_sim_does_not_import_plotting_libraries():
     code = (
-        "import sys, scanner_sim, scanner_sim.viz, scanner_sim.io, scanner_sim.points\n"
+        "import sys, scanner_sim, scanner_sim.render.viz, scanner_sim.io, scanner_sim.survey.georeference\n"
         "bad = [m for m in ('pyvista', 'vtk', 'matplotlib') if m in sys.modules]\n"
         "assert not bad, bad\n"
     )

@@ -13,8 +13,8 @@ Modules: ``errors`` (ConfigError and the one-line messages), ``base`` (strict ba
 ``scene_config`` (the whole scene, overrides, JSON Schema), ``loading`` (YAML files and shipped scenes).
 """
 
-from .errors import ConfigError, build
-from .geometry import (
+from scanner_sim.config.errors import ConfigError, build
+from scanner_sim.config.geometry import (
     OBJECT_TYPES,
     CableObject,
     ConeMineObject,
@@ -28,9 +28,9 @@ from .geometry import (
     SeabedConfig,
     reflectance_of,
 )
-from .loading import SCENES_DIR, load_scene, resolve_scene_path, shipped_scenes
-from .scene_config import FORMAT_VERSION, SceneConfig, parse_scene, scene_json_schema
-from .sections import (
+from scanner_sim.config.loading import SCENES_DIR, load_scene, resolve_scene_path, shipped_scenes
+from scanner_sim.config.scene_config import FORMAT_VERSION, SceneConfig, parse_scene, scene_json_schema
+from scanner_sim.config.sections import (
     AttitudeConfig,
     InstrumentConfig,
     LawnmowerConfig,

@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
-from .errors import checked_at, invalid
+from scanner_sim.config.errors import checked_at, invalid
 
 
 class StrictModel(BaseModel):

@@ -1,7 +1,7 @@
 """What the rays see: the procedural seabed and the objects (a discriminated union on ``type``).
 
 Every surface has a material (or a reflectance at 532 nm, which wins) and a class label, from
-:mod:`scanner_sim.materials`; :func:`surface` makes the base model that carries them with a kind's defaults.
+:mod:`scanner_sim.world.materials`; :func:`surface` makes the base model that carries them with a kind's defaults.
 Objects placed by [x, y] rest on the seabed; [x, y, z] gives the ground level z directly.
 """
 
@@ -17,8 +17,7 @@ from pydantic import (
     model_validator,
 )
 
-from ..materials import LABELS, MATERIALS
-from .base import (
+from scanner_sim.config.base import (
     Choice,
     Fraction,
     Fractions,
@@ -32,8 +31,9 @@ from .base import (
     Vector,
     choice_check,
 )
-from .errors import checked_at, invalid
-from .sections import MAX_SEED, check_depth_m
+from scanner_sim.config.errors import checked_at, invalid
+from scanner_sim.config.sections import MAX_SEED, check_depth_m
+from scanner_sim.world.materials import LABELS, MATERIALS
 
 MAX_SEABED_TRIANGLES = 2_000_000
 

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import yaml
 
-from .errors import ConfigError
-from .scene_config import SceneConfig, parse_scene
+from scanner_sim.config.errors import ConfigError
+from scanner_sim.config.scene_config import SceneConfig, parse_scene
 
 #: The shipped scenes, loaded by name.
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"

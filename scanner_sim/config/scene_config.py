@@ -6,10 +6,10 @@ from typing import Any
 
 from pydantic import PrivateAttr, model_validator
 
-from .base import Choice, StrictModel, choice_check
-from .errors import ConfigError, build, checked_at, invalid
-from .geometry import Objects, SeabedConfig
-from .sections import (
+from scanner_sim.config.base import Choice, StrictModel, choice_check
+from scanner_sim.config.errors import ConfigError, build, checked_at, invalid
+from scanner_sim.config.geometry import Objects, SeabedConfig
+from scanner_sim.config.sections import (
     InstrumentConfig,
     OutputConfig,
     PlatformConfig,

@@ -16,10 +16,7 @@ from muls.water import (
     GROUP_INDEX_SEAWATER,
     Water,
 )
-
-from ..beams import PROFILES, SUBRAY_COUNTS
-from ..fidelity import FIDELITY_LEVELS, FidelityLevel
-from .base import (
+from scanner_sim.config.base import (
     Choice,
     Integer,
     NonNegative,
@@ -30,7 +27,9 @@ from .base import (
     StrictModel,
     Vector,
 )
-from .errors import invalid
+from scanner_sim.config.errors import invalid
+from scanner_sim.fidelity import FIDELITY_LEVELS, FidelityLevel
+from scanner_sim.rays.beams import PROFILES, SUBRAY_COUNTS
 
 WaterPreset = Choice(*sorted(WATER_PRESETS))
 

@@ -2,16 +2,16 @@
 
 - :mod:`~scanner_sim.io.atomic`: :func:`atomic_path`, the atomic write every writer uses.
 - :mod:`~scanner_sim.io.las`: ``points.las``, LAS 1.4 format 6 with extra dimensions, streamed by
-  :class:`LasWriter`; the layout follows the :class:`~scanner_sim.records.PointRecords` declarations.
+  :class:`LasWriter`; the layout follows the :class:`~scanner_sim.survey.point_records.PointRecords` declarations.
 - :mod:`~scanner_sim.io.dropouts`: ``dropouts.npz``, streamed by :class:`DropoutWriter`.
 - :mod:`~scanner_sim.io.ply`: ``scene.ply``, the labelled truth meshes.
 - :mod:`~scanner_sim.io.summary`: ``summary.json``.
 - :mod:`~scanner_sim.io.tables`: ``trajectory.csv``, ``waveforms.npz``, ``coverage_grid.npz``, text files.
 """
 
-from .atomic import atomic_path
-from .dropouts import DropoutWriter, read_dropouts_npz, write_dropouts_npz
-from .las import (
+from scanner_sim.io.atomic import atomic_path
+from scanner_sim.io.dropouts import DropoutWriter, read_dropouts_npz, write_dropouts_npz
+from scanner_sim.io.las import (
     EXTRA_DIMENSIONS,
     LAS_POINT_FORMAT,
     LAS_SCALE_M,
@@ -24,9 +24,9 @@ from .las import (
     scan_angle_to_las,
     write_las,
 )
-from .ply import read_scene_ply, write_scene_ply
-from .summary import write_summary_json
-from .tables import (
+from scanner_sim.io.ply import read_scene_ply, write_scene_ply
+from scanner_sim.io.summary import write_summary_json
+from scanner_sim.io.tables import (
     read_coverage_grid_npz,
     read_trajectory_csv,
     read_waveforms_npz,

@@ -34,7 +34,7 @@ import shutil
 import threading
 from pathlib import Path
 
-from .atomic import PathLike, fsync_dir
+from scanner_sim.io.atomic import PathLike, fsync_dir
 
 try:
     import fcntl

@@ -9,8 +9,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..coverage import GAP_CAUSES
-from .atomic import PathLike, atomic_open
+from scanner_sim.io.atomic import PathLike, atomic_open
+from scanner_sim.metrics.coverage import GAP_CAUSES
 
 __all__ = [
     "read_coverage_grid_npz",
@@ -159,7 +159,7 @@ def read_waveforms_npz(path: PathLike) -> tuple[np.ndarray, np.ndarray, dict[str
 def write_coverage_grid_npz(path: PathLike, grid, state, reaching, valid) -> None:
     """Write a pass's plan-cell coverage to a compressed ``.npz``, atomically.
 
-    ``grid`` is a :class:`scanner_sim.coverage.PlanGrid`; ``state`` (ny, nx) int16 (-2 not reached,
+    ``grid`` is a :class:`scanner_sim.metrics.coverage.PlanGrid`; ``state`` (ny, nx) int16 (-2 not reached,
     -1 covered, else an index into ``gap_cause_names``); ``reaching`` and ``valid`` (ny * nx,) or
     (ny, nx) counts of reaching pulses and valid points per cell. Row = y, column = x; cell (0, 0) has its
     lower-left corner at ``origin_m``.

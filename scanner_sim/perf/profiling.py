@@ -1,0 +1,89 @@
+"""Where a pass spends its time: CPU seconds per stage of the flow, from a profile of one pass run stage after
+stage on one numba thread (so that each stage's seconds are its own), beside the cores the ordinary pass keeps
+busy. ``scanner-sim bench --profile`` prints it; docs/performance.md holds the tables.
+
+A stage is the cumulative time of the functions listed for it in :data:`STAGES` (a function's time includes
+what it calls); ``other`` is the rest of the chunk loop (poses, mirror directions, chunk bookkeeping).
+"""
+
+from __future__ import annotations
+
+import cProfile
+import pstats
+import tempfile
+import time
+
+#: Stage -> (file name, function name) pairs whose cumulative times make it up (a sink's ``add`` is named by
+#: its class); "ray stage" (``balanced``'s cast or the ``auto`` level's) minus "rays (Embree)" is the sub-ray set-up,
+#: hit attributes and receiver check.
+STAGES = {
+    "rays (Embree)": (("raycast.py", "first_hits_raw"), ("raycast.py", "occluded_raw")),
+    "ray stage": (("raycast.py", "cast_beams"), ("auto_level.py", "cast_auto")),
+    "waveform input": (("survey.py", "pulse_batch"), ("waveform.py", "echoes")),
+    "digitise": (("detection.py", "digitise"),),
+    "ranging": (("ranging.py", "range_batch"),),
+    "truth": (("survey.py", "lines_of_sight"),),
+    "georeference": (("points.py", "georeference"),),
+    "coverage": (("sinks.py", "CoverageSink.add"),),
+    "LAS": (("sinks.py", "LasSink.add"),),
+}
+
+
+def _cumulative(stats: pstats.Stats, file_name: str, function: str) -> float:
+    """Cumulative seconds of ``function`` (``Class.method`` for a sink's method) defined in ``file_name``."""
+    line = None
+    if "." in function:
+        from scanner_sim.survey import sinks
+
+        cls, function = function.split(".")
+        line = getattr(sinks, cls).add.__code__.co_firstlineno
+    return sum(row[3] for (path, lineno, name), row in stats.stats.items()
+               if path.endswith(file_name) and name == function and line in (None, lineno))
+
+
+def stage_profile(scene_name: str = "cable_survey", fidelity: str = "balanced", pulses: int = 60000) -> dict:
+    """CPU seconds per stage [s] and per pulse [us] of a ``pulses``-pulse pass on one numba thread, with the
+    chunk loop's total; then the cores the ordinary (overlapped, multi-threaded) pass keeps busy."""
+    import numba
+
+    from scanner_sim.config import load_scene
+    from scanner_sim.survey.pipeline import PassOptions, PassSetup, run_pass, stream_pass
+    from scanner_sim.survey.sinks import LasSink, pass_metadata
+
+    config = load_scene(scene_name)
+    options = PassOptions(fidelity=fidelity, max_pulses=pulses, progress=False, render=False, write_scene=False)
+    with tempfile.TemporaryDirectory(prefix="muls-profile-") as out:
+        run_pass(config, out, PassOptions(fidelity=fidelity, max_pulses=2000, progress=False, render=False))  # warm
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        setup = PassSetup.build(config, options)
+        footprint = setup.scene.heightfield is not None
+        chunks = (setup.finish_chunk(setup.cast_chunk(slots, footprint)) for slots in setup.slot_chunks())
+        with tempfile.TemporaryDirectory(prefix="muls-profile-") as out, LasSink(
+                f"{out}/points.las", setup.scene.local_origin, pass_metadata(setup)) as las:
+            profile = cProfile.Profile(time.process_time)
+            profile.enable()
+            stream_pass(setup, chunks, [las], options)
+            profile.disable()
+    finally:
+        numba.set_num_threads(threads)
+    stats = pstats.Stats(profile)
+    total = sum(row[2] for row in stats.stats.values())  # own times add up to the whole
+    seconds = {}
+    for stage, functions in STAGES.items():
+        times = [_cumulative(stats, *f) for f in functions]
+        # the ray stage is one of two entry points, the auto level's calling the other where it cannot help
+        seconds[stage] = max(times) if stage == "ray stage" else sum(times)
+    seconds["ray stage"] -= seconds["rays (Embree)"]
+    seconds = {("sub-rays, hits, receiver check" if k == "ray stage" else k): v for k, v in seconds.items()}
+    seconds["other"] = total - sum(seconds.values())
+    with tempfile.TemporaryDirectory(prefix="muls-profile-") as out:
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        summary = run_pass(config, out, options).summary
+        cores = (time.process_time() - cpu0) / (time.perf_counter() - wall0)
+    n = summary["pulses"]
+    return {"scene": scene_name, "fidelity": fidelity, "pulses": n, "cpu_s_one_thread": round(total, 3),
+            "stages": {k: {"cpu_s": round(v, 3), "us_per_pulse": round(1e6 * v / n, 2), "share": round(v / total, 3)}
+                       for k, v in seconds.items()},
+            "pass_pulses_per_s": summary["pulses_per_s"], "pass_cores_used": round(cores, 2)}

@@ -1,0 +1,198 @@
+"""Numba kernels of the ray stage (scanner_sim.rays.cast.cast_beams): one pass in, one pass out.
+
+They fuse what numpy would do in a dozen temporaries (sub-ray generation; hit point, normal, incidence,
+FOV cone and shadow-ray set-up), so the stage keeps most of Embree's throughput. Compiled on first use and
+cached on disk. Geometry as in scanner_sim.rays.beams: sub-ray j of pulse p starts at o_p + r_t (x_j u_p + y_j v_p)
+and points along a_p + tan(theta_h) (x_j u_p + y_j v_p), normalised (MULS Eq. 11's r1 at every range).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+
+class PulseRays(NamedTuple):
+    """Per pulse of a chunk, (n, 3) float64 in the scene's local frame: beam origin and unit direction, the
+    beam's perpendicular basis u, v, the receiver aperture and its unit axis."""
+
+    beam: np.ndarray
+    beam_dir: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    rx: np.ndarray
+    rx_dir: np.ndarray
+
+
+class SubrayLayout(NamedTuple):
+    """The beam's sub-rays: xy (m, 2) in the unit disc, weight (m,), beam radius r_t [m] at the window and
+    tan of the half divergence."""
+
+    xy: np.ndarray
+    weight: np.ndarray
+    r_t: float
+    tan_h: float
+
+
+class SceneFaces(NamedTuple):
+    """Per-face attributes of the scene (normal (f, 3) local frame, reflectance, label, object), its local
+    origin (3,) [m] and the step off a surface for shadow rays ``eps`` [m]."""
+
+    normal: np.ndarray
+    reflectance: np.ndarray
+    label: np.ndarray
+    object_id: np.ndarray
+    local_origin: np.ndarray
+    eps: float
+
+
+class HitRows(NamedTuple):
+    """Output rows of the hit kernel (sized for every sub-ray hitting); see :func:`hit_block`."""
+
+    pulse: np.ndarray
+    sub: np.ndarray
+    range_m: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    cos_inc: np.ndarray
+    reflectance: np.ndarray
+    label: np.ndarray
+    object_id: np.ndarray
+    weight: np.ndarray
+    rx_dist: np.ndarray
+    seen: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> HitRows:
+        return cls(np.empty(n, np.int64), np.empty(n, np.int32), np.empty(n), np.empty((n, 3)),
+                   np.empty((n, 3), np.float32), np.empty(n), np.empty(n), np.empty(n, np.int16),
+                   np.empty(n, np.int32), np.empty(n), np.empty(n, np.float32), np.empty(n))
+
+
+class ShadowRays(NamedTuple):
+    """Shadow rays of one block: origin (b, 3), unit direction (b, 3) and length (b,), float32 local frame."""
+
+    origin: np.ndarray
+    direction: np.ndarray
+    length: np.ndarray
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def subrays_local32(rays, p0, p1, layout, origins, dirs):
+    """Fill ``origins`` and ``dirs`` ((n m, 3) float32, pulse-major, local frame) with the sub-rays of pulses
+    p0 .. p1 - 1 of ``rays`` (:class:`PulseRays`)."""
+    xy, r_t, tan_h = layout.xy, layout.r_t, layout.tan_h
+    beam_local, beam_dir, u, v = rays.beam, rays.beam_dir, rays.u, rays.v
+    m = xy.shape[0]
+    for q in range(p1 - p0):
+        p = p0 + q
+        for j in range(m):
+            k = q * m + j
+            x, y = xy[j, 0], xy[j, 1]
+            dx = beam_dir[p, 0] + tan_h * (x * u[p, 0] + y * v[p, 0])
+            dy = beam_dir[p, 1] + tan_h * (x * u[p, 1] + y * v[p, 1])
+            dz = beam_dir[p, 2] + tan_h * (x * u[p, 2] + y * v[p, 2])
+            inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+            for c in range(3):
+                origins[k, c] = beam_local[p, c] + r_t * (x * u[p, c] + y * v[p, c])
+            dirs[k, 0] = dx * inv
+            dirs[k, 1] = dy * inv
+            dirs[k, 2] = dz * inv
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half_fov, rows, shadows):
+    """Turn one block of Embree first-hit results into hit rows, and set up their shadow rays.
+
+    prim (b,) int32 / tfar (b,) float32: Embree's answer for rays ray0 .. ray0 + b - 1 (-1: miss) of the
+    chunk's :class:`PulseRays` with the sub-rays of ``layout``. Hits are written in ray (scan) order at rows
+    base, base + 1, ... of ``rows`` (:class:`HitRows`): pulse int64, sub int32, range_m float64, point (., 3)
+    float64 world, normal (., 3) float32 facing the ray, cos_inc float64 (cosine of the incidence angle),
+    reflectance float64, label int16, object_id int32, weight float64, rx_dist float32 [m], seen float64 (1
+    when inside the receiver's FOV cone, virtual apex ``apex_behind`` [m] behind the aperture and half-angle
+    cosine ``cos_half_fov``, with the aperture on the lit side). Shadow ray c of the block (for hit row
+    base + c) goes into ``shadows`` (float32, local frame): from the hit stepped ``faces.eps`` off the surface
+    toward the aperture, stopping ``eps`` short of it; length -1 (an empty ray Embree skips) when the hit is
+    not in the cone. Returns the block's hit count.
+    """
+    pulse, sub, rng, point, normal, cos_inc, refl, label, obj, weight, rx_dist, seen = rows
+    sh_o, sh_d, sh_len = shadows
+    beam_local, beam_dir, u, v, rx_local, rx_dir = rays
+    xy, weights, r_t, tan_h = layout
+    face_normal, eps = faces.normal, faces.eps
+    m = xy.shape[0]
+    c = 0
+    ox, oy, oz = faces.local_origin[0], faces.local_origin[1], faces.local_origin[2]
+    for b in range(prim.shape[0]):
+        f = prim[b]
+        if f < 0:
+            continue
+        r = ray0 + b
+        i = base + c
+        p = r // m
+        j = r - p * m
+        pulse[i] = p
+        sub[i] = j
+        refl[i] = faces.reflectance[f]
+        label[i] = faces.label[f]
+        obj[i] = faces.object_id[f]
+        weight[i] = weights[j]
+        x, y = xy[j, 0], xy[j, 1]
+        ax = x * u[p, 0] + y * v[p, 0]
+        ay = x * u[p, 1] + y * v[p, 1]
+        az = x * u[p, 2] + y * v[p, 2]
+        dx = beam_dir[p, 0] + tan_h * ax
+        dy = beam_dir[p, 1] + tan_h * ay
+        dz = beam_dir[p, 2] + tan_h * az
+        inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+        dx *= inv
+        dy *= inv
+        dz *= inv
+        t = np.float64(tfar[b])
+        rng[i] = t
+        qx = beam_local[p, 0] + r_t * ax + t * dx
+        qy = beam_local[p, 1] + r_t * ay + t * dy
+        qz = beam_local[p, 2] + r_t * az + t * dz
+        point[i, 0] = qx + ox
+        point[i, 1] = qy + oy
+        point[i, 2] = qz + oz
+        nx, ny, nz = face_normal[f, 0], face_normal[f, 1], face_normal[f, 2]
+        dn = nx * dx + ny * dy + nz * dz
+        if dn > 0.0:  # orient the normal toward the incoming ray
+            nx, ny, nz, dn = -nx, -ny, -nz, -dn
+        normal[i, 0] = nx
+        normal[i, 1] = ny
+        normal[i, 2] = nz
+        cos_inc[i] = -dn if -dn < 1.0 else 1.0  # arccos in numpy (SIMD) afterwards
+        # Receiver FOV cone: virtual apex behind the aperture (raycast.ReceiverCone).
+        rx, ry, rz = rx_local[p, 0], rx_local[p, 1], rx_local[p, 2]
+        kx, ky, kz = rx_dir[p, 0], rx_dir[p, 1], rx_dir[p, 2]
+        wx = qx - (rx - apex_behind * kx)
+        wy = qy - (ry - apex_behind * ky)
+        wz = qz - (rz - apex_behind * kz)
+        along = wx * kx + wy * ky + wz * kz
+        tx, ty, tz = rx - qx, ry - qy, rz - qz
+        dist = math.sqrt(tx * tx + ty * ty + tz * tz)
+        rx_dist[i] = dist
+        ok = along >= cos_half_fov * math.sqrt(wx * wx + wy * wy + wz * wz) and nx * tx + ny * ty + nz * tz > 0.0
+        seen[i] = 1.0 if ok else 0.0
+        sh_o[c, 0] = qx + eps * nx
+        sh_o[c, 1] = qy + eps * ny
+        sh_o[c, 2] = qz + eps * nz
+        sh_d[c, 0] = tx / dist
+        sh_d[c, 1] = ty / dist
+        sh_d[c, 2] = tz / dist
+        sh_len[c] = dist - 2.0 * eps if ok else -1.0
+        c += 1
+    return c
+
+
+@njit(cache=True, nogil=True)
+def clear_blocked(occluded, sh_len, seen, base):
+    """seen[base + c] = 0 where shadow ray c hit something (empty rays, length <= 0, never count)."""
+    for c in range(occluded.shape[0]):
+        if occluded[c] >= 0 and sh_len[c] > 0.0:
+            seen[base + c] = 0.0

@@ -1,0 +1,75 @@
+"""The seabed's height field on a grid of coarse cells with bounds (slope, highest seabed node, highest other
+object), from which :mod:`scanner_sim.rays.seabed_kernels` proves that nothing can stand in a ray's way: the ``auto``
+level's analytic seabed hits (:mod:`scanner_sim.rays.auto`) and every level's shadow rays that need no cast
+(:func:`scanner_sim.rays.cast.cast_beams`). Built once per ray caster.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scanner_sim.rays.seabed_kernels import SeabedGrid, rasterise_tops, seabed_planes
+
+#: [m] Side of the coarse cells over which :func:`seabed_grid` bounds the seabed's slope and the other objects.
+COARSE_CELL_M = 0.1
+#: [m] Side of the blocks of coarse cells over which :func:`seabed_grid` keeps the highest point of anything.
+SUPER_CELL_M = 1.0
+
+
+def seabed_grid(scene, caster):
+    """The :class:`scanner_sim.rays.seabed_kernels.SeabedGrid` of ``scene``'s seabed in ``caster``'s local frame, or None
+    where the scene has no height field or its seabed faces are not the height field's own, in its order."""
+    hf = scene.heightfield
+    seabeds = [o for o in scene.objects if o.kind == "seabed"]
+    if hf is None or len(seabeds) != 1:
+        return None
+    sb = seabeds[0]
+    ny, nx = hf.shape
+    cells = (nx - 1) * (ny - 1)
+    faces = scene.faces[sb.face_start:sb.face_stop]
+    if faces.shape[0] != 2 * cells:
+        return None
+    _, expected = hf.mesh()
+    if not np.array_equal(faces - faces.min(), expected):
+        return None
+    k = max(1, round(COARSE_CELL_M / hf.spacing_m))
+    cy, cx = -(-(ny - 1) // k), -(-(nx - 1) // k)
+
+    normal = scene.face_normal[sb.face_start:sb.face_stop]
+    gradient = np.empty((cy, cx, 4))
+    for axis in (0, 1):  # dz/dx, dz/dy of each seabed triangle: -n_x / n_z, -n_y / n_z
+        g = (-normal[:, axis] / normal[:, 2]).reshape(2, ny - 1, nx - 1)
+        gradient[:, :, 2 * axis] = -_block_max(-g.min(axis=0), k)
+        gradient[:, :, 2 * axis + 1] = _block_max(g.max(axis=0), k)
+    z = caster.vertices[faces.min():faces.min() + nx * ny, 2].astype(np.float64).reshape(ny, nx)
+    node_top = np.maximum(np.maximum(z[:-1, :-1], z[:-1, 1:]), np.maximum(z[1:, :-1], z[1:, 1:]))
+    x0, y0 = hf.x0_m - scene.local_origin[0], hf.y0_m - scene.local_origin[1]
+    object_top = np.full((cy, cx), -np.inf)
+    size = k * hf.spacing_m
+    rasterise_tops(caster.vertices, caster.faces, 0, sb.face_start, x0, y0, size, object_top)
+    rasterise_tops(caster.vertices, caster.faces, sb.face_stop, caster.faces.shape[0], x0, y0, size, object_top)
+    seabed_top = _block_max(node_top, k)
+    sk = max(1, round(SUPER_CELL_M / (k * hf.spacing_m)))
+    super_top = _block_max(np.maximum(seabed_top, object_top), sk)
+    plane = np.empty((2 * cells, 4))
+    seabed_planes(caster.vertices, caster.faces, sb.face_start, sb.face_stop, plane)
+    return SeabedGrid(float(x0), float(y0), float(hf.spacing_m), int(nx), int(ny), int(sb.face_start), int(k),
+                      gradient, seabed_top, object_top, float(caster.vertices[:, 2].max()) + 1e-3, plane,
+                      int(sk), super_top, int(scene.face_object[sb.face_start]))
+
+
+def _block_max(a: np.ndarray, k: int) -> np.ndarray:
+    """The maximum of each k x k block of the 2-D ``a`` (the last blocks padded with -inf)."""
+    by, bx = -(-a.shape[0] // k), -(-a.shape[1] // k)
+    padded = np.full((by * k, bx * k), -np.inf)
+    padded[:a.shape[0], :a.shape[1]] = a
+    return padded.reshape(by, k, bx, k).max(axis=(1, 3))
+
+
+def seabed_grid_of(caster, scene):
+    """:func:`seabed_grid` once per caster (its scene)."""
+    cached = getattr(caster, "_seabed_grid", None)
+    if cached is None or cached[0] is not scene:
+        cached = (scene, seabed_grid(scene, caster))
+        caster._seabed_grid = cached
+    return cached[1]

@@ -1,0 +1,260 @@
+"""Speed against accuracy (``scanner-sim tradeoff``): every fidelity level, and each single knob of ``balanced``,
+run on the same pulses of the same seed, timed, and measured against the truth mesh and against the reference
+level (:mod:`scanner_sim.studies.accuracy`).
+
+Each run is the pass's own chunk loop (:func:`scanner_sim.survey.pipeline.pass_chunks`, with the nominal footprint and
+coverage tally where the scene has a seabed) over the scene's first ``pulses`` pulses; ``pulses_per_s`` times that loop
+alone, after a short untimed warm-up, the fastest of ``repeat`` passes taken round-robin over the runs. The
+waveform R^2 is measured on the first ``waveform_pulses`` pulses, simulated again with their records kept (the
+full reference records take 6 kB a pulse).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from scanner_sim import io
+from scanner_sim.config import SceneConfig
+from scanner_sim.fidelity import FIDELITY_LEVELS, FidelityLevel
+from scanner_sim.rays.beams import beam_pattern
+from scanner_sim.studies import accuracy
+from scanner_sim.survey import sinks
+from scanner_sim.survey.pipeline import PassOptions, PassSetup, pass_chunks
+from scanner_sim.survey.point_records import PointRecords
+from scanner_sim.world.scene import build_scene
+
+#: The level every other is measured against.
+REFERENCE = "reference"
+#: Single changes to ``balanced``, one knob each: name -> the field it sets and its value.
+KNOBS: dict[str, tuple[str, object]] = {
+    "subrays=1": ("subrays", 1), "subrays=7": ("subrays", 7), "subrays=37": ("subrays", 37),
+    "subrays=91": ("subrays", 91), "shadow_rays=off": ("shadow_rays", False), "record_mode=full": ("record_mode", "full"),
+    "column_cut=pulse": ("column_cut", "pulse"), "deciding_only=on": ("deciding_only", True),
+}
+#: Sub-rays of the reference run again at a finer resolution to show the reference has converged (the densest
+#: ring layout, beams.SUBRAY_COUNTS: 8 rings against the reference's 5).
+CONVERGENCE_SUBRAYS = 217
+#: Pulses each run simulates, by default, and of those, pulses whose waveforms are compared. On 2 shared cores
+#: ``scanner-sim tradeoff cable_survey`` (4 levels, 8 knobs, the convergence run, 3 timed passes) then takes 1.5-3 minutes
+#: (docs/fidelity.md).
+DEFAULT_PULSES = 30000
+#: Timed passes of each run, the fastest kept: one pass of 30,000 pulses lasts about a second, and on a shared
+#: machine two single passes of one level differ by up to a third.
+DEFAULT_REPEAT = 3
+DEFAULT_WAVEFORM_PULSES = 500
+WARM_UP_PULSES = 200
+
+
+@dataclass(frozen=True)
+class LevelRun:
+    """One level's run: its speed [pulses/s], points, the coverage it reached (covered share of the reached
+    seabed cells, or without a seabed the share of pulses with a point an echo explains), which points lie on a
+    surface the receiver cannot see, and the waveform records of the first pulses."""
+
+    level: FidelityLevel
+    pulses_per_s: float
+    n_pulses: int
+    points: PointRecords
+    coverage: float | None
+    hidden: np.ndarray
+    records: object
+
+
+def knob_level(name: str) -> FidelityLevel:
+    """``balanced`` with the one change of knob ``name`` (:data:`KNOBS`)."""
+    key, value = KNOBS[name]
+    return replace(FIDELITY_LEVELS["balanced"], name=name, **{key: value})
+
+
+def with_level(setup: PassSetup, level: FidelityLevel) -> PassSetup:
+    """``setup`` run at ``level`` (its sub-ray pattern rebuilt)."""
+    return replace(setup, level=level, pattern=beam_pattern(level.subrays, setup.config.survey.beam_profile))
+
+
+#: [m] Occluders this close to a point's truth surface do not hide it: the point is placed on the surface along its
+#: estimated line of sight, which navigation noise (5 cm sigma in the shipped scenes) moves over the relief.
+HIDDEN_MARGIN_M = 0.1
+
+
+def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
+    """(n,) bool: the surface a point ranged has something more than :data:`HIDDEN_MARGIN_M` from it and in front
+    of the receiver aperture at the pulse's true pose.
+
+    The surface point is where the truth puts it, ``true_range_m`` along the point's estimated line of sight. Only
+    points whose ranged object is the first one along that line are judged: a return behind an edge has its truth
+    on the plane of the facet it ranged, extended under the nearer surface, where visibility means nothing. Noise
+    points are never hidden."""
+    known = np.isfinite(points.true_range_m) & (points.object_id >= 0)
+    out = np.zeros(len(points), bool)
+    if not known.any():
+        return out
+    times = points.gps_time_s[known]
+    truth = setup.trajectory.poses(times)
+    origin, direction = setup.scanner.beam_rays(setup.trajectory.estimate_of(truth))
+    _, _, _, rx_origin, _ = setup.scanner.world_rays(truth)
+    local = origin - setup.scene.local_origin
+    ray, tri, _ = setup.caster.first_hits(local.astype(np.float32), direction.astype(np.float32))
+    first_object = np.full(times.size, -1)
+    first_object[ray] = setup.scene.face_object[tri]
+    judged = first_object == points.object_id[known]
+    surface = origin + points.true_range_m[known, None].astype(np.float64) * direction
+    to_rx = rx_origin - surface
+    length = np.linalg.norm(to_rx, axis=1)
+    to_rx /= length[:, None]
+    start = surface + HIDDEN_MARGIN_M * to_rx - setup.scene.local_origin
+    blocked = setup.caster.occluded(start.astype(np.float32), to_rx.astype(np.float32),
+                                    (length - HIDDEN_MARGIN_M).astype(np.float32))
+    out[known] = blocked & judged
+    return out
+
+
+def _timed_pass(setup: PassSetup):
+    """The pass's chunks as a pass runs them (:func:`scanner_sim.survey.pipeline.pass_chunks`, one per core at once), with
+    the coverage tally over a seabed: (points, covered share or None, wall seconds of the loop)."""
+    seabed = setup.scene.heightfield is not None
+    coverage = sinks.CoverageSink(setup.scene) if seabed else None
+    parts, started = [], time.perf_counter()
+    for chunk in pass_chunks(setup, PassOptions(progress=False)):
+        chunk = chunk._replace(records=None)
+        if coverage is not None:
+            coverage.add(chunk)
+        parts.append(chunk.points)
+    wall_s = time.perf_counter() - started
+    return PointRecords.concatenate(parts), None if coverage is None else coverage.figures()["covered_fraction"], wall_s
+
+
+def run_level(base: PassSetup, level: FidelityLevel, waveform_pulses: int) -> LevelRun:
+    """The pulses of pass ``base`` (its ``max_pulses``) at ``level``, timed once, with their metrics' inputs."""
+    setup = with_level(base, level)
+    seabed = setup.scene.heightfield is not None
+    slots = list(setup.slot_chunks())
+    setup.simulate_chunk(slots[0][:WARM_UP_PULSES], footprint=seabed)  # compiled kernels and caches warm
+    points, covered, wall_s = _timed_pass(setup)
+    n = int(sum(s.size for s in slots))
+    if covered is None:
+        covered = np.unique(points.pulse_index[points.object_id >= 0]).size / max(n, 1)
+    first = np.concatenate(slots)[:waveform_pulses]
+    records = setup.simulate_chunk(first, whole_records=True).records  # every sample, for the waveforms' R^2
+    return LevelRun(level, n / wall_s, n, points, covered, hidden_from_receiver(setup, points), records)
+
+
+def best_speed(base: PassSetup, runs: dict, repeat: int) -> dict:
+    """``runs`` with each one's ``pulses_per_s`` the best of ``repeat`` timed passes: the first (in ``runs``) and
+    ``repeat - 1`` more, taken round-robin over the runs so that a machine's drift meets them all alike. The
+    passes give the same points (a seed fixes them); only their time is kept."""
+    best = {name: run.pulses_per_s for name, run in runs.items()}
+    for _ in range(repeat - 1):
+        for name, run in runs.items():
+            setup = with_level(base, run.level)
+            _, _, wall_s = _timed_pass(setup)
+            best[name] = max(best[name], run.n_pulses / wall_s)
+    return {name: replace(run, pulses_per_s=best[name]) for name, run in runs.items()}
+
+
+def _rounded(metrics: dict) -> dict:
+    return {k: (None if v is None else round(float(v), 6)) for k, v in metrics.items()}
+
+
+def level_metrics(run: LevelRun, reference: LevelRun) -> dict:
+    """The JSON entry of one run: its settings, speed, and metrics against the truth and the reference."""
+    fit = accuracy.WaveformFit.of(run.records, reference.records)
+    vs_ref = accuracy.vs_reference(run.points, reference.points, run.n_pulses)
+    vs_ref["coverage_diff"] = accuracy.coverage_difference(run.coverage, reference.coverage)
+    vs_ref["waveform_r2"] = fit.r2
+    lv = run.level
+    return {"pulses_per_s": round(run.pulses_per_s, 1), "subrays": lv.subrays, "shadow_rays": lv.shadow_rays,
+            "record_mode": lv.record_mode, "column_cut": lv.column_cut, "coverage": run.coverage,
+            "vs_truth": _rounded(accuracy.vs_truth(run.points, run.n_pulses, run.hidden)),
+            "vs_reference": _rounded(vs_ref)}
+
+
+def tradeoff(config: SceneConfig, levels=tuple(FIDELITY_LEVELS), knobs=tuple(KNOBS), pulses: int = DEFAULT_PULSES,
+             waveform_pulses: int = DEFAULT_WAVEFORM_PULSES, progress=None, convergence: bool = True,
+             repeat: int = DEFAULT_REPEAT) -> dict:
+    """Every level of ``levels`` and knob of ``knobs`` on the scene's first ``pulses`` pulses, against the
+    reference level run on the same pulses and seed. Returns the JSON-ready result (:func:`write_tradeoff`).
+    ``convergence``: also run the reference at :data:`CONVERGENCE_SUBRAYS` sub-rays and compare it with the
+    reference (``reference_convergence``). ``progress``: called with each run's name as it starts. ``repeat``:
+    timed passes per run, the fastest kept (:func:`best_speed`)."""
+    base = PassSetup.build(config, PassOptions(max_pulses=pulses), build_scene(config))
+    plan = [(name, FIDELITY_LEVELS[name]) for name in dict.fromkeys([REFERENCE, *levels])]
+    plan += [(name, knob_level(name)) for name in knobs]
+    finer = f"reference, {CONVERGENCE_SUBRAYS} sub-rays"
+    if convergence:
+        plan.append((finer, replace(FIDELITY_LEVELS[REFERENCE], name=finer, subrays=CONVERGENCE_SUBRAYS)))
+    runs = {}
+    for name, level in plan:
+        if progress:
+            progress(name)
+        runs[name] = run_level(base, level, waveform_pulses)
+    if progress and repeat > 1:
+        progress(f"{repeat - 1} more timed passes of each")
+    runs = best_speed(base, runs, repeat)
+    reference = runs[REFERENCE]
+    started = time.time()
+    result = {"scene": config.name, "seed": config.survey.seed, "pulses": reference.n_pulses, "timed_passes": repeat,
+              "waveform_pulses": min(waveform_pulses, reference.n_pulses), "reference": REFERENCE,
+              "match_tolerance_m": accuracy.MATCH_TOLERANCE_M,
+              "levels": {n: level_metrics(runs[n], reference) for n in levels},
+              "knobs": {n: level_metrics(runs[n], reference) for n in knobs}}
+    if convergence:
+        result["reference_convergence"] = level_metrics(runs[finer], reference)
+    result["metrics_s"] = round(time.time() - started, 1)
+    return result
+
+
+#: Columns of the table: (title, section, key, format).
+TABLE = [("pulses/s", None, "pulses_per_s", "{:,.0f}"),
+         ("median abs err [m]", "vs_truth", "median_abs_range_error_m", "{:.4f}"),
+         ("p95 abs err [m]", "vs_truth", "p95_abs_range_error_m", "{:.3f}"),
+         ("false alarms /pulse", "vs_truth", "false_alarms_per_pulse", "{:.4f}"),
+         ("hidden pts /pulse", "vs_truth", "hidden_points_per_pulse", "{:.4f}"),
+         ("missing /pulse", "vs_reference", "missing_per_pulse", "{:.4f}"),
+         ("extra /pulse", "vs_reference", "extra_per_pulse", "{:.4f}"),
+         ("p95 pos diff [m]", "vs_reference", "p95_position_diff_m", "{:.4f}"),
+         ("class agree", "vs_reference", "class_agreement", "{:.4f}"),
+         ("coverage diff", "vs_reference", "coverage_diff", "{:+.4f}"),
+         ("waveform R²", "vs_reference", "waveform_r2", "{:.5f}")]
+
+
+def _cell(entry: dict, section, key, fmt) -> str:
+    value = entry[key] if section is None else entry[section][key]
+    return "n/a" if value is None or (isinstance(value, float) and math.isnan(value)) else fmt.format(value)
+
+
+def markdown_table(result: dict) -> str:
+    """The levels and knobs, one row each, in a Markdown table."""
+    head = "| run | " + " | ".join(t for t, *_ in TABLE) + " |"
+    rows = [head, "|" + "---|" * (len(TABLE) + 1)]
+    for group in ("levels", "knobs"):
+        for name, entry in result[group].items():
+            rows.append(f"| {name} | " + " | ".join(_cell(entry, *spec[1:]) for spec in TABLE) + " |")
+    return "\n".join(rows) + "\n"
+
+
+def write_tradeoff(result: dict, out_dir: str | Path, render: bool = True) -> Path:
+    """tradeoff.json, tradeoff.md and (``render``) tradeoff.png in ``out_dir``, each written atomically; returns
+    the path of tradeoff.json."""
+    from scanner_sim.render.viz import plot_tradeoff
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if render:
+        plot_tradeoff(out / "tradeoff.png", result)
+    intro = (f"# Speed against accuracy: {result['scene']}\n\n{result['pulses']:,} pulses per run (seed "
+             f"{result['seed']}), waveforms over the first {result['waveform_pulses']:,}; against the truth mesh "
+             f"and against the `{result['reference']}` level on the same pulses.\n\n")
+    converged = result.get("reference_convergence")
+    if converged:
+        ref = converged["vs_reference"]
+        intro += (f"Reference converged: at {converged['subrays']} sub-rays its returns differ from the reference's by "
+                  f"{_cell(converged, 'vs_reference', 'p95_position_diff_m', '{:.4f}')} m (95th percentile), "
+                  f"{ref['missing_per_pulse']:.4f} missing and {ref['extra_per_pulse']:.4f} extra per pulse.\n\n")
+    io.write_text(out / "tradeoff.md", intro + markdown_table(result) + ("\n![chart](tradeoff.png)\n" if render else ""))
+    io.write_summary_json(out / "tradeoff.json", result)
+    return out / "tradeoff.json"

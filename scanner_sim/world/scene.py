@@ -1,0 +1,406 @@
+"""Scenes: object generators and the combined mesh the rays see.
+
+A :class:`Scene` is one triangle mesh (world coordinates, float64) with per-triangle object id, class label
+and reflectance, the seabed's height field for fast height queries, and a local origin: the mesh is shifted
+by ``local_origin`` before it reaches Embree in float32, and rays are shifted the same way, so a scene in
+UTM coordinates ranges as accurately as one at the origin (docs/design.md#frames).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from muls.errors import ParameterError
+from scanner_sim.config import (
+    CableObject,
+    ConeMineObject,
+    ConfigError,
+    CylinderMineObject,
+    MeshObject,
+    MooredMineObject,
+    PanelObject,
+    reflectance_of,
+)
+from scanner_sim.world.materials import LABELS
+from scanner_sim.world.terrain import HeightField, generate_heightfield, rock_meshes
+
+#: Largest world coordinate [m]: beyond any place on Earth in a projected CRS (UTM northings reach 1e7 m);
+#: larger values are a unit slip, and overflow the float arithmetic of normals and ray casting.
+MAX_COORDINATE_M = 1e8
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """One object of the scene: its index is ``object_id``; faces [start, stop) of the combined mesh."""
+
+    object_id: int
+    name: str
+    kind: str
+    label: int
+    reflectance: float
+    face_start: int
+    face_stop: int
+    centreline: np.ndarray | None = None  # (n, 3) world [m] for cables and pipelines, else None
+
+
+@dataclass(frozen=True)
+class Part:
+    """A mesh to add to a scene: vertices (n, 3) float64 world [m], faces (m, 3) int."""
+
+    name: str
+    kind: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    label: int
+    reflectance: float
+    centreline: np.ndarray | None = None
+
+
+class Scene:
+    """The combined triangle mesh with per-triangle attributes.
+
+    vertices (n_v, 3) float64 world [m]; faces (n_f, 3) int64; face_object (n_f,) int32; face_label (n_f,)
+    int16 (LAS code); face_reflectance (n_f,) float64; face_normal (n_f, 3) float64 unit (right-hand winding);
+    local_origin (3,) float64 world [m]; heightfield: the seabed's, or None; objects: list of SceneObject.
+    """
+
+    def __init__(self, parts: list[Part], heightfield: HeightField | None = None,
+                 local_origin: np.ndarray | None = None):
+        if not parts:
+            raise ParameterError("scene: no geometry (give a seabed or at least one object)")
+        verts = [np.asarray(p.vertices, float) for p in parts]
+        starts = np.cumsum([0] + [len(v) for v in verts])
+        faces = np.concatenate([np.asarray(p.faces, np.int64) + starts[i] for i, p in enumerate(parts)])
+        part = np.concatenate([np.full(len(p.faces), i, np.int32) for i, p in enumerate(parts)])
+        self.vertices = np.concatenate(verts)
+        lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        # Local origin: the bounding box centre rounded to whole metres (a readable number).
+        self.local_origin = np.round(0.5 * (lo + hi)) if local_origin is None else np.asarray(local_origin, float)
+        local = self.vertices - self.local_origin
+        normal, area2 = _face_geometry(local, faces)
+        scale = np.array([_mesh_scale(v) for v in verts])
+        keep = area2 > DEGENERATE_AREA * scale[part] ** 2  # degenerate triangles go: Embree and normals need area
+        self.faces, part, self.face_normal = faces[keep], part[keep], normal[keep]
+        self.face_object = part
+        self.face_label = np.array([p.label for p in parts], np.int16)[part]
+        self.face_reflectance = np.array([p.reflectance for p in parts], float)[part]
+        ends = np.cumsum(np.bincount(part, minlength=len(parts)))
+        self.objects = [SceneObject(i, p.name, p.kind, p.label, p.reflectance, int(ends[i - 1]) if i else 0,
+                                    int(ends[i]), p.centreline) for i, p in enumerate(parts)]
+        self.heightfield = heightfield
+        self.local_extent_m = float(np.abs(local).max())
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.faces.shape[0])
+
+    @property
+    def bounds_m(self) -> np.ndarray:
+        """(2, 3) world bounding box [m]."""
+        return np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    def surface_height(self, x_m, y_m) -> np.ndarray:
+        """Seabed z [m] at world (x, y) from the height field (rocks and objects not included)."""
+        if self.heightfield is None:
+            raise ParameterError("scene has no seabed: surface_height needs a seabed section")
+        return self.heightfield.height(x_m, y_m)
+
+    def object_named(self, name: str) -> SceneObject:
+        for o in self.objects:
+            if o.name == name:
+                return o
+        raise ParameterError(f"object = {name!r}: the scene has {', '.join(o.name for o in self.objects)}")
+
+    def to_trimesh(self):
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+
+#: A triangle with twice its area below this times the square of its mesh's size is degenerate.
+DEGENERATE_AREA = 1e-14
+
+
+def _mesh_scale(v: np.ndarray) -> float:
+    return max(1e-12, float(np.ptp(v, axis=0).max()) if len(v) else 1.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _face_geometry(vertices, faces):
+    """Unit normal (n, 3) (right-hand winding; nan for a degenerate face) and twice the area (n,) of each face
+    (n, 3) of ``vertices`` (m, 3) float64, in one pass: the same arithmetic as numpy's cross and norm."""
+    n = faces.shape[0]
+    normal = np.empty((n, 3))
+    area2 = np.empty(n)
+    for i in range(n):
+        a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
+        e1x, e1y, e1z = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
+        e2x, e2y, e2z = vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1], vertices[c, 2] - vertices[a, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        length = math.sqrt(nx * nx + ny * ny + nz * nz)
+        area2[i] = length
+        if length > 0.0:
+            normal[i, 0], normal[i, 1], normal[i, 2] = nx / length, ny / length, nz / length
+        else:
+            normal[i, 0], normal[i, 1], normal[i, 2] = np.nan, np.nan, np.nan
+    return normal, area2
+
+
+def _nondegenerate(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """(m,) bool: the faces f (m, 3) of vertices v (n, 3) that are not degenerate."""
+    return _face_geometry(np.ascontiguousarray(v, np.float64), np.ascontiguousarray(f, np.int64))[1] > (
+        DEGENERATE_AREA * _mesh_scale(v) ** 2)
+
+
+# ------------------------------------------------------------------------------------------------------
+# Object generators: each returns (vertices (n, 3) float64 world, faces (m, 3) int64), outward normals.
+# ------------------------------------------------------------------------------------------------------
+
+def frustum(bottom_radius_m: float, top_radius_m: float, height_m: float, sections: int = 32):
+    """Closed truncated cone (cylinder when the radii are equal) on the z axis, base at z = 0."""
+    phi = 2.0 * np.pi * np.arange(sections) / sections
+    ring = np.c_[np.cos(phi), np.sin(phi)]
+    bottom = np.c_[bottom_radius_m * ring, np.zeros(sections)]
+    top = np.c_[top_radius_m * ring, np.full(sections, height_m)]
+    verts = np.vstack([bottom, top, [[0.0, 0.0, 0.0], [0.0, 0.0, height_m]]])
+    i = np.arange(sections)
+    j = (i + 1) % sections
+    side = np.r_[np.c_[i, j, j + sections], np.c_[i, j + sections, i + sections]]
+    cb, ct = 2 * sections, 2 * sections + 1
+    caps = np.r_[np.c_[np.full(sections, cb), j, i], np.c_[np.full(sections, ct), i + sections, j + sections]]
+    return verts, np.r_[side, caps].astype(np.int64)
+
+
+def tube(centreline: np.ndarray, radius_m: float, sides: int = 12):
+    """Closed tube of ``radius_m`` swept along ``centreline`` (n, 3) [m]; frames keep one axis horizontal."""
+    c = np.asarray(centreline, float)
+    t = np.gradient(c, axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    side = np.cross([0.0, 0.0, 1.0], t)
+    bad = np.linalg.norm(side, axis=1) < 1e-9
+    side[bad] = np.cross([1.0, 0.0, 0.0], t[bad])
+    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    up = np.cross(t, side)
+    phi = 2.0 * np.pi * np.arange(sides) / sides
+    ring = (np.cos(phi)[None, :, None] * side[:, None, :] + np.sin(phi)[None, :, None] * up[:, None, :])
+    n = len(c)
+    verts = (c[:, None, :] + radius_m * ring).reshape(-1, 3)
+    k = np.arange(n - 1)[:, None] * sides
+    i = np.arange(sides)[None, :]
+    j = (i + 1) % sides
+    a, b, cc, d = (k + i), (k + j), (k + sides + i), (k + sides + j)
+    faces = np.r_[np.c_[a.ravel(), cc.ravel(), b.ravel()], np.c_[b.ravel(), cc.ravel(), d.ravel()]]
+    start, end = len(verts), len(verts) + 1
+    verts = np.vstack([verts, c[0], c[-1]])
+    ii = np.arange(sides)
+    jj = (ii + 1) % sides
+    caps = np.r_[np.c_[np.full(sides, start), jj, ii], np.c_[np.full(sides, end), (n - 1) * sides + ii,
+                                                               (n - 1) * sides + jj]]
+    faces = np.r_[faces, caps]
+    # Orient outward: the ring winding above is outward for a right-handed (t, side, up) frame; check one face.
+    v0, v1, v2 = verts[faces[0]]
+    if np.dot(np.cross(v1 - v0, v2 - v0), v0 - c[0]) < 0:
+        faces = faces[:, ::-1]
+    return verts, faces.astype(np.int64)
+
+
+def rotation_matrix(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
+    """(3, 3) R = Rz(yaw) Ry(pitch) Rx(roll): right-handed rotations about x, y, z."""
+    cr, sr, cp, sp, cy, sy = (math.cos(roll_rad), math.sin(roll_rad), math.cos(pitch_rad), math.sin(pitch_rad),
+                              math.cos(yaw_rad), math.sin(yaw_rad))
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def compass_to_yaw_rad(heading_deg) -> np.ndarray:
+    """Compass heading [deg, 0 north, clockwise] -> yaw [rad, 0 east, counter-clockwise]."""
+    return np.radians(90.0 - np.asarray(heading_deg, float))
+
+
+def _ground_z(position, heightfield) -> float:
+    if len(position) == 3:
+        return float(position[2])
+    if heightfield is None:
+        raise ParameterError("an object placed by [x, y] needs a seabed to sit on")
+    return float(heightfield.height(position[0], position[1]))
+
+
+def cable_centreline(points_m, diameter_m: float, burial_fraction, heightfield: HeightField | None,
+                     step_m: float = 0.05, stiffness_length_m: float = 0.5) -> np.ndarray:
+    """(n, 3) centreline [m] of a cable through the (x, y[, z]) points, lying on the seabed.
+
+    A natural cubic spline through the points (chord-length parameter), resampled every ``step_m``. The
+    seabed height along it is low-passed over ``stiffness_length_m`` (a stiff cable bridges ripple troughs),
+    and the centre sits at z = h + r - burial * 2 r: ``burial`` of the diameter lies below the surface.
+    """
+    from scipy.interpolate import CubicSpline
+    from scipy.ndimage import gaussian_filter1d
+
+    pts = np.asarray(points_m, float)
+    chord = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts[:, :2], axis=0), axis=1))]
+    keep = np.r_[True, np.diff(chord) > 1e-9]
+    pts, chord = pts[keep], chord[keep]
+    n = max(2, int(math.ceil(chord[-1] / step_m)) + 1)
+    s = np.linspace(0.0, chord[-1], n)
+    if len(pts) >= 3:
+        xy = CubicSpline(chord, pts[:, :2], bc_type="natural")(s)
+    else:
+        xy = np.c_[np.interp(s, chord, pts[:, 0]), np.interp(s, chord, pts[:, 1])]
+    r = 0.5 * diameter_m
+    burial = np.interp(s, chord, np.broadcast_to(np.asarray(burial_fraction, float), chord.shape))
+    if pts.shape[1] == 3:
+        ground = np.interp(s, chord, pts[:, 2])
+    else:
+        if heightfield is None:
+            raise ParameterError("a cable given by [x, y] points needs a seabed to lie on")
+        ground = heightfield.height(xy[:, 0], xy[:, 1])
+        if stiffness_length_m > 0:
+            ground = gaussian_filter1d(ground, stiffness_length_m / (s[1] - s[0]), mode="nearest")
+    return np.c_[xy, ground + r - burial * 2.0 * r]
+
+
+def panel_mesh(center_m, size_m, normal, up):
+    """Two triangles: a width x height rectangle centred at ``center_m`` facing ``normal``."""
+    n = np.asarray(normal, float)
+    n /= np.linalg.norm(n)
+    u = np.asarray(up, float)
+    u = u - np.dot(u, n) * n
+    if np.linalg.norm(u) < 1e-9:
+        u = np.array([1.0, 0.0, 0.0]) - n[0] * n
+    u /= np.linalg.norm(u)
+    w = np.cross(u, n)  # width direction; (w, u, n) right-handed
+    hw, hh = 0.5 * size_m[0], 0.5 * size_m[1]
+    c = np.asarray(center_m, float)
+    verts = np.array([c - hw * w - hh * u, c + hw * w - hh * u, c + hw * w + hh * u, c - hw * w + hh * u])
+    return verts, np.array([[0, 1, 2], [0, 2, 3]], np.int64)
+
+
+# ------------------------------------------------------------------------------------------------------
+# Scene from a validated config
+# ------------------------------------------------------------------------------------------------------
+
+def build_scene(config) -> Scene:
+    """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds)."""
+    parts: list[Part] = []
+    hf = None
+    sb = config.seabed
+    if sb is not None:
+        rng = np.random.default_rng(sb.seed)
+        hf = generate_heightfield(sb.center_m, sb.size_m, sb.resolution_m, sb.depth_m, sb.relief.rms_m,
+                                  sb.relief.wavelength_m, sb.relief.hurst, sb.ripples.amplitude_m,
+                                  sb.ripples.wavelength_m, sb.ripples.crest_deg, sb.ripples.sinuosity, rng)
+        v, f = hf.mesh()
+        parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb)))
+        rk = sb.rocks
+        if rk.count:
+            rocks = rock_meshes(hf, rk.count, (rk.radius_min_m, rk.radius_max_m), rng)
+            v = np.concatenate([r[0] for r in rocks])
+            offsets = np.cumsum([0] + [len(r[0]) for r in rocks[:-1]])
+            f = np.concatenate([r[1] + o for r, o in zip(rocks, offsets)])
+            parts.append(Part("rocks", "rocks", v, f, LABELS[rk.label], reflectance_of(rk)))
+
+    for index, obj in enumerate(config.objects):
+        refl, label = reflectance_of(obj), LABELS[obj.label]
+        centreline = None
+        if isinstance(obj, CableObject):
+            line = cable_centreline(obj.points_m, obj.diameter_m, obj.burial_fraction, hf, obj.step_m,
+                                    obj.stiffness_length_m)
+            v, f = tube(line, 0.5 * obj.diameter_m, obj.sides)
+            centreline = line
+        elif isinstance(obj, MooredMineObject):
+            ground = _ground_z(obj.position_m, hf)
+            x, y = obj.position_m[:2]
+            import trimesh  # here only: importing it takes about a second that other scenes need not pay
+
+            sphere = trimesh.creation.icosphere(subdivisions=3, radius=obj.radius_m)
+            sv = sphere.vertices + [x, y, ground + obj.height_m]
+            tv, tf = frustum(0.5 * obj.tether_diameter_m, 0.5 * obj.tether_diameter_m,
+                             obj.height_m - obj.radius_m + 0.05, sections=8)
+            tv = tv + [x, y, ground - 0.05]
+            v = np.vstack([sv, tv])
+            f = np.vstack([sphere.faces, tf + len(sv)])
+        elif isinstance(obj, CylinderMineObject):
+            ground = _ground_z(obj.position_m, hf)
+            v, f = frustum(obj.radius_m, obj.radius_m, obj.length_m, sections=32)
+            v = v - [0.0, 0.0, 0.5 * obj.length_m]
+            # Axis z -> horizontal along the heading: pitch 90 deg puts it along x, then yaw.
+            rot = rotation_matrix(0.0, math.pi / 2, float(compass_to_yaw_rad(obj.heading_deg)))
+            z = ground + obj.radius_m - obj.burial_fraction * 2.0 * obj.radius_m
+            v = v @ rot.T + [obj.position_m[0], obj.position_m[1], z]
+        elif isinstance(obj, ConeMineObject):
+            ground = _ground_z(obj.position_m, hf)
+            v, f = frustum(obj.bottom_radius_m, obj.top_radius_m, obj.height_m, sections=32)
+            v = v + [obj.position_m[0], obj.position_m[1], ground - obj.burial_fraction * obj.height_m]
+        elif isinstance(obj, PanelObject):
+            v, f = panel_mesh(obj.center_m, obj.size_m, obj.normal, obj.up)
+        elif isinstance(obj, MeshObject):
+            v, f = load_mesh_file(obj, index)
+            rot = rotation_matrix(*np.radians(obj.rotate_deg))
+            v = v * obj.scale @ rot.T
+            if len(obj.translate_m) == 2:
+                ground = _ground_z(obj.translate_m, hf)
+                v = v + [obj.translate_m[0], obj.translate_m[1], ground - v[:, 2].min()]
+            else:
+                v = v + np.asarray(obj.translate_m)
+        else:  # pragma: no cover - config only produces the types above
+            raise ParameterError(f"object type {type(obj).__name__} is not supported")
+        if not (np.abs(v) <= MAX_COORDINATE_M).all():  # NaN included
+            raise ConfigError(f"objects[{index}] ({obj.name!r}): its sizes and position give coordinates that are not "
+                              f"finite or beyond +-{MAX_COORDINATE_M:.0e} m; check them (metres)")
+        parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline))
+    return Scene(parts, hf)
+
+
+def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (n, 3) float64 and faces (m, 3) int64 of a ``mesh`` object's file, as the file gives them
+    (trimesh's usual processing applied: duplicate vertices merged).
+
+    Raises :class:`ConfigError` naming the object (``objects[index]`` and its name) and the file when trimesh
+    cannot read it, or it holds no triangles, vertices that are not finite, faces that refer to missing
+    vertices, or only degenerate (zero-area) triangles. trimesh's own loading would silently drop the
+    triangles with NaN corners, and the first three errors would otherwise surface as a traceback.
+    """
+    import trimesh
+
+    where = f"objects[{index}].file = {obj.file!r} (object {obj.name!r})"
+    try:
+        mesh = trimesh.load(obj.resolved_path, force="mesh", process=False)
+        v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), float)
+        f = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))))
+    except Exception as exc:  # trimesh raises whatever its parser meets: ValueError, IndexError, KeyError...
+        detail = " ".join(str(exc).split())[:120]
+        raise ConfigError(f"{where}: not a mesh file trimesh can read ({type(exc).__name__}: {detail})") from None
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or v.ndim != 2 or v.shape[1] != 3:
+        raise ConfigError(f"{where}: no triangles (an empty file, or not a mesh format trimesh recognises by its "
+                          "suffix)")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        raise ConfigError(f"{where}: {int(bad.sum()):,} of {len(v):,} vertices are not finite (NaN or infinite), "
+                          f"the first is vertex {int(np.flatnonzero(bad)[0])}")
+    if not np.issubdtype(f.dtype, np.integer) or f.min() < 0 or f.max() >= len(v):
+        i = int(np.flatnonzero(((f < 0) | (f >= len(v))).any(axis=1))[0]) if np.issubdtype(f.dtype, np.integer) else 0
+        raise ConfigError(f"{where}: face {i} refers to vertex {f[i].tolist()}, but the file has {len(v):,} vertices "
+                          f"(0 to {len(v) - 1})")
+    f = f.astype(np.int64)
+    with np.errstate(over="ignore", invalid="ignore"):  # huge coordinates are judged once placed (build_scene)
+        some_area = _nondegenerate(v, f).any()
+    if not some_area:
+        raise ConfigError(f"{where}: all {len(f):,} triangles are degenerate (zero area)")
+    mesh = trimesh.Trimesh(v, f, process=True)
+    return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+
+
+def plate_scene(distance_m: float, size_m: float = 20.0, center_xy_m=(0.0, 0.0), origin_m=(0.0, 0.0, 0.0),
+                reflectance: float = 0.1) -> Scene:
+    """A square plate facing +z, ``distance_m`` below ``origin_m`` (the overlap check's target)."""
+    o = np.asarray(origin_m, float)
+    v, f = panel_mesh(o + [center_xy_m[0], center_xy_m[1], -distance_m], (size_m, size_m), (0, 0, 1), (0, 1, 0))
+    return Scene([Part("plate", "panel", v, f, LABELS["panel"], reflectance)])
