@@ -1,9 +1,5 @@
 """MULS: the multi-channel underwater lidar waveform model (physics only, usable alone)."""
 
-from . import (
-    kernel_cache,  # noqa: F401  first: where numba caches the kernels the modules below define
-    thread_policy,  # noqa: F401  before any parallel kernel runs: idle OpenMP workers sleep
-)
 from .errors import ParameterError
 from .instrument import Channel, Digitizer, Instrument, Processing, Receiver, Reference, Transmitter
 from .overlap import TransceiverGeometry

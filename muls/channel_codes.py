@@ -6,21 +6,21 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from .channels import gate_open_at, level_lsb
 from .noise import fill_normals_of, half_bits, normal_upper_bound
+from .runtime import kernel
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def quantise(u, max_code):
     """MULS Eq. 13: rounding, then clipping to [0, 2^bits - 1], as an int32 (a float-to-int conversion that
     vectorises; the code then fits any integer record type)."""
     return np.int32(min(max(math.floor(u + 0.5), 0.0), max_code))
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def channel_codes(out, power, times, dark_normal, shot_normal, chans, c, max_code, noise_scale):
     """One channel's codes (n,) of a window from the power [W] at its sample times [s] and its two normals: no
     branch but selects, so the loop runs on SIMD lanes."""
@@ -37,7 +37,7 @@ def channel_codes(out, power, times, dark_normal, shot_normal, chans, c, max_cod
 READ_MARGIN_LSB = 1e-3
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def ranging_codes(out, power, baseline, times, dark_hashes, dark_half, shot_hashes, shot_half, chans, c, max_code,
                   noise_scale, k_sigma, read, at, dark_normal, shot_normal, tails):
     """One channel's codes (n,) of a window where the peak search (:func:`muls.peaks._peaks`) may read them, 0

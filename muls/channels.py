@@ -6,10 +6,10 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
 from .instrument import Channel, Instrument
+from .runtime import kernel
 
 ELECTRON_CHARGE_C = 1.602176634e-19
 
@@ -81,20 +81,20 @@ class ChannelArrays(NamedTuple):
         return ChannelArrays(*(a[1:] for a in self))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def processor_sigma_lsb(chans, c, baseline_w):
     """The noise [LSB] the peak search assumes on signal channel ``c`` of ``chans`` (:meth:`ChannelArrays.signal`)
     over a calibrated baseline of ``baseline_w`` [W]: dark noise, the baseline's shot noise and rounding."""
     return math.sqrt(chans.dark_std_lsb[c] ** 2 + chans.shot_lsb2_per_w[c] * baseline_w + 1.0 / 12.0)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def gate_open_at(chans, c, t):
     """Signal channel ``c``'s gate is open at time ``t`` [s] (bitwise, so that a loop of these has no branch)."""
     return (chans.gate_open_s[c] <= t) & (t < chans.gate_close_s[c])
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def level_lsb(chans, c, power_w):
     """Signal channel ``c``'s noise-free level [LSB] at optical power ``power_w`` [W] (MULS Eq. 12 in LSB)."""
     return chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * power_w

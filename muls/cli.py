@@ -40,6 +40,7 @@ from .command import (
     write_atomically,
 )
 from .presets import WATER_PRESETS
+from .runtime import configure_process
 
 
 def _water_name(name: str) -> str:
@@ -460,6 +461,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Entry point of the ``muls`` console script; returns the exit code (``run_guarded``: 0, 1, 2, 130, 143)."""
+    configure_process()  # threads, memory and the kernel cache, before any kernel runs (muls/runtime.py)
     args, code = parse_guarded(build_parser(), argv)
     if args is None:
         return code

@@ -24,11 +24,11 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from .channels import gate_open_at, level_lsb, processor_sigma_lsb
 from .noise import NORMAL_BOUND
+from .runtime import kernel
 
 #: The kept channel's worst SNR must exceed a lower-gain channel's best by this factor for that one to be dropped:
 #: room for the peak fit's amplitude ratio (the centre sample over the fitted peak, within a few per cent).
@@ -44,7 +44,7 @@ ECHO_SPAN_S = 1e-9
 TIMED_SNR = 20.0
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, echo_span_s, scratch):
     """Fill ``out`` (n_channels,) bool with the channels of one window that can decide a return (module doc);
     ``scratch``: (3, n_channels) bool work space.
@@ -112,26 +112,26 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
             out[c] = not (clipped[c] or loses)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _noise_reach(chans, c, power):
     """Most that channel c's noise and rounding can move a code at optical power ``power`` [W] [LSB]."""
     return NORMAL_BOUND * (chans.dark_std_lsb[c] + math.sqrt(chans.shot_lsb2_per_w[c] * power)) + 0.5
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _surely_unclipped(c, highest_power, chans, max_code):
     """No sample of channel c, whose gate is open throughout, can reach the top code whatever the noise: its level
     and the noise's reach both grow with the power, so the window's highest power [W] decides."""
     return level_lsb(chans, c, highest_power) + _noise_reach(chans, c, highest_power) < max_code
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _surely_clipped(c, power, chans, max_code):
     """Channel c's sample at optical power ``power`` [W] reaches the top code, whatever the noise."""
     return level_lsb(chans, c, power) - _noise_reach(chans, c, power) >= max_code
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _clipped_from_blindness(c, power, baseline, times, top, chans, max_code):
     """Channel c, which the baseline alone clips at some samples, surely stays clipped from its last such sample
     through the hump, which lies after all of them, with its gate open all along: the plateau at the hump then runs
@@ -150,7 +150,7 @@ def _clipped_from_blindness(c, power, baseline, times, top, chans, max_code):
     return True
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _snr_bounds(c, power, baseline, top, chans):
     """(least, most) SNR of channel c's peak at the hump: its amplitude over the baseline, less or plus the noise's
     reach, over the processor's noise there (dark, rounding and the baseline's shot noise, as muls.peaks has it)."""
@@ -160,7 +160,7 @@ def _snr_bounds(c, power, baseline, top, chans):
     return (amplitude - reach) / sigma, (amplitude + reach) / sigma
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _one_hump(power, baseline, top, tolerance):
     """The echo signal r = power - baseline has one hump, at ``top``: going out from it either way, r never rises
     by more than ``tolerance`` [W] over both its lowest value since the hump and zero (a rise below the baseline,

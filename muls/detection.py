@@ -31,6 +31,7 @@ from .noise import (
     stream_base,
     uniform_at,
 )
+from .runtime import kernel
 from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values, column_integrals_at
 
 RECORD_MODES = ("windowed", "full")
@@ -94,7 +95,7 @@ def sampling_phase_s(key: np.uint64, pulse_id: np.ndarray, sample_interval_s: fl
     return _phases(key, np.asarray(pulse_id, np.int64)) * sample_interval_s
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _phases(key, pulse_id):
     out = np.empty(pulse_id.shape[0])
     for i in range(pulse_id.shape[0]):
@@ -119,7 +120,7 @@ def plan_windows(model: OpticalModel, batch: PulseBatch, echoes: Echoes, mode: s
     return pulses, np.minimum(starts, dig.n_samples - width), width
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _plan(offsets, first, usable, reach):
     """Windows per pulse, one per cluster of echoes: an echo whose window would start before the cluster's
     earlier windows end (``reach`` samples after each window start) joins the cluster, whose window then
@@ -206,7 +207,7 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
 WINDOW_BLOCK = 64
 
 
-@numba.njit(cache=True, parallel=True, nogil=True)
+@kernel(parallel=True, nogil=True)
 def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_mean, dark_std, max_code,
                noise_scale, peak_only):
     """The CH0 records (n_pulses, n_ref) from sample 0 (MULS Eqs. 2, 13 through the photodiode). ``peak_only``:
@@ -245,7 +246,7 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
                                             max_code)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _reference_span(levels, dark_mean, bound, max_code):
     """(first, last) samples of a CH0 record that can hold its highest code among samples 1 to n - 2 (where the peak
     search looks) or flank it, from the noise-free ``levels`` (n,) [LSB over the dark mean] and the most a code can lie
@@ -275,7 +276,7 @@ class DigitiserSettings(NamedTuple):
     read_samples_only: bool = False
 
 
-@numba.njit(cache=True, parallel=True, nogil=True)
+@kernel(parallel=True, nogil=True)
 def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, col, cuts, echoes, chans, settings):
     n_windows, n_chan, n_samples = codes.shape
     n_pairs = (n_chan + 1) // 2
@@ -403,7 +404,7 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                     codes[w, c, :] = 0
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def sample_times(out, first, end, t0_s, dt_s, first_index, phase_s):
     """out[k] = t0_s + (first_index + k) dt_s + phase_s [s] for first <= k < end: the times of samples of a window
     whose sample 0 is sample ``first_index`` of its record (:class:`Sampling`; :meth:`Records.sample_times_s`)."""
@@ -411,13 +412,13 @@ def sample_times(out, first, end, t0_s, dt_s, first_index, phase_s):
         out[k] = t0_s + (first_index + k) * dt_s + phase_s
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _pair_needed(needed, j):
     """Whether row 2j or 2j + 1 of ``needed`` (k,) is set (the rows that share stream pair j)."""
     return needed[2 * j] or (2 * j + 1 < needed.shape[0] and needed[2 * j + 1])
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _hash_pairs(hashes, needed, sampling, p, first_stream, first_index):
     """Row j of ``hashes`` (m, n): the positions ``first_index`` on of stream ``first_stream + j`` of pulse ``p``, for
     the pairs j a ``needed`` (k,) row (2j or 2j + 1) asks for (as :func:`_draw_pairs` draws them)."""
@@ -426,7 +427,7 @@ def _hash_pairs(hashes, needed, sampling, p, first_stream, first_index):
             fill_hashes(stream_base(sampling.key, sampling.pulse_id[p], first_stream + j), first_index, hashes[j])
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _draw_pairs(normals, needed, sampling, p, first_stream, first_index, no_low, tails):
     """Rows 2j and 2j + 1 of ``normals`` (2 m, n) from the two halves of stream ``first_stream + j`` of pulse ``p``,
     positions ``first_index`` on, for the pairs with a ``needed`` (k,) row; a half no row needs is not drawn."""

@@ -7,11 +7,12 @@ transposed); this kernel spares every process the second or more that importing 
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from .runtime import kernel
 
-@numba.njit(cache=True, nogil=True)
+
+@kernel(nogil=True)
 def _filter_columns(x, r, b0, b1):
     n, m = x.shape
     y = np.empty((n, m))

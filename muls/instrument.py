@@ -113,9 +113,6 @@ class Channel:
         """V_i / P_T [V/W] of this channel."""
         return self.split_ratio * self.voltage_ratio * self.sensitivity_a_per_w * self.gain * self.load_ohm  # MULS Eq. 12
 
-    def with_gate(self, delay_s: float | None, width_s: float | None) -> Channel:
-        return replace(self, gate_delay_s=delay_s, gate_width_s=width_s)
-
 
 @dataclass(frozen=True)
 class Reference:

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import math
 
-import numba
+from .runtime import kernel
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def bracket(x, xp):
     """The cell of ascending ``xp`` (n,) that holds ``x``, as :func:`numpy.interp` finds it: j with xp[j] <= x <
     xp[j + 1]; -1 below the grid (or NaN), n - 1 at or above its end."""
@@ -31,7 +31,7 @@ def bracket(x, xp):
     return lo
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def interp_at(x, j, xp, fp):
     """``numpy.interp(x, xp, fp)`` with x in cell ``j`` (:func:`bracket`), in numpy's arithmetic."""
     n = xp.shape[0]
@@ -44,7 +44,7 @@ def interp_at(x, j, xp, fp):
     return (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j]) * (x - xp[j]) + fp[j]
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def on_geometric_grid(x, ratio, table):
     """Linear interpolation of ``table`` at ``x`` on the geometric grid ``ratio`` (O(1): index from log x)."""
     if not x > ratio[0]:  # also x <= 0 and NaN: below the grid
@@ -52,13 +52,13 @@ def on_geometric_grid(x, ratio, table):
     return on_log_grid(math.log(x), math.log(ratio[0]), steps_per_log(ratio), table)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def steps_per_log(ratio):
     """Grid steps per unit of natural log of the geometric grid ``ratio``."""
     return (ratio.shape[0] - 1) / (math.log(ratio[ratio.shape[0] - 1]) - math.log(ratio[0]))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def on_log_grid(log_x, log_first, steps, table):
     """:func:`on_geometric_grid` given log x, the log of the grid's first ratio and its steps per unit of log
     (:func:`steps_per_log`): no transcendental function, for loops that move along the grid in log."""

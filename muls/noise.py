@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+
+from .runtime import kernel
 
 #: Weyl increment of the SplitMix64 sequence (the golden ratio in 64 bits).
 GAMMA = np.uint64(0x9E3779B97F4A7C15)
@@ -36,7 +37,7 @@ def seed_key(seed) -> np.uint64:
     return np.uint64(splitmix64(np.uint64(int(seed) & 0xFFFFFFFFFFFFFFFF)))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def splitmix64(z):
     """The SplitMix64 finaliser: a 64-bit integer to a well-mixed one (Steele et al. 2014)."""
     z = (z ^ (z >> np.uint64(30))) * _M1
@@ -44,19 +45,19 @@ def splitmix64(z):
     return z ^ (z >> np.uint64(31))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def stream_base(key, pulse_id, stream):
     """State of one (pulse, stream) sequence."""
     return splitmix64(key ^ splitmix64(np.uint64(pulse_id) * np.uint64(64) + np.uint64(stream) + GAMMA))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def hash_at(base, index):
     """The 64 bits of position ``index`` of a stream: two 32-bit halves, two normals (:func:`normal_of_bits`)."""
     return splitmix64(base + (np.uint64(index) + np.uint64(1)) * GAMMA)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def uniform_at(base, index):
     """Uniform in [0, 1) at position ``index`` of a stream."""
     h = hash_at(base, index)
@@ -79,7 +80,7 @@ _P_LOW = 0.02425
 NORMAL_BOUND = 6.34
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _central_normal(p):
     """Acklam's central rational, for p in [_P_LOW, 1 - _P_LOW] (no branch, so a loop of these vectorises)."""
     q = p - 0.5
@@ -88,12 +89,12 @@ def _central_normal(p):
         ((((_B[0] * r + _B[1]) * r + _B[2]) * r + _B[3]) * r + _B[4]) * r + 1.0)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _in_tail(p):
     return p < _P_LOW or p > 1.0 - _P_LOW
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _tail_normal(p):
     """Acklam's tail formula, for p outside [_P_LOW, 1 - _P_LOW]."""
     q = math.sqrt(-2.0 * math.log(p if p < 0.5 else 1.0 - p))
@@ -102,12 +103,12 @@ def _tail_normal(p):
     return x if p < 0.5 else -x
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _inverse_normal_cdf(p):
     return _tail_normal(p) if _in_tail(p) else _central_normal(p)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def centred_unit(bits32):
     """A 32-bit integer k to (k + 1/2) / 2^32: the centres of 2^32 equal cells of (0, 1), never 0 or 1 and
     symmetric about 1/2 (k and 2^32 - 1 - k give p and 1 - p), so the normals are finite and symmetric."""
@@ -116,26 +117,26 @@ def centred_unit(bits32):
     return (float(np.int32(np.int64(bits32) - 2147483648)) + 2147483648.5) * _INV_2_32
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def half_bits(h, half):
     """32-bit half ``half`` (0: the high bits, 1: the low) of a position's hash ``h``."""
     return h >> np.uint64(32) if half == 0 else h & np.uint64(0xFFFFFFFF)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def normal_of_bits(bits32):
     """The standard normal of a 32-bit half, |x| < :data:`NORMAL_BOUND`."""
     return _inverse_normal_cdf(centred_unit(bits32))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def normal_half_at(base, index, half):
     """The standard normal of 32-bit half ``half`` (0: the high bits, 1: the low) of position ``index`` of a stream:
     each position gives two independent normals, |x| < :data:`NORMAL_BOUND`."""
     return normal_of_bits(half_bits(hash_at(base, index), half))
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def fill_hashes(base, first_index, out):
     """out[k] = :func:`hash_at` (base, first_index + k), k < out.shape[0] (uint64)."""
     base = np.uint64(base)
@@ -147,7 +148,7 @@ def fill_hashes(base, first_index, out):
 UPPER_BOUND_SHIFT = np.uint64(20)
 
 
-@numba.njit(cache=True)
+@kernel
 def _upper_bounds():
     """(4096,) the normal of each cell's last value, plus 1e-6: more than the inverse CDF's approximation can wiggle
     (its relative error is 1.2e-9, |x| < 6.34), so each value bounds every normal of its cell from above."""
@@ -164,20 +165,20 @@ def _upper_bounds():
 _NORMAL_UPPER = _upper_bounds()
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def normal_upper_bound(bits32):
     """A number at least :func:`normal_of_bits` (bits32), at most 0.015 above it where |x| < 2.5 (a table lookup, no
     division or log): enough to tell that a draw cannot exceed a level without drawing it."""
     return _NORMAL_UPPER[bits32 >> UPPER_BOUND_SHIFT]
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def normal_at(base, index):
     """Standard normal at position ``index`` of a stream (its first half)."""
     return normal_half_at(base, index, 0)
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def fill_normal_pairs(base, first_index, high, low, tails):
     """The normals of both halves of positions ``first_index + k`` of a stream, ``k < high.shape[0]``: ``high[k]``,
     ``low[k]`` equal :func:`normal_half_at` (..., 0) and (..., 1) bit for bit; an empty ``low`` (shape (0,)) skips the
@@ -212,7 +213,7 @@ def fill_normal_pairs(base, first_index, high, low, tails):
                 low[k] = _tail_normal(p)
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def fill_normals_of(hashes, half, at, out, tails):
     """out[i] = :func:`normal_of_bits` (:func:`half_bits` (hashes[at[i]], half)) for i < at.shape[0], bit for bit;
     ``tails`` (m,) bool scratch. As :func:`fill_normal_pairs`: a loop without a branch for the central formula, then
@@ -226,7 +227,7 @@ def fill_normals_of(hashes, half, at, out, tails):
             out[i] = _tail_normal(centred_unit(half_bits(hashes[at[i]], half)))
 
 
-@numba.njit(cache=True)
+@kernel
 def _normals(key, pulse_id, stream, index):
     out = np.empty(index.shape[0])
     for i in range(index.shape[0]):

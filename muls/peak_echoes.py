@@ -6,6 +6,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from .runtime import kernel
 from .waveform import Echoes, pulse_value
 
 
@@ -28,7 +29,7 @@ def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, shape) -> np.nda
     return out
 
 
-@numba.njit(cache=True, parallel=True, nogil=True)
+@kernel(parallel=True, nogil=True)
 def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent, making):
     """Index into the echoes of the echo explaining each peak, -1 for none (see :func:`dominant_echo`); an echo
     can make a peak up to ``making`` [s] after its start."""

@@ -23,6 +23,7 @@ from .channels import processor_sigma_lsb
 from .detection import WINDOW_BLOCK, Records, sample_times
 from .lookup import bracket, interp_at, on_geometric_grid, on_log_grid, steps_per_log
 from .peak_echoes import dominant_echo
+from .runtime import kernel
 from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values
 
 #: Most peaks kept per window and channel (more means noise, not echoes).
@@ -131,7 +132,7 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes:
     return peaks, ref_time
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def peak_order(pulse, channel, index, time_s):
     """(m,) int64: the peaks to keep, in ranging's order: by pulse, then time, then channel and sample index, where
     overlapping windows found one run twice (the same pulse, channel and index) the earlier one only.
@@ -165,7 +166,7 @@ def peak_order(pulse, channel, index, time_s):
     return kept[:m]
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _after(a, b, time_s, channel, index):
     """Peak ``a`` comes after peak ``b`` of the same pulse: by time, then channel, sample index and slot."""
     if time_s[a] != time_s[b]:
@@ -177,7 +178,7 @@ def _after(a, b, time_s, channel, index):
     return a > b
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _refine(y0, y1, y2, fit, table):
     """(offset of the peak from the middle sample [samples], middle sample over peak) from three samples."""
     if fit == SAMPLE_MAXIMUM:
@@ -196,7 +197,7 @@ def _refine(y0, y1, y2, fit, table):
     return interp_at(d, j, table.feature, table.offset), interp_at(d, j, table.feature, table.centre)
 
 
-@numba.njit(cache=True, parallel=True, nogil=True)
+@kernel(parallel=True, nogil=True)
 def _reference_peaks(reference, dark_mean, fit, table):
     """Sub-sample index of the CH0 peak of each pulse."""
     n_pulses, n_ref = reference.shape
@@ -212,7 +213,7 @@ def _reference_peaks(reference, dark_mean, fit, table):
     return out
 
 
-@numba.njit(cache=True, parallel=True, nogil=True)
+@kernel(parallel=True, nogil=True)
 def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
            clip_table, out, sparse):
     """The peak search over every window and channel (module doc), into ``out``. ``sparse``: records mostly 0 (full
@@ -338,7 +339,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                         counts[slot] += 1
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _residuals(codes, times, base_w, chans, c, max_code, open_, blind, sigma, resid, echoes):
     """Channel ``c``'s residuals over its baseline (codes (n,) at ``times`` (n,) [s], the uncut baseline ``base_w``
     (n,) [W] before the gate), in one loop without branches (it runs on SIMD lanes): ``open_``, ``blind`` (the
@@ -364,7 +365,7 @@ def _residuals(codes, times, base_w, chans, c, max_code, open_, blind, sigma, re
     return seen
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _may_run(codes, synthesised, w, c, chans, k_sigma):
     """Whether channel ``c`` of window ``w`` was synthesised and has a sample over half the threshold above its dark
     level, where a run may start (the baseline and its noise only raise the bar)."""
@@ -376,7 +377,7 @@ def _may_run(codes, synthesised, w, c, chans, k_sigma):
     return highest - chans.dark_mean_lsb[c] > 0.5 * k_sigma * processor_sigma_lsb(chans, c, 0.0)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _code_segments(row, seg_first, seg_end):
     """The stretches of ``row`` (n,) codes within a sample of a nonzero code, merged where they touch: their first
     samples and ends (exclusive) into ``seg_first``, ``seg_end``; returns how many. A run of the peak search lies
@@ -398,7 +399,7 @@ def _code_segments(row, seg_first, seg_end):
     return m
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _add_echo(echoes, first, u, dt, scale, basis):
     """echoes[first:] += scale * w(u + i dt): the pulse basis steps by constant factors, two exps in all."""
     if u < 0.0:  # the echo starts after this sample: first sample at or after its start
@@ -416,7 +417,7 @@ def _add_echo(echoes, first, u, dt, scale, basis):
         eb *= rb
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _clipped_peak(first, last, level_first, level_last, table):
     """(peak index [samples], amplitude) of an echo clipped from sample ``first`` to ``last``, where the clip
     level above the baseline was ``level_first`` and ``level_last`` (both > 0): the amplitude A whose pulse exceeds

@@ -19,11 +19,11 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
-import numba
 import numpy as np
 
 from .errors import ParameterError
 from .lookup import bracket
+from .runtime import kernel
 
 # Petzold's average particle phase function [1/sr], the values published in Mobley (1994), Light and Water,
 # Table 3.10 (also Mobley et al. 1993, Appl. Opt. 32, 7484, Table 1), derived from Petzold (1972), SIO Ref.
@@ -222,7 +222,7 @@ def phase_function(name: str, **params) -> PhaseFunction:
 # Compiled helpers: the kernels of muls.montecarlo call these with the tables above.
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def sample_angle(sample_theta, u):
     """Scattering angle [rad] whose cumulative probability is ``u`` in [0, 1) (inverse CDF, linear)."""
     x = u * (sample_theta.shape[0] - 1)
@@ -230,7 +230,7 @@ def sample_angle(sample_theta, u):
     return sample_theta[i] + (x - i) * (sample_theta[i + 1] - sample_theta[i])
 
 
-@numba.njit(cache=True)
+@kernel
 def cumulative_at(sample_theta, theta):
     """Probability of a scattering angle below ``theta`` [rad]: the exact inverse of :func:`sample_angle`.
 
@@ -246,7 +246,7 @@ def cumulative_at(sample_theta, theta):
     return (lo + (theta - sample_theta[lo]) / (sample_theta[lo + 1] - sample_theta[lo])) / m
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def value_at(ln_p, ln_theta0, inv_step, theta):
     """p(theta) [1/sr] from the ln p table (linear in ln theta; clamped to the grid's ends)."""
     if theta <= 0.0:

@@ -8,11 +8,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from .detection import Records
 from .peaks import Peaks, find_peaks
+from .runtime import kernel
 from .waveform import Echoes, OpticalModel, PulseBatch, optical_power
 
 DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
@@ -68,7 +68,7 @@ def choose_returns(model: OpticalModel, peaks: Peaks):
     return chosen, return_number, number_of_returns, dropped
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def best_of_clusters(new, saturated, score):
     """(k,) int64, ascending: the peak each cluster keeps, where a cluster is a run of peaks that ``new`` (n,) bool
     starts: the unsaturated one with the highest ``score`` before any saturated one, a tie going to the later peak,
@@ -148,7 +148,7 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     return cause
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _powers(t, pulses, col, cuts, echoes, extent):
     out = np.empty(t.shape[0])
     for i in range(t.shape[0]):

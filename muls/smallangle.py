@@ -112,12 +112,3 @@ def attenuation_per_m(attenuation_per_m: float, scattering_per_m: float, footpri
     r = np.asarray(range_m, dtype=float)
     return np.interp(np.log(np.clip(r, TABLE_MIN_RANGE_M, TABLE_MAX_RANGE_M)), ln_z, k)
 
-
-def single_scattering_share(fov_full_rad: float) -> float:
-    """The first-order limit: the share of scattering kept, int_0^1 F(theta_h / (1 - u)) du (module doc),
-    for a receiver of full field of view ``fov_full_rad`` and a footprint growing as the field does."""
-    phase = petzold()
-    u = (np.arange(20000) + 0.5) / 20000.0
-    angle = np.minimum(0.5 * fov_full_rad / (1.0 - u), 0.5 * math.pi)  # light scattered backwards is lost
-    cdf = np.linspace(0.0, 1.0, phase.sample_theta_rad.shape[0])
-    return float(np.mean(np.interp(np.log(angle), np.log(phase.sample_theta_rad), cdf)))

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
 from .channels import ChannelArrays
@@ -27,6 +26,7 @@ from .errors import ParameterError
 from .filters import first_order_filter
 from .instrument import Instrument
 from .radiometry import column_density_per_m, lambertian_weight, target_factor, window_factor
+from .runtime import kernel
 from .shape_tables import ClipTable, FitTable
 from .water import Water
 
@@ -248,7 +248,7 @@ class OpticalModel:
 INSERTION_SORT_MAX = 12
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _sort_by_delay_within(offsets, delay, energy, source):
     """Sort each pulse's echoes by delay in place, stably, as an insertion sort alone would.
 
@@ -291,7 +291,7 @@ def _sort_by_delay_within(offsets, delay, energy, source):
             delay[j + 1], energy[j + 1], source[j + 1] = d, e, s
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def pulse_value(u, basis):
     """Filtered unit-area pulse at u seconds after its start [1/s] (MULS Eq. 2 through the bandwidth)."""
     if u < 0.0:
@@ -299,7 +299,7 @@ def pulse_value(u, basis):
     return (basis[2] * u + basis[3]) * math.exp(-basis[0] * u) + basis[4] * math.exp(-basis[1] * u)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def column_integrals_at(tau, col):
     """(S0a, S1a, S0b) of the module doc at two-way time tau [s], interpolated in the tables; zeros past them."""
     table = col.integrals
@@ -312,7 +312,7 @@ def column_integrals_at(tau, col):
             table[i, 2] + f * (table[i + 1, 2] - table[i, 2]))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def uncut_column_value(t, col):
     """Power [W] at time t [s] of the column of a beam that meets nothing (:func:`column_value` with no cut): one
     interpolation in ``col.uncut`` instead of three and their combination."""
@@ -325,7 +325,7 @@ def uncut_column_value(t, col):
     return col.uncut[i] + (x - i) * (col.uncut[i + 1] - col.uncut[i])
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def baseline_values(out, times, background_w, col):
     """out[k] = ``background_w`` + :func:`uncut_column_value` (times[k]) [W], the same numbers, in a loop whose
     branches are selects (the table index clamped), so it runs on SIMD lanes."""
@@ -337,7 +337,7 @@ def baseline_values(out, times, background_w, col):
         out[k] = background_w + (table[i] + (x - i) * (table[i + 1] - table[i]) if inside else 0.0)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def column_value(t, cut_tau, col):
     """Column power [W] at time t [s] of a beam cut at two-way time cut_tau [s] (exact cut, see module doc);
     ``col`` a :class:`ColumnKernel`."""
@@ -353,7 +353,7 @@ def column_value(t, cut_tau, col):
     return (basis[2] * (u * v0a + v1a) + basis[3] * v0a) * ea + basis[4] * v0b * math.exp(-basis[1] * u)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _column_many(t, cut_tau, col):
     out = np.empty(t.shape[0])
     for i in range(t.shape[0]):
@@ -361,7 +361,7 @@ def _column_many(t, cut_tau, col):
     return out
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def optical_power(t, p, col, cuts, echoes, extent):
     """Total received power [W] of batch pulse p at time t [s] (MULS Eq. 1): column, echoes, background."""
     power = cuts.background_w[p]

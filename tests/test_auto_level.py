@@ -13,11 +13,13 @@ from scanner_sim.fidelity import FIDELITY_LEVELS
 from scanner_sim.rays import auto as auto_level
 from scanner_sim.rays.auto import cast_auto
 from scanner_sim.rays.beams import beam_pattern
-from scanner_sim.rays.cast import Hits, RayCaster, cast_beams
-from scanner_sim.rays.collapse import HIT_FIELDS, SIMPLE_SPREAD_M, simple_pulses, two_point_rule
+from scanner_sim.rays.cast import CastScene, cast_beams
+from scanner_sim.rays.caster import RayCaster
+from scanner_sim.rays.collapse import simple_pulses, two_point_rule
+from scanner_sim.rays.echoes import ECHO_BIN_M, echo_energy
+from scanner_sim.rays.hits import HIT_FIELDS, Hits
 from scanner_sim.rays.seabed_grid import seabed_grid
-from scanner_sim.studies.tradeoff import with_level
-from scanner_sim.survey.pipeline import PassOptions, PassSetup, hit_echo_range_m
+from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import LABELS, Part, Scene, panel_mesh, tube
 from scanner_sim.world.terrain import HeightField
 
@@ -32,7 +34,7 @@ def _hits(pulse, range_m, object_id, n_pulses):
     return Hits(pulse_index=np.asarray(pulse, np.int64), subray_index=sub, range_m=np.asarray(range_m, float),
                 point=np.zeros((n, 3)), normal=np.tile([0.0, 0.0, 1.0], (n, 1)), incidence_rad=0 * f,
                 reflectance=0.1 * f, label=np.ones(n, np.int16), object_id=np.asarray(object_id, np.int32),
-                receiver_weight=f, weight=f / M, rx_distance_m=np.asarray(range_m, np.float32), n_pulses=n_pulses,
+                receiver_weight=f, weight=f / M, echo_range_m=np.asarray(range_m, float), n_pulses=n_pulses,
                 n_subrays=M)
 
 
@@ -41,7 +43,7 @@ def test_a_pulse_is_simple_only_when_all_its_sub_rays_meet_one_object_within_the
     spread just over the limit; 3 one sub-ray missing."""
     flat = list(5.0 + np.linspace(0, 0.01, M))
     pulse = [0] * M + [1] * M + [2] * M + [3] * (M - 1)
-    rng = flat + flat + list(5.0 + np.linspace(0, 1.01 * SIMPLE_SPREAD_M, M)) + flat[:-1]
+    rng = flat + flat + list(5.0 + np.linspace(0, 1.01 * ECHO_BIN_M, M)) + flat[:-1]
     obj = [1] * M + [1] * (M - 1) + [2] + [1] * (2 * M - 1)
     np.testing.assert_array_equal(simple_pulses(_hits(pulse, rng, obj, 4)), [True, False, False, False])
 
@@ -67,17 +69,17 @@ def test_the_two_point_rule_keeps_energy_mean_variance_and_skewness():
 
 def _casts(scene, pulses):
     """(auto's hits, balanced's hits) of the scene's first pulses."""
-    setup = with_level(PassSetup.build(load_scene(str(FAILURES / f"{scene}.yaml")), PassOptions(max_pulses=pulses)),
-                       FIDELITY_LEVELS["auto"])
+    setup = PassSetup.build(load_scene(str(FAILURES / f"{scene}.yaml")), PassOptions(max_pulses=pulses),
+                            level=FIDELITY_LEVELS["auto"])
     slots = np.concatenate(list(setup.slot_chunks()))
     rays = setup.scanner.world_rays(setup.trajectory.poses(slots / setup.scanner.pulse_rate_hz))
     geometry = setup.model.instrument.geometry
-    return (cast_auto(setup.caster, setup.scene, *rays, setup.pattern, geometry),
-            cast_beams(setup.caster, setup.scene, *rays, setup.pattern, geometry))
+    return (cast_auto(setup.target, *rays, setup.pattern, geometry),
+            cast_beams(setup.target, *rays, setup.pattern, geometry))
 
 
 def _energy(hits):
-    return hits.weight * hits.reflectance * np.cos(hits.incidence_rad) * hits.receiver_weight
+    return echo_energy(hits.weight, hits.reflectance, np.cos(hits.incidence_rad), hits.receiver_weight)
 
 
 @pytest.mark.parametrize("scene", ["clear_water", "step_edges"])
@@ -97,14 +99,14 @@ def test_auto_keeps_each_pulses_echo_energy_and_mean_delay_and_the_axis_hit(scen
     ea, eb = per_pulse(auto, _energy(auto)), per_pulse(balanced, _energy(balanced))
     np.testing.assert_allclose(ea, eb, rtol=1e-9)
     lit = eb > 0
-    mean_a = per_pulse(auto, _energy(auto) * hit_echo_range_m(auto))[lit] / ea[lit]
-    mean_b = per_pulse(balanced, _energy(balanced) * hit_echo_range_m(balanced))[lit] / eb[lit]
+    mean_a = per_pulse(auto, _energy(auto) * auto.echo_range_m)[lit] / ea[lit]
+    mean_b = per_pulse(balanced, _energy(balanced) * balanced.echo_range_m)[lit] / eb[lit]
     np.testing.assert_allclose(mean_a, mean_b, rtol=0, atol=1e-6)  # return legs are float32: 0.5 um at 9 m
 
     def variance(hits, mean, energy):
         full_mean = np.zeros(n)
         full_mean[lit] = mean
-        return per_pulse(hits, _energy(hits) * (hit_echo_range_m(hits) - full_mean[hits.pulse_index]) ** 2)[lit] / energy
+        return per_pulse(hits, _energy(hits) * (hits.echo_range_m - full_mean[hits.pulse_index]) ** 2)[lit] / energy
 
     np.testing.assert_allclose(variance(auto, mean_a, ea[lit]), variance(balanced, mean_b, eb[lit]), rtol=1e-2,
                                atol=1e-10)
@@ -194,8 +196,10 @@ def _pulses(n, seed, spread_deg=40.0):
 def _both(scene, pulses, shadow_rays=True):
     caster = CountingCaster(RayCaster.for_scene(scene))
     pattern = beam_pattern(19)
-    proven = auto_level.cast_seabed_analytic(caster, scene, *pulses, pattern, GEOMETRY, shadow_rays)
-    embree = cast_beams(caster._caster, scene, *pulses, pattern, GEOMETRY, shadow_rays, prove_shadows=False)
+    grid = seabed_grid(scene, caster)
+    proven = auto_level.cast_seabed_analytic(CastScene(scene, caster, grid), *pulses, pattern, GEOMETRY, shadow_rays)
+    embree = cast_beams(CastScene(scene, caster._caster, grid), *pulses, pattern, GEOMETRY, shadow_rays,
+                        prove_shadows=False)
     return proven, embree, caster
 
 
@@ -253,7 +257,7 @@ def test_analytic_hits_leave_pulses_the_relief_can_hide_to_embree():
 
 
 def _seen_without_shadow_rays(scene, pulses):
-    hits = cast_beams(RayCaster.for_scene(scene), scene, *pulses, beam_pattern(19), GEOMETRY, shadow_rays=False)
+    hits = cast_beams(CastScene.build(scene), *pulses, beam_pattern(19), GEOMETRY, shadow_rays=False)
     return hits.receiver_weight
 
 
@@ -267,7 +271,7 @@ def test_a_scene_without_a_height_field_is_cast_as_balanced_casts_it():
     assert seabed_grid(scene, RayCaster.for_scene(scene)) is None
     proven, embree, _ = _both(scene, pulses)
     for f in HIT_FIELDS:
-        np.testing.assert_array_equal(getattr(proven, f), getattr(embree, f))
+        np.testing.assert_array_equal(getattr(proven, f.name), getattr(embree, f.name))
 
 
 def test_the_seabed_bounds_hold_every_triangle():
@@ -300,20 +304,19 @@ def test_the_seabed_bounds_hold_every_triangle():
 def test_auto_on_a_seabed_keeps_each_pulses_echo_energy_and_mean_delay():
     """cable_survey's first pulses: auto's echoes (analytic hits, collapsed) bring balanced's energy per pulse
     and its energy-weighted mean echo range to the float32 precision of the distances."""
-    setup = with_level(PassSetup.build(load_scene("cable_survey"), PassOptions(max_pulses=3000)),
-                       FIDELITY_LEVELS["auto"])
+    setup = PassSetup.build(load_scene("cable_survey"), PassOptions(max_pulses=3000), level=FIDELITY_LEVELS["auto"])
     slots = np.concatenate(list(setup.slot_chunks()))
     rays = setup.scanner.world_rays(setup.trajectory.poses(slots / setup.scanner.pulse_rate_hz))
     geometry = setup.model.instrument.geometry
-    auto = cast_auto(setup.caster, setup.scene, *rays, setup.pattern, geometry)
-    balanced = cast_beams(setup.caster, setup.scene, *rays, setup.pattern, geometry)
+    auto = cast_auto(setup.target, *rays, setup.pattern, geometry)
+    balanced = cast_beams(setup.target, *rays, setup.pattern, geometry)
     n = balanced.n_pulses
     ea = np.bincount(auto.pulse_index, weights=_energy(auto), minlength=n)
     eb = np.bincount(balanced.pulse_index, weights=_energy(balanced), minlength=n)
     np.testing.assert_allclose(ea, eb, rtol=1e-6)
     lit = eb > 0
-    mean_a = np.bincount(auto.pulse_index, weights=_energy(auto) * hit_echo_range_m(auto), minlength=n)[lit] / ea[lit]
-    mean_b = np.bincount(balanced.pulse_index, weights=_energy(balanced) * hit_echo_range_m(balanced),
+    mean_a = np.bincount(auto.pulse_index, weights=_energy(auto) * auto.echo_range_m, minlength=n)[lit] / ea[lit]
+    mean_b = np.bincount(balanced.pulse_index, weights=_energy(balanced) * balanced.echo_range_m,
                          minlength=n)[lit] / eb[lit]
     np.testing.assert_allclose(mean_a, mean_b, rtol=0, atol=2e-5)
     assert np.bincount(auto.pulse_index, minlength=n).mean() < 4  # mostly three rows a pulse
@@ -328,10 +331,11 @@ def test_shadow_rays_proven_clear_leave_every_hit_as_embree_finds_it(ridges):
     scene = _plates_and_cable_scene(seed=5, ridges=ridges)
     pulses = _pulses(4000, seed=6, spread_deg=60.0 if ridges else 40.0)
     every, proving = CountingCaster(RayCaster.for_scene(scene)), CountingCaster(RayCaster.for_scene(scene))
-    cast = cast_beams(every, scene, *pulses, beam_pattern(19), GEOMETRY, prove_shadows=False)
-    proven = cast_beams(proving, scene, *pulses, beam_pattern(19), GEOMETRY)
+    cast = cast_beams(CastScene(scene, every, seabed_grid(scene, every)), *pulses, beam_pattern(19), GEOMETRY,
+                      prove_shadows=False)
+    proven = cast_beams(CastScene(scene, proving, seabed_grid(scene, proving)), *pulses, beam_pattern(19), GEOMETRY)
     shadowed = (cast.receiver_weight == 0) & (_seen_without_shadow_rays(scene, pulses) == 1)
     assert shadowed.sum() > 20  # hits hidden from the receiver: what the shadow rays are for
     for f in HIT_FIELDS:
-        np.testing.assert_array_equal(getattr(proven, f), getattr(cast, f), err_msg=f)
+        np.testing.assert_array_equal(getattr(proven, f.name), getattr(cast, f.name), err_msg=f.name)
     assert proving.shadow_rays < (0.6 if ridges else 0.4) * every.shadow_rays, (proving.shadow_rays, every.shadow_rays)

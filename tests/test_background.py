@@ -5,7 +5,7 @@ import math
 import pytest
 
 from scanner_sim.config import ConfigError, load_scene
-from scanner_sim.survey.pipeline import PassOptions, PassSetup
+from scanner_sim.survey.setup import PassOptions, PassSetup
 
 RADIANCE = 0.5  # L_b [W/(m^2 sr nm)]
 
@@ -32,10 +32,10 @@ def test_background_light_raises_the_far_channels_baseline_by_eqs_8_to_10():
     common = RADIANCE * 4.4e-3 * 0.6 * 1.0 * math.exp(-2.0 * water.two_way_attenuation_per_m * 7.0)
     power_w = common * 0.1 * 0.1**2 / 4 + common * water.beta_pi_per_m_sr * math.pi * 0.1**2 / 4  # Eqs. 9, 10, 8
     expected_lsb = power_w * 0.98 * 1.0 * 0.077 * 20000 * 50 * 1024
-    t_ns = lit.records.sample_times_s(setup.model)[0] * 1e9
+    t_ns = lit.waveforms.sample_times_s(setup.model)[0] * 1e9
     after_echo = (t_ns > 160) & (t_ns < 460)  # the bright echo's tail has decayed below 0.01 LSB by 160 ns
     ch3 = setup.model.instrument.channel_names.index("ch3")
-    rise = lit.records.codes[:, ch3, after_echo].mean() - dark.records.codes[:, ch3, after_echo].mean()
+    rise = lit.waveforms.codes[:, ch3, after_echo].mean() - dark.waveforms.codes[:, ch3, after_echo].mean()
     assert expected_lsb > 5.0  # a level the test can resolve
     assert rise == pytest.approx(expected_lsb, rel=0.05, abs=0.3)
 

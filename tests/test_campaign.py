@@ -19,8 +19,10 @@ import yaml
 from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, load_scene
 from scanner_sim.runs.campaign import load_campaign, parse_campaign
-from scanner_sim.runs.tasks import TIMING_KEYS, dask_client, run_pass_segmented
-from scanner_sim.survey.pipeline import PassOptions, run_pass
+from scanner_sim.runs.cluster import dask_client
+from scanner_sim.runs.jobs import TIMING_KEYS, run_pass_segmented
+from scanner_sim.survey.pipeline import run_pass
+from scanner_sim.survey.setup import PassOptions
 
 EXAMPLE = SCENES_DIR / "campaigns" / "example_campaign.yaml"
 #: The files whose bytes must match the serial pass's (summary.json is compared without its timings).

@@ -15,8 +15,9 @@ from scanner_sim.metrics.coverage import (
     Footprint,
     PlanGrid,
 )
-from scanner_sim.survey.pipeline import PassOptions, run_pass
+from scanner_sim.survey.pipeline import run_pass
 from scanner_sim.survey.point_records import DROPOUT_CAUSES, DropoutRecords, PointRecords
+from scanner_sim.survey.setup import PassOptions
 from scanner_sim.world.scene import build_scene
 
 CELL = 0.25

@@ -14,7 +14,8 @@ import yaml
 from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, load_scene, parse_scene
 from scanner_sim.config.errors import SetupWarning
-from scanner_sim.motion.track_checks import MAX_LEGS, MAX_PASS_PULSES, build_trajectory, check_pass_budget, estimate_pass
+from scanner_sim.survey.budget import MAX_LEGS, MAX_PASS_PULSES, check_pass_budget, estimate_pass
+from scanner_sim.survey.setup import checked_trajectory
 from scanner_sim.world.scene import build_scene
 
 MINE_FIELD = yaml.safe_load((SCENES_DIR / "mine_field.yaml").read_text())
@@ -42,7 +43,7 @@ def _config(**changes):
 
 def _refused(match, scene=None, **changes):
     with pytest.raises(ConfigError) as exc:
-        build_trajectory(_config(**changes), scene)
+        checked_trajectory(_config(**changes), scene)
     text = str(exc.value)
     assert "\n" not in text, text
     assert match in text, text
@@ -52,7 +53,7 @@ def _refused(match, scene=None, **changes):
 def _warned(match, scene, **changes):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        build_trajectory(_config(**changes), scene)
+        checked_trajectory(_config(**changes), scene)
     messages = [str(w.message) for w in caught if issubclass(w.category, SetupWarning)]
     assert any(match in m for m in messages), messages
     return messages
@@ -63,7 +64,7 @@ def test_shipped_scenes_pass_the_checks_without_warnings():
         config = load_scene(name)
         with warnings.catch_warnings():
             warnings.simplefilter("error", SetupWarning)
-            build_trajectory(config, build_scene(config))
+            checked_trajectory(config, build_scene(config))
 
 
 # -- refused when the file is read ---------------------------------------------------------------------------
@@ -177,7 +178,7 @@ def test_seabed_beyond_any_echo_warns():
                         "seabed.resolution_m": 0.5})
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        build_trajectory(config, build_scene(config))
+        checked_trajectory(config, build_scene(config))
     assert any("platform.depth_m = 10.0: the seabed lies about 3,000 m below the vehicle" in str(w.message)
                for w in caught)
 

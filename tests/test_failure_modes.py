@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from scanner_sim.config import parse_scene
-from scanner_sim.survey.pipeline import PassSetup
+from scanner_sim.survey.setup import PassSetup
 
 LIDAR_Z = -1.0
 
@@ -98,9 +98,8 @@ def test_regression_windowed_records_keep_every_return_of_eight_surfaces_in_one_
 
 # -- 4. grazing incidence -----------------------------------------------------------------------------------
 def _median_range_error(config, level):
-    from scanner_sim.studies.tradeoff import with_level
 
-    setup = with_level(PassSetup.build(config), level)
+    setup = PassSetup.build(config, level=level)
     points = setup.simulate_chunk(np.concatenate(list(setup.slot_chunks()))).points
     return float(np.median(points.range_error_m[points.object_id >= 0]))
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from muls.errors import ParameterError
-from scanner_sim.fidelity import SUBRAY_CUT_BIN_M, column_cuts
+from scanner_sim.rays.echoes import ECHO_BIN_M
+from scanner_sim.survey.handoff import column_cuts
 
 
 def test_per_pulse_cut_sits_at_the_energy_weighted_mean_range_of_the_hits():
@@ -16,7 +17,7 @@ def test_per_pulse_cut_sits_at_the_energy_weighted_mean_range_of_the_hits():
 
 def test_per_subray_cuts_light_the_column_to_each_surface():
     """The same beam cut per sub-ray: 0.3 at 5 m and 0.2 at 6 m; two sub-rays within a bin share one cut."""
-    half_bin = 0.4 * SUBRAY_CUT_BIN_M
+    half_bin = 0.4 * ECHO_BIN_M
     cuts, shares = column_cuts(np.array([0, 0, 0]), np.array([6.0, 5.0, 5.0 + half_bin]),
                                np.array([0.2, 0.15, 0.15]), 2, "subray")
     assert cuts.shape == (2, 3)

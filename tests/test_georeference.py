@@ -7,9 +7,9 @@ import pytest
 from muls.peaks import Peaks
 from muls.ranging import Ranging
 from scanner_sim.config import parse_scene
-from scanner_sim.rays.cast import Hits
+from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.georeference import NO_OBJECT, NOISE_CLASS, LinesOfSight, georeference
-from scanner_sim.survey.pipeline import PassOptions, PassSetup
+from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import LABELS
 
 STEP_M = 1.0
@@ -119,7 +119,7 @@ def _hits(pulse_index, range_m, object_id):
     return Hits(pulse_index=np.asarray(pulse_index, np.int64), subray_index=np.zeros(n, np.int32),
                 range_m=np.asarray(range_m, float), point=np.zeros((n, 3)), normal=np.tile([0.0, 0.0, 1.0], (n, 1)),
                 incidence_rad=0 * f, reflectance=0.1 * f, label=np.full(n, LABELS["panel"], np.int16),
-                object_id=np.asarray(object_id, np.int32), receiver_weight=f, weight=f, rx_distance_m=f,
+                object_id=np.asarray(object_id, np.int32), receiver_weight=f, weight=f, echo_range_m=f,
                 n_pulses=2, n_subrays=1)
 
 
@@ -150,7 +150,7 @@ def test_truth_without_navigation_noise_is_what_a_cast_along_each_line_finds():
     assert not setup.trajectory.has_navigation_noise
     slots = next(setup.slot_chunks())
     sight = setup.cast_chunk(slots).sight
-    ray, tri, dist = setup.caster.first_hits((sight.origin_m - setup.scene.local_origin).astype(np.float32),
+    ray, tri, dist = setup.target.caster.first_hits((sight.origin_m - setup.scene.local_origin).astype(np.float32),
                                              sight.direction.astype(np.float32))
     assert ray.size == slots.size  # every line meets a panel
     assert np.array_equal(sight.true_range_m[ray], dist.astype(float))

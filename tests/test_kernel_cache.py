@@ -1,11 +1,12 @@
-"""Where numba caches the compiled kernels (muls/kernel_cache.py)."""
+"""The process's runtime set-up (muls/runtime.py): where numba caches the compiled kernels, and that importing the
+packages changes nothing until an entry point asks."""
 
 import os
 import subprocess
 import sys
 from pathlib import Path
 
-from muls.kernel_cache import source_key
+from muls.runtime import source_key
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -18,36 +19,56 @@ def _tree(tmp_path):
     return tmp_path
 
 
+def _run(code: str, **env) -> str:
+    base = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "OMP_WAIT_POLICY")}
+    return subprocess.run([sys.executable, "-c", code], env={**base, **env}, check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
 def test_regression_a_change_to_a_helper_module_starts_a_fresh_kernel_cache(tmp_path):
     """Root cause: numba's cache checks only the source file of the function it compiled, while a kernel compiles
     in the helpers it calls from other modules. Changing the normal draws in muls/noise.py (or the deciding test in
     muls/deciding_channels.py) alone left the digitiser's cached kernel running the old helper: results from code
-    no longer in the tree. The cache directory is now keyed by every source file's size and modification time: a
+    no longer in the tree. The cache directory is keyed by every source file's size and modification time: a
     change to any file, in either package and at any depth, gives a new key; nothing else does."""
     root = _tree(tmp_path)
-    key = source_key(root)
-    assert source_key(root) == key and len(key) == 16
+    packages = (root / "muls", root / "scanner_sim")
+    key = source_key(packages)
+    assert source_key(packages) == key and len(key) == 16
     helper = root / "muls" / "sub" / "b.py"
     stat = helper.stat()
     os.utime(helper, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000))
-    touched = source_key(root)
+    touched = source_key(packages)
     assert touched != key
     (root / "scanner_sim" / "a.py").write_text("x = 10\n")
-    assert source_key(root) not in (key, touched)
+    assert source_key(packages) not in (key, touched)
     (root / "notes.txt").write_text("not a source")
     (root / "muls" / "data.yaml").write_text("a: 1")
-    assert source_key(root) == source_key(root)
+    assert source_key(packages) == source_key(packages)
+    assert source_key(packages[:1]) != source_key(packages)  # the physics alone is keyed by its own sources
 
 
-def test_importing_muls_points_numba_at_the_cache_of_these_sources(tmp_path):
-    """In a fresh process, importing muls sets numba's cache directory to <XDG_CACHE_HOME>/muls-scanner/numba/<key of
-    the repository's sources>; a NUMBA_CACHE_DIR the user set wins."""
-    code = "import muls, numba; print(numba.config.CACHE_DIR)"
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    out = subprocess.run([sys.executable, "-c", code], env={**env, "XDG_CACHE_HOME": str(tmp_path)}, check=True,
-                         capture_output=True, text=True).stdout.strip()
-    assert Path(out) == tmp_path / "muls-scanner" / "numba" / source_key(ROOT)
+def test_each_packages_kernels_cache_under_the_key_of_its_sources_and_the_physics(tmp_path):
+    """A muls kernel caches in <XDG_CACHE_HOME>/muls-scanner/numba/<key of muls's sources>; a mission kernel under
+    the key of muls's and scanner_sim's sources (it may compile in helpers of both); a NUMBA_CACHE_DIR the user set
+    wins for both."""
+    code = ("from muls.detection import _phases; from scanner_sim.rays.kernels import hit_block\n"
+            "print(_phases._cache._cache_path); print(hit_block._cache._cache_path)")
+    physics, mission = map(Path, _run(code, XDG_CACHE_HOME=str(tmp_path)).splitlines())
+    base = tmp_path / "muls-scanner" / "numba"
+    assert physics.parent == base / source_key([ROOT / "muls"])
+    assert mission.parent == base / source_key([ROOT / "muls", ROOT / "scanner_sim"])
     mine = tmp_path / "mine"
-    out = subprocess.run([sys.executable, "-c", code], env={**env, "NUMBA_CACHE_DIR": str(mine)}, check=True,
-                         capture_output=True, text=True).stdout.strip()
-    assert Path(out) == mine
+    physics, mission = map(Path, _run(code, NUMBA_CACHE_DIR=str(mine)).splitlines())
+    assert physics.parent == mine and mission.parent == mine
+
+
+def test_importing_the_packages_changes_nothing_until_an_entry_point_configures_the_process(tmp_path):
+    """No import-time side effects: importing muls, scanner_sim and the command line leaves the environment and
+    numba's global cache directory as they were; configure_process (what the entry points call) sets the OpenMP
+    wait policy, and a policy the user set wins."""
+    code = ("import os, numba, muls, scanner_sim, scanner_sim.cli\n"
+            "print(os.environ.get('OMP_WAIT_POLICY'), repr(numba.config.CACHE_DIR))\n"
+            "from muls.runtime import configure_process; configure_process(); print(os.environ['OMP_WAIT_POLICY'])")
+    assert _run(code, XDG_CACHE_HOME=str(tmp_path)).splitlines() == ["None ''", "PASSIVE"]
+    assert _run(code, XDG_CACHE_HOME=str(tmp_path), OMP_WAIT_POLICY="ACTIVE").splitlines()[-1] == "ACTIVE"

@@ -488,7 +488,7 @@ def test_regression_second_plateau_explained_by_the_first_echo_does_not_hang():
         "import numpy as np\n"
         "from scanner_sim.config import load_scene\n"
         "from scanner_sim.studies.coverage_study import combination_config\n"
-        "from scanner_sim.survey.pipeline import PassOptions, PassSetup\n"
+        "from scanner_sim.survey.setup import PassOptions, PassSetup\n"
         "cfg = combination_config(load_scene('mine_field'), 'coastal_ocean', 3.0, 'single_channel')\n"
         "chunk = PassSetup.build(cfg, PassOptions(water='coastal_ocean')).simulate_chunk(np.array([44049]))\n"
         "assert np.all(np.isfinite(chunk.points.xyz)) and len(chunk.points) >= 1\n"

@@ -10,7 +10,8 @@ import pytest
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
 from scanner_sim.io import read_las_metadata, read_waveforms_npz
-from scanner_sim.survey.pipeline import PassOptions, run_pass
+from scanner_sim.survey.pipeline import run_pass
+from scanner_sim.survey.setup import PassOptions
 
 PULSES = 1500
 

@@ -8,7 +8,8 @@ import pytest
 
 from muls.presets import mul2023
 from scanner_sim.rays.beams import beam_pattern
-from scanner_sim.rays.cast import RayCaster, cast_beams
+from scanner_sim.rays.cast import CastScene, cast_beams
+from scanner_sim.rays.caster import ray_caster
 from scanner_sim.world.scene import LABELS, Part, Scene, frustum, panel_mesh
 
 GEOMETRY = mul2023().geometry
@@ -16,7 +17,7 @@ FLOAT32_RANGE_TOL_M = 2e-6  # float32 spacing near 10 m is 1e-6 m
 
 
 def _cast(scene, *rays, **kw):
-    return cast_beams(RayCaster.for_scene(scene), scene, *rays, **kw)
+    return cast_beams(CastScene.build(scene), *rays, **kw)
 
 
 def _plate(distance_m, tilt_rad, origin):
@@ -133,8 +134,8 @@ def test_numpy_backend_agrees_with_embree():
     v = bv + [0.0, 0.0, -3.0]
     o = np.c_[rng.uniform(-0.6, 0.6, (200, 2)), np.zeros(200)].astype(np.float32)
     d = np.tile(np.float32([0, 0, -1]), (200, 1))
-    a = RayCaster(v, bf, backend="embree").first_hits(o, d)
-    b = RayCaster(v, bf, backend="numpy").first_hits(o, d)
+    a = ray_caster(v, bf, backend="embree").first_hits(o, d)
+    b = ray_caster(v, bf, backend="numpy").first_hits(o, d)
     assert np.array_equal(a[0], b[0])
     np.testing.assert_allclose(a[2], b[2], atol=1e-5)
 
@@ -144,14 +145,14 @@ def test_explicit_embree_backend_is_loud_when_missing(monkeypatch):
     monkeypatch.setitem(sys.modules, "embreex.rtcore_scene", None)
     bv, bf = frustum(0.5, 0.2, 0.4)
     with pytest.raises(ImportError, match="embreex"):
-        RayCaster(bv, bf, backend="embree")
+        ray_caster(bv, bf, backend="embree")
     with pytest.warns(RuntimeWarning, match="embreex"):
-        assert RayCaster(bv, bf, backend="auto").backend == "numpy"
+        assert ray_caster(bv, bf, backend="auto").backend == "numpy"
 
 
 def test_unknown_backend_lists_choices():
     with pytest.raises(ValueError, match="'auto', 'embree', 'numpy'"):
-        RayCaster(np.zeros((3, 3)), np.array([[0, 1, 2]]), backend="optix")
+        ray_caster(np.zeros((3, 3)), np.array([[0, 1, 2]]), backend="optix")
 
 
 def test_bvh_is_built_when_the_caster_is_made_not_by_the_first_chunks():
@@ -159,5 +160,5 @@ def test_bvh_is_built_when_the_caster_is_made_not_by_the_first_chunks():
     chunks of a pass, running side by side on two threads, could both start building the same scene, and the
     build was timed as part of the pass (0.1 s of a cable_survey pass). The caster now builds it on creation."""
     bv, bf = frustum(0.5, 0.2, 0.4)
-    caster = RayCaster(bv, bf, backend="embree")
-    assert caster._scene.is_committed == 1
+    caster = ray_caster(bv, bf, backend="embree")
+    assert caster.committed

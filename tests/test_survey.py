@@ -13,8 +13,9 @@ import trimesh
 
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
-from scanner_sim.survey.pipeline import PassOptions, PassSetup, last_cut, run_pass
+from scanner_sim.survey.pipeline import last_cut, run_pass
 from scanner_sim.survey.point_records import DROPOUT_CAUSES
+from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import LABELS
 
 POOL_P95_MAX_M = 0.15
@@ -117,10 +118,13 @@ def test_same_seed_same_points_whatever_the_thread_count(tmp_path):
 
 
 def test_idle_parallel_workers_sleep_unless_the_user_says_otherwise():
-    """Importing muls sets OpenMP's wait policy to PASSIVE before any parallel kernel runs: spinning workers take a
-    core from the threads working beside them (measured when a ray-stage thread ran beside the physics: ``fast`` on
-    cable_survey 91,000 against 103,000 pulses/s, medians of five). A policy the user set is kept."""
-    code = "import os, muls; print(os.environ['OMP_WAIT_POLICY'])"
+    """A pass's set-up sets OpenMP's wait policy to PASSIVE before any parallel kernel runs (muls.runtime): spinning
+    workers take a core from the threads working beside them (measured when a ray-stage thread ran beside the
+    physics: ``fast`` on cable_survey 91,000 against 103,000 pulses/s, medians of five). A policy the user set is
+    kept."""
+    code = ("import os, scanner_sim\n"
+            "scanner_sim.PassSetup.build(scanner_sim.load_scene('pool_panel'), scanner_sim.PassOptions(max_pulses=10))\n"
+            "print(os.environ['OMP_WAIT_POLICY'])")
     env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
     for given, expected in ((None, "PASSIVE"), ("ACTIVE", "ACTIVE")):
         run_env = env if given is None else {**env, "OMP_WAIT_POLICY": given}

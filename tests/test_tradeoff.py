@@ -13,8 +13,8 @@ from scanner_sim.config import load_scene
 from scanner_sim.fidelity import FIDELITY_LEVELS
 from scanner_sim.render.report import tradeoff_section
 from scanner_sim.studies.accuracy import vs_reference
-from scanner_sim.studies.tradeoff import CONVERGENCE_SUBRAYS, with_level
-from scanner_sim.survey.pipeline import PassOptions, PassSetup
+from scanner_sim.studies.tradeoff import CONVERGENCE_SUBRAYS
+from scanner_sim.survey.setup import PassOptions, PassSetup
 
 FAILURES = Path(__file__).resolve().parent.parent / "scenes" / "failures"
 
@@ -97,8 +97,8 @@ def test_the_reference_has_converged_on_the_cable_survey():
     base = PassSetup.build(load_scene("cable_survey"), PassOptions(max_pulses=600))
     slots = np.concatenate(list(base.slot_chunks()))
     reference = FIDELITY_LEVELS["reference"]
-    coarse = with_level(base, reference).simulate_chunk(slots).points
-    fine = with_level(base, replace(reference, subrays=CONVERGENCE_SUBRAYS)).simulate_chunk(slots).points
+    coarse = base.at_level(reference).simulate_chunk(slots).points
+    fine = base.at_level(replace(reference, subrays=CONVERGENCE_SUBRAYS)).simulate_chunk(slots).points
     m = vs_reference(fine, coarse, slots.size)
     assert m["missing_per_pulse"] == 0.0 and m["extra_per_pulse"] == 0.0
     assert m["p95_position_diff_m"] < 0.01
@@ -111,8 +111,7 @@ def test_points_on_a_plate_hidden_from_the_receiver_count_as_hidden():
 
     blind = replace(FIDELITY_LEVELS["fast"], shadow_rays=False)
     for scene, hidden in (("hidden_plate", 1.0), ("eight_surfaces", 0.0)):
-        setup = with_level(PassSetup.build(load_scene(str(FAILURES / f"{scene}.yaml")), PassOptions(max_pulses=100)),
-                           blind)
+        setup = PassSetup.build(load_scene(str(FAILURES / f"{scene}.yaml")), PassOptions(max_pulses=100), level=blind)
         points = setup.simulate_chunk(np.concatenate(list(setup.slot_chunks()))).points
         assert len(points) >= 100
         assert np.mean(hidden_from_receiver(setup, points)) == hidden

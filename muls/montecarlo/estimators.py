@@ -21,9 +21,8 @@ from __future__ import annotations
 
 import math
 
-import numba
-
 from ..phase import cumulative_at, sample_angle, value_at
+from ..runtime import kernel
 from .layout import (
     APERTURE_RADIUS,
     APERTURE_X,
@@ -40,7 +39,7 @@ from .reciprocity import grid_cell
 from .sampling import angle, aperture_point, scatter, uniform
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def cones(x, y, z, geo):
     """At an event (x, y, z): the direction to the aperture centre and the cones around it and the beam.
 
@@ -55,7 +54,7 @@ def cones(x, y, z, geo):
     return ex / d, ey / d, ez / d, d, alpha, max(alpha, geo[WIDE_RAD]), theta_c
 
 
-@numba.njit(cache=True)
+@kernel
 def column_estimate(state, batch, world, first_order, x, y, z, dx, dy, dz, w, t, theta_c, geo, c, speed, phase,
                     times, column, column1):
     """Light a scattering event sends to the receiver unscattered: local estimate beyond theta_c, forward cone.
@@ -99,7 +98,7 @@ def column_estimate(state, batch, world, first_order, x, y, z, dx, dy, dz, w, t,
     return state
 
 
-@numba.njit(cache=True)
+@kernel
 def target_hit(state, batch, k, x, y, z, t, w, direct, geo, c, speed, scene, times, target, target_direct, hits):
     """Estimates at a hit of plane k: the unscattered return, and the hit binned for reciprocity.
 

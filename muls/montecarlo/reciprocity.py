@@ -18,6 +18,7 @@ import math
 import numba
 import numpy as np
 
+from ..runtime import kernel
 from .layout import APERTURE_RADIUS, APERTURE_X, FOV_TAN
 from .sampling import batch_packets, flight, packet_stream, turn, uniform
 
@@ -45,7 +46,7 @@ def ring_edges(ranges_m, tilt_rad: float, offset_m: float, aperture_radius_m: fl
     return np.array([np.concatenate([i, i[-1] * RING_GROWTH ** np.arange(1, n_out + 1)]) for i in inner])
 
 
-@numba.njit(cache=True)
+@kernel
 def grid_cell(k, x, y, z, origin, e1, e2, edges, n_phi):
     """Index of the receiver-field cell of plane k holding the point (x, y, z) of that plane, or -1."""
     rx, ry, rz = x - origin[k, 0], y - origin[k, 1], z - origin[k, 2]
@@ -69,7 +70,7 @@ def grid_cell(k, x, y, z, origin, e1, e2, edges, n_phi):
     return lo * n_phi + j
 
 
-@numba.njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def trace_receiver(seed_key, first_packet, n_packets, geo, water, scene, sample_theta, times, field):
     """Trace receiver packets (unit weight each) to the planes; tally the scattered ones' first arrivals.
 

@@ -10,31 +10,31 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from ..noise import GAMMA, splitmix64
 from ..phase import sample_angle
+from ..runtime import kernel
 
 #: Odd 64-bit constant separating the streams (0 beam, 1 receiver) and the streams of split copies.
 STREAM_KEY = np.uint64(0xD1B54A32D192ED03)
 _INV53 = 1.0 / 9007199254740992.0
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def packet_stream(seed_key, stream, packet):
     """Initial state of packet ``packet`` of stream ``stream`` (0 beam, 1 receiver)."""
     return splitmix64(seed_key ^ splitmix64(np.uint64(packet) * GAMMA + np.uint64(stream) * STREAM_KEY))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def uniform(state):
     """(next state, uniform in [0, 1))."""
     state = state + GAMMA
     return state, float(splitmix64(state) >> np.uint64(11)) * _INV53
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def scatter(ux, uy, uz, theta, phi):
     """Direction turned by polar angle ``theta`` and azimuth ``phi`` from the unit vector (ux, uy, uz)."""
     st, ct = math.sin(theta), math.cos(theta)
@@ -49,7 +49,7 @@ def scatter(ux, uy, uz, theta, phi):
     return nx * norm, ny * norm, nz * norm
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def angle(ax, ay, az, bx, by, bz):
     """Angle [rad] between two vectors (atan2 of |a x b| and a . b: exact at small angles)."""
     cx = ay * bz - az * by
@@ -58,7 +58,7 @@ def angle(ax, ay, az, bx, by, bz):
     return math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz)
 
 
-@numba.njit(cache=True)
+@kernel
 def aperture_point(state, px, py, pz, ap_x, ap_r, fov_tan):
     """A point q of the aperture that sees (px, py, pz) within its field of view, and the area it stands for.
 
@@ -87,14 +87,14 @@ def aperture_point(state, px, py, pz, ap_x, ap_r, fov_tan):
     return state, math.pi * ap_r * ap_r, qx, qy
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def batch_packets(batch, first_packet, n_packets, n_batches):
     """The packet numbers [lo, hi) that batch ``batch`` of ``n_batches`` traces, in order: a batch's share is fixed
     by the counts alone, so a seed fixes the result whatever the thread count."""
     return first_packet + batch * n_packets // n_batches, first_packet + (batch + 1) * n_packets // n_batches
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def flight(state, x, y, z, dx, dy, dz, t, b, speed, t_end, n):
     """A free path and the distances to the flight's other ends.
 
@@ -110,7 +110,7 @@ def flight(state, x, y, z, dx, dy, dz, t, b, speed, t_end, n):
     return state, s_free, s_time, s_exit, sd, sp
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def turn(state, dx, dy, dz, sample_theta):
     """Scatter the direction (dx, dy, dz) by an angle drawn from p and a uniform azimuth."""
     state, v1 = uniform(state)

@@ -46,6 +46,7 @@ import numpy as np
 from ..errors import ParameterError, check_fraction, check_non_negative, check_positive
 from ..noise import splitmix64
 from ..phase import sample_angle, value_at
+from ..runtime import kernel
 from .estimators import column_estimate, cones, target_hit
 from .layout import (
     APERTURE_RADIUS,
@@ -117,7 +118,7 @@ def split_stack(batches: int) -> tuple[np.ndarray, np.ndarray]:
     return np.zeros((batches, SPLIT_STACK, _SPLIT_FIELDS)), np.zeros((batches, SPLIT_STACK), np.uint64)
 
 
-@numba.njit(cache=True)
+@kernel
 def first_arrivals(state, batch, nxt, last, estimate, direct, x, y, z, dx, dy, dz, t, w, sd, sp, step, geo, water,
                    scene, times, tallies):
     """Planes nxt .. last - 1 first reached along this flight: estimate each hit (when ``estimate``).
@@ -136,7 +137,7 @@ def first_arrivals(state, batch, nxt, last, estimate, direct, x, y, z, dx, dy, d
     return state, nxt
 
 
-@numba.njit(cache=True)
+@kernel
 def ghost_path(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, excess, geo, water, scene, phase, times,
                tallies, stack, top):
     """Trace one ghost (or copy) until it ends; copies it splits off are pushed on ``stack`` above ``top``.
@@ -187,7 +188,7 @@ def ghost_path(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, excess, geo
                     top += 1
 
 
-@numba.njit(cache=True)
+@kernel
 def ghost(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, excess, geo, water, scene, phase, times, tallies,
           stack):
     """Trace a ghost leaving the event (x, y, z) in direction (dx, dy, dz), and every copy it splits into."""
@@ -202,7 +203,7 @@ def ghost(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, excess, geo, wat
     return state
 
 
-@numba.njit(cache=True)
+@kernel
 def launch_ghosts(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, geo, water, scene, phase, times, tallies,
                   stack):
     """The ghosts of a beam packet's scattering event (incident direction (dx, dy, dz), weight w)."""
@@ -234,7 +235,7 @@ def launch_ghosts(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, geo, wat
     return state, ax, ay, az, alpha_w
 
 
-@numba.njit(cache=True, parallel=True)
+@kernel(parallel=True)
 def trace_beam(seed_key, first_packet, n_packets, geo, water, scene, phase, times, tallies, stack):
     """Trace ``n_packets`` beam packets in ``tallies[0].shape[0]`` batches (one thread per batch, packet order).
 

@@ -111,3 +111,17 @@ def build(model: type[BaseModel], data: Any, path: str = "", context: dict | Non
         return model.model_validate(data, context=context)
     except ValidationError as exc:
         raise config_error(exc, data, path) from None
+
+
+def config_value(config, key: str) -> str:
+    """The value of a dotted scene key of ``config``, shortened for a message."""
+    node = config
+    for name in key.split("."):
+        node = getattr(node, name)
+    if hasattr(node, "model_dump"):
+        node = node.model_dump()
+
+    def lists(v):
+        return [lists(x) for x in v] if isinstance(v, (tuple, list)) else v
+
+    return shown(lists(node))

@@ -30,7 +30,7 @@ MAX_NODES = 1_000_000
 _BaseLoader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-class _StrictLoader(_BaseLoader):
+class StrictLoader(_BaseLoader):
     """SafeLoader whose mappings refuse duplicate keys (PyYAML silently keeps the last one) and keys that are
     not text, and which refuses the hazards of the document's shape (:func:`_check_events`) before composing
     it, whoever loads with it (scene and campaign files)."""
@@ -108,7 +108,7 @@ def _construct_mapping(loader, node, deep=False):
     return loader.construct_mapping(node, deep)
 
 
-_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 
 
 def shipped_scenes() -> dict[str, Path]:
@@ -157,10 +157,15 @@ def read_scene_text(path: Path) -> str:
                           "save the scene file as UTF-8") from None
 
 
+def load_strict_yaml(text: str):
+    """The value a YAML text holds, read by :class:`StrictLoader` (its refusals raise ``yaml.YAMLError``)."""
+    return yaml.load(text, Loader=StrictLoader)
+
+
 def parse_yaml_text(text: str, path: Path) -> dict:
     """The mapping a scene file's text holds; raises a one-line ConfigError naming ``path`` for anything else."""
     try:
-        data = yaml.load(text, Loader=_StrictLoader)
+        data = load_strict_yaml(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""

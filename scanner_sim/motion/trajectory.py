@@ -89,6 +89,9 @@ def lawnmower_waypoints(center_m, size_m, heading_deg: float, line_spacing_m: fl
     return world + np.asarray(center_m, float)
 
 
+#: [Hz] Rate of the trajectory table a pass writes (trajectory.csv).
+TABLE_RATE_HZ = 10.0
+
 class Trajectory:
     """Poses along a plan path at constant speed (or a static pose).
 
@@ -222,6 +225,19 @@ class Trajectory:
         roll, pitch, yaw = truth.roll_rad + e[:, 3], truth.pitch_rad + e[:, 4], truth.yaw_rad + e[:, 5]
         return Poses(truth.time_s, truth.position + e[:, :3], rotation_matrices(yaw, pitch, roll), yaw, pitch, roll,
                      truth.speed_m_s)
+
+    def table(self, start_s: float, stop_s: float, rate_hz: float = TABLE_RATE_HZ) -> dict[str, np.ndarray]:
+        """True and estimated poses from ``start_s`` to ``stop_s`` [s] at ``rate_hz``: time_s (n,), position_m
+        (n, 3), attitude_deg (n, 3) roll, pitch, yaw, est_position_m, est_attitude_deg, leg (n,)."""
+        t = np.arange(start_s, stop_s, 1.0 / rate_hz)
+        true = self.poses(t)
+        est = self.estimate_of(true)
+
+        def rpy(p):
+            return np.degrees(np.c_[p.roll_rad, p.pitch_rad, p.yaw_rad])
+
+        return {"time_s": t, "position_m": true.position, "attitude_deg": rpy(true), "est_position_m": est.position,
+                "est_attitude_deg": rpy(est), "leg": self.leg(t)}
 
 
 def trajectory_of(config, scene=None) -> Trajectory:

@@ -31,12 +31,13 @@ def _peak_rss_mb() -> float:
 def _level_figures(scene_name: str, fidelity: str, pulses: int, repeat: int, overrides: dict) -> dict:
     """In a fresh process: best and median pulses/s of ``repeat`` passes, cores used (of the best), set-up seconds
     and peak RSS."""
+    from muls.runtime import configure_process
     from scanner_sim.config import load_scene
-    from scanner_sim.rays.cast import tune_memory
-    from scanner_sim.survey.pipeline import PassOptions, run_pass
+    from scanner_sim.survey.pipeline import run_pass
+    from scanner_sim.survey.setup import PassOptions
     from scanner_sim.world.scene import build_scene
 
-    tune_memory()  # as scanner-sim does at start: this process is spawned afresh
+    configure_process()  # as scanner-sim does at start: this process is spawned afresh
     config = load_scene(scene_name).with_overrides(overrides)
     t0 = time.perf_counter()
     scene = build_scene(config)
@@ -83,7 +84,7 @@ def _large_seabed_overrides(scene_name: str) -> dict:
 def _large_seabed_figures(scene_name: str, overrides: dict) -> dict:
     """In a fresh process: scene build and BVH build [s] of the large seabed."""
     from scanner_sim.config import load_scene
-    from scanner_sim.rays.cast import RayCaster
+    from scanner_sim.rays.caster import RayCaster
     from scanner_sim.world.scene import build_scene
 
     config = load_scene(scene_name).with_overrides(overrides)

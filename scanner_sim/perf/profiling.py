@@ -2,7 +2,7 @@
 stage on one numba thread (so that each stage's seconds are its own), beside the cores the ordinary pass keeps
 busy. ``scanner-sim bench --profile`` prints it; docs/performance.md holds the tables.
 
-A stage is the cumulative time of the functions listed for it in :data:`STAGES` (a function's time includes
+A stage is the cumulative time of the functions :func:`stages` lists for it (a function's time includes
 what it calls); ``other`` is the rest of the chunk loop (poses, mirror directions, chunk bookkeeping).
 """
 
@@ -13,32 +13,40 @@ import pstats
 import tempfile
 import time
 
-#: Stage -> (file name, function name) pairs whose cumulative times make it up (a sink's ``add`` is named by
-#: its class); "ray stage" (``balanced``'s cast or the ``auto`` level's) minus "rays (Embree)" is the sub-ray set-up,
-#: hit attributes and receiver check.
-STAGES = {
-    "rays (Embree)": (("raycast.py", "first_hits_raw"), ("raycast.py", "occluded_raw")),
-    "ray stage": (("raycast.py", "cast_beams"), ("auto_level.py", "cast_auto")),
-    "waveform input": (("survey.py", "pulse_batch"), ("waveform.py", "echoes")),
-    "digitise": (("detection.py", "digitise"),),
-    "ranging": (("ranging.py", "range_batch"),),
-    "truth": (("survey.py", "lines_of_sight"),),
-    "georeference": (("points.py", "georeference"),),
-    "coverage": (("sinks.py", "CoverageSink.add"),),
-    "LAS": (("sinks.py", "LasSink.add"),),
-}
+
+def stages() -> dict[str, tuple]:
+    """Stage -> the functions whose cumulative times make it up; "ray stage" (``balanced``'s cast or the ``auto``
+    level's) minus "rays (Embree)" is the sub-ray set-up, hit attributes and receiver check. The functions
+    themselves, not their names: one that moves or is renamed fails here, loudly."""
+    from muls.detection import digitise
+    from muls.ranging import range_batch
+    from muls.waveform import OpticalModel
+    from scanner_sim.rays.auto import cast_auto
+    from scanner_sim.rays.cast import cast_beams
+    from scanner_sim.rays.caster import EmbreeCaster
+    from scanner_sim.survey.georeference import georeference
+    from scanner_sim.survey.handoff import pulse_batch
+    from scanner_sim.survey.setup import PassSetup
+    from scanner_sim.survey.sinks import CoverageSink, LasSink
+
+    return {
+        "rays (Embree)": (EmbreeCaster.first_hits_raw, EmbreeCaster.occluded_raw),
+        "ray stage": (cast_beams, cast_auto),
+        "waveform input": (pulse_batch, OpticalModel.echoes),
+        "digitise": (digitise,),
+        "ranging": (range_batch,),
+        "truth": (PassSetup.lines_of_sight,),
+        "georeference": (georeference,),
+        "coverage": (CoverageSink.add,),
+        "LAS": (LasSink.add,),
+    }
 
 
-def _cumulative(stats: pstats.Stats, file_name: str, function: str) -> float:
-    """Cumulative seconds of ``function`` (``Class.method`` for a sink's method) defined in ``file_name``."""
-    line = None
-    if "." in function:
-        from scanner_sim.survey import sinks
-
-        cls, function = function.split(".")
-        line = getattr(sinks, cls).add.__code__.co_firstlineno
+def _cumulative(stats: pstats.Stats, function) -> float:
+    """Cumulative seconds of ``function`` in the profile ``stats``."""
+    code = function.__code__
     return sum(row[3] for (path, lineno, name), row in stats.stats.items()
-               if path.endswith(file_name) and name == function and line in (None, lineno))
+               if path == code.co_filename and lineno == code.co_firstlineno and name == code.co_name)
 
 
 def stage_profile(scene_name: str = "cable_survey", fidelity: str = "balanced", pulses: int = 60000) -> dict:
@@ -47,8 +55,9 @@ def stage_profile(scene_name: str = "cable_survey", fidelity: str = "balanced", 
     import numba
 
     from scanner_sim.config import load_scene
-    from scanner_sim.survey.pipeline import PassOptions, PassSetup, run_pass, stream_pass
-    from scanner_sim.survey.sinks import LasSink, pass_metadata
+    from scanner_sim.survey.pipeline import pass_facts, run_pass, stream_pass
+    from scanner_sim.survey.setup import PassOptions, PassSetup
+    from scanner_sim.survey.sinks import LasSink
 
     config = load_scene(scene_name)
     options = PassOptions(fidelity=fidelity, max_pulses=pulses, progress=False, render=False, write_scene=False)
@@ -58,10 +67,9 @@ def stage_profile(scene_name: str = "cable_survey", fidelity: str = "balanced", 
     numba.set_num_threads(1)
     try:
         setup = PassSetup.build(config, options)
-        footprint = setup.scene.heightfield is not None
-        chunks = (setup.finish_chunk(setup.cast_chunk(slots, footprint)) for slots in setup.slot_chunks())
+        chunks = (setup.simulate_chunk(slots) for slots in setup.slot_chunks())
         with tempfile.TemporaryDirectory(prefix="muls-profile-") as out, LasSink(
-                f"{out}/points.las", setup.scene.local_origin, pass_metadata(setup)) as las:
+                f"{out}/points.las", setup.scene.local_origin, pass_facts(setup).metadata()) as las:
             profile = cProfile.Profile(time.process_time)
             profile.enable()
             stream_pass(setup, chunks, [las], options)
@@ -71,8 +79,8 @@ def stage_profile(scene_name: str = "cable_survey", fidelity: str = "balanced", 
     stats = pstats.Stats(profile)
     total = sum(row[2] for row in stats.stats.values())  # own times add up to the whole
     seconds = {}
-    for stage, functions in STAGES.items():
-        times = [_cumulative(stats, *f) for f in functions]
+    for stage, functions in stages().items():
+        times = [_cumulative(stats, f) for f in functions]
         # the ray stage is one of two entry points, the auto level's calling the other where it cannot help
         seconds[stage] = max(times) if stage == "ray stage" else sum(times)
     seconds["ray stage"] -= seconds["rays (Embree)"]

@@ -26,16 +26,17 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
 
     from scanner_sim.config import load_scene
     from scanner_sim.motion.scanner import Scanner
-    from scanner_sim.motion.track_checks import build_trajectory
     from scanner_sim.rays import kernels as _raykernels
-    from scanner_sim.rays.beams import beam_pattern, perpendicular_basis
-    from scanner_sim.rays.cast import RayCaster, ReceiverCone, cast_beams, shadow_offset_m
+    from scanner_sim.rays.beams import beam_pattern
+    from scanner_sim.rays.cast import CastScene, cast_beams, kernel_inputs
+    from scanner_sim.rays.hits import empty_columns
+    from scanner_sim.survey.setup import checked_trajectory
     from scanner_sim.world.scene import build_scene
 
     cfg = load_scene(scene_name).with_overrides(overrides or {})
     inst = cfg.instrument_model()
     scene = build_scene(cfg)
-    traj = build_trajectory(cfg, scene)
+    traj = checked_trajectory(cfg, scene)
     scanner = Scanner.from_config(cfg.scanner, inst)
     mid = 0.5 * traj.duration_s
     span = pulses / (scanner.pulse_rate_hz * scanner.active_fraction)
@@ -45,26 +46,19 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
     geometry = inst.geometry
 
     # The exact float32 rays the pipeline casts (primary and shadow), prepared outside the raw timing.
-    u, v = perpendicular_basis(rays[1], rays[2])
-    pulse_rays = _raykernels.PulseRays(np.ascontiguousarray(rays[0] - scene.local_origin), rays[1], u, v,
-                                       np.ascontiguousarray(rays[3] - scene.local_origin), rays[4])
-    layout = _raykernels.SubrayLayout(np.ascontiguousarray(pattern.xy), pattern.weight,
-                                      0.5 * geometry.beam_diameter_m,
-                                      float(np.tan(0.5 * geometry.beam_divergence_full_rad)))
+    pulse_rays, layout, faces, cone = kernel_inputs(scene, *rays, pattern, geometry)
     n_pulses = len(times)
     o32 = np.empty((n_pulses * pattern.count, 3), np.float32)
     d32 = np.empty_like(o32)
     _raykernels.subrays_local32(pulse_rays, 0, n_pulses, layout, o32, d32)
-    caster = RayCaster.for_scene(scene, backend="embree")
+    target = CastScene.build(scene, backend="embree")
+    caster = target.caster
     prim, tfar = caster.first_hits_raw(o32, d32)
-    cone = ReceiverCone.from_geometry(geometry)
     n_sub = o32.shape[0]
-    faces = _raykernels.SceneFaces(scene.face_normal, scene.face_reflectance, scene.face_label, scene.face_object,
-                                   scene.local_origin, shadow_offset_m(scene.local_extent_m))
     shadows = _raykernels.ShadowRays(np.empty((n_sub, 3), np.float32), np.empty((n_sub, 3), np.float32),
                                      np.empty(n_sub, np.float32))
     c = _raykernels.hit_block(prim, tfar, 0, 0, pulse_rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov,
-                              _raykernels.HitRows.empty(n_sub), shadows)
+                              empty_columns(n_sub), shadows)
     sh_o, sh_d, sh_len = shadows
     sh_o, sh_d, sh_len = sh_o[:c].copy(), sh_d[:c].copy(), sh_len[:c].copy()
     n_shadow = int(np.count_nonzero(sh_len > 0))
@@ -78,7 +72,7 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
         raw_scene.run(sh_o, sh_d, dists=sh_len, query="OCCLUDED")
 
     def pipeline():
-        return cast_beams(caster, scene, *rays, pattern, geometry, shadow_rays=True)
+        return cast_beams(target, *rays, pattern, geometry, shadow_rays=True)
 
     raw()
     hits = pipeline()  # warm both (BVH build, numba compile)

@@ -12,7 +12,9 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+
+from muls.runtime import kernel
+from scanner_sim.rays.echoes import echo_range_m
 
 
 class PulseRays(NamedTuple):
@@ -49,29 +51,6 @@ class SceneFaces(NamedTuple):
     eps: float
 
 
-class HitRows(NamedTuple):
-    """Output rows of the hit kernel (sized for every sub-ray hitting); see :func:`hit_block`."""
-
-    pulse: np.ndarray
-    sub: np.ndarray
-    range_m: np.ndarray
-    point: np.ndarray
-    normal: np.ndarray
-    cos_inc: np.ndarray
-    reflectance: np.ndarray
-    label: np.ndarray
-    object_id: np.ndarray
-    weight: np.ndarray
-    rx_dist: np.ndarray
-    seen: np.ndarray
-
-    @classmethod
-    def empty(cls, n: int) -> HitRows:
-        return cls(np.empty(n, np.int64), np.empty(n, np.int32), np.empty(n), np.empty((n, 3)),
-                   np.empty((n, 3), np.float32), np.empty(n), np.empty(n), np.empty(n, np.int16),
-                   np.empty(n, np.int32), np.empty(n), np.empty(n, np.float32), np.empty(n))
-
-
 class ShadowRays(NamedTuple):
     """Shadow rays of one block: origin (b, 3), unit direction (b, 3) and length (b,), float32 local frame."""
 
@@ -80,7 +59,7 @@ class ShadowRays(NamedTuple):
     length: np.ndarray
 
 
-@njit(cache=True, fastmath=False, nogil=True)
+@kernel(fastmath=False, nogil=True)
 def subrays_local32(rays, p0, p1, layout, origins, dirs):
     """Fill ``origins`` and ``dirs`` ((n m, 3) float32, pulse-major, local frame) with the sub-rays of pulses
     p0 .. p1 - 1 of ``rays`` (:class:`PulseRays`)."""
@@ -103,23 +82,21 @@ def subrays_local32(rays, p0, p1, layout, origins, dirs):
             dirs[k, 2] = dz * inv
 
 
-@njit(cache=True, fastmath=False, nogil=True)
+@kernel(fastmath=False, nogil=True)
 def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half_fov, rows, shadows):
     """Turn one block of Embree first-hit results into hit rows, and set up their shadow rays.
 
     prim (b,) int32 / tfar (b,) float32: Embree's answer for rays ray0 .. ray0 + b - 1 (-1: miss) of the
     chunk's :class:`PulseRays` with the sub-rays of ``layout``. Hits are written in ray (scan) order at rows
-    base, base + 1, ... of ``rows`` (:class:`HitRows`): pulse int64, sub int32, range_m float64, point (., 3)
-    float64 world, normal (., 3) float32 facing the ray, cos_inc float64 (cosine of the incidence angle),
-    reflectance float64, label int16, object_id int32, weight float64, rx_dist float32 [m], seen float64 (1
-    when inside the receiver's FOV cone, virtual apex ``apex_behind`` [m] behind the aperture and half-angle
-    cosine ``cos_half_fov``, with the aperture on the lit side). Shadow ray c of the block (for hit row
-    base + c) goes into ``shadows`` (float32, local frame): from the hit stepped ``faces.eps`` off the surface
-    toward the aperture, stopping ``eps`` short of it; length -1 (an empty ray Embree skips) when the hit is
-    not in the cone. Returns the block's hit count.
+    base, base + 1, ... of ``rows`` (:class:`scanner_sim.rays.hits.HitColumns`), every field but one as the hit
+    record declares it: ``incidence_rad`` holds the cosine of the incidence angle, which the caller turns into
+    the angle with numpy's vectorised arccos. ``receiver_weight`` is 1 when the hit is inside the receiver's FOV
+    cone (virtual apex ``apex_behind`` [m] behind the aperture, half-angle cosine ``cos_half_fov``) with the
+    aperture on the lit side, else 0. Shadow ray c of the block (for hit row base + c) goes into ``shadows``
+    (float32, local frame): from the hit stepped ``faces.eps`` off the surface toward the aperture, stopping
+    ``eps`` short of it; length -1 (an empty ray Embree skips) when the hit is not in the cone. Returns the
+    block's hit count.
     """
-    pulse, sub, rng, point, normal, cos_inc, refl, label, obj, weight, rx_dist, seen = rows
-    sh_o, sh_d, sh_len = shadows
     beam_local, beam_dir, u, v, rx_local, rx_dir = rays
     xy, weights, r_t, tan_h = layout
     face_normal, eps = faces.normal, faces.eps
@@ -134,12 +111,12 @@ def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half
         i = base + c
         p = r // m
         j = r - p * m
-        pulse[i] = p
-        sub[i] = j
-        refl[i] = faces.reflectance[f]
-        label[i] = faces.label[f]
-        obj[i] = faces.object_id[f]
-        weight[i] = weights[j]
+        rows.pulse_index[i] = p
+        rows.subray_index[i] = j
+        rows.reflectance[i] = faces.reflectance[f]
+        rows.label[i] = faces.label[f]
+        rows.object_id[i] = faces.object_id[f]
+        rows.weight[i] = weights[j]
         x, y = xy[j, 0], xy[j, 1]
         ax = x * u[p, 0] + y * v[p, 0]
         ay = x * u[p, 1] + y * v[p, 1]
@@ -152,22 +129,22 @@ def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half
         dy *= inv
         dz *= inv
         t = np.float64(tfar[b])
-        rng[i] = t
+        rows.range_m[i] = t
         qx = beam_local[p, 0] + r_t * ax + t * dx
         qy = beam_local[p, 1] + r_t * ay + t * dy
         qz = beam_local[p, 2] + r_t * az + t * dz
-        point[i, 0] = qx + ox
-        point[i, 1] = qy + oy
-        point[i, 2] = qz + oz
+        rows.point[i, 0] = qx + ox
+        rows.point[i, 1] = qy + oy
+        rows.point[i, 2] = qz + oz
         nx, ny, nz = face_normal[f, 0], face_normal[f, 1], face_normal[f, 2]
         dn = nx * dx + ny * dy + nz * dz
         if dn > 0.0:  # orient the normal toward the incoming ray
             nx, ny, nz, dn = -nx, -ny, -nz, -dn
-        normal[i, 0] = nx
-        normal[i, 1] = ny
-        normal[i, 2] = nz
-        cos_inc[i] = -dn if -dn < 1.0 else 1.0  # arccos in numpy (SIMD) afterwards
-        # Receiver FOV cone: virtual apex behind the aperture (raycast.ReceiverCone).
+        rows.normal[i, 0] = nx
+        rows.normal[i, 1] = ny
+        rows.normal[i, 2] = nz
+        rows.incidence_rad[i] = -dn if -dn < 1.0 else 1.0  # the cosine; arccos in numpy (SIMD) afterwards
+        # Receiver FOV cone: virtual apex behind the aperture (rays.cast.ReceiverCone).
         rx, ry, rz = rx_local[p, 0], rx_local[p, 1], rx_local[p, 2]
         kx, ky, kz = rx_dir[p, 0], rx_dir[p, 1], rx_dir[p, 2]
         wx = qx - (rx - apex_behind * kx)
@@ -176,23 +153,24 @@ def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half
         along = wx * kx + wy * ky + wz * kz
         tx, ty, tz = rx - qx, ry - qy, rz - qz
         dist = math.sqrt(tx * tx + ty * ty + tz * tz)
-        rx_dist[i] = dist
+        # The return leg at float32 precision (0.5 um at 10 m), as Embree gives the outgoing one.
+        rows.echo_range_m[i] = echo_range_m(t, np.float64(np.float32(dist)))
         ok = along >= cos_half_fov * math.sqrt(wx * wx + wy * wy + wz * wz) and nx * tx + ny * ty + nz * tz > 0.0
-        seen[i] = 1.0 if ok else 0.0
-        sh_o[c, 0] = qx + eps * nx
-        sh_o[c, 1] = qy + eps * ny
-        sh_o[c, 2] = qz + eps * nz
-        sh_d[c, 0] = tx / dist
-        sh_d[c, 1] = ty / dist
-        sh_d[c, 2] = tz / dist
-        sh_len[c] = dist - 2.0 * eps if ok else -1.0
+        rows.receiver_weight[i] = 1.0 if ok else 0.0
+        shadows.origin[c, 0] = qx + eps * nx
+        shadows.origin[c, 1] = qy + eps * ny
+        shadows.origin[c, 2] = qz + eps * nz
+        shadows.direction[c, 0] = tx / dist
+        shadows.direction[c, 1] = ty / dist
+        shadows.direction[c, 2] = tz / dist
+        shadows.length[c] = dist - 2.0 * eps if ok else -1.0
         c += 1
     return c
 
 
-@njit(cache=True, nogil=True)
-def clear_blocked(occluded, sh_len, seen, base):
-    """seen[base + c] = 0 where shadow ray c hit something (empty rays, length <= 0, never count)."""
+@kernel(nogil=True)
+def clear_blocked(occluded, sh_len, receiver_weight, base):
+    """receiver_weight[base + c] = 0 where shadow ray c hit something (empty rays, length <= 0, never count)."""
     for c in range(occluded.shape[0]):
         if occluded[c] >= 0 and sh_len[c] > 0.0:
-            seen[base + c] = 0.0
+            receiver_weight[base + c] = 0.0

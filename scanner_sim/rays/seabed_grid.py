@@ -1,7 +1,7 @@
 """The seabed's height field on a grid of coarse cells with bounds (slope, highest seabed node, highest other
 object), from which :mod:`scanner_sim.rays.seabed_kernels` proves that nothing can stand in a ray's way: the ``auto``
 level's analytic seabed hits (:mod:`scanner_sim.rays.auto`) and every level's shadow rays that need no cast
-(:func:`scanner_sim.rays.cast.cast_beams`). Built once per ray caster.
+(:func:`scanner_sim.rays.cast.cast_beams`). Built once per pass, with its :class:`~scanner_sim.rays.cast.CastScene`.
 """
 
 from __future__ import annotations
@@ -65,11 +65,3 @@ def _block_max(a: np.ndarray, k: int) -> np.ndarray:
     padded[:a.shape[0], :a.shape[1]] = a
     return padded.reshape(by, k, bx, k).max(axis=(1, 3))
 
-
-def seabed_grid_of(caster, scene):
-    """:func:`seabed_grid` once per caster (its scene)."""
-    cached = getattr(caster, "_seabed_grid", None)
-    if cached is None or cached[0] is not scene:
-        cached = (scene, seabed_grid(scene, caster))
-        caster._seabed_grid = cached
-    return cached[1]

@@ -10,7 +10,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+
+from muls.runtime import kernel
 
 
 class SeabedGrid(NamedTuple):
@@ -44,7 +45,7 @@ class SeabedGrid(NamedTuple):
     object_id: int
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def rasterise_tops(vertices, faces, first, stop, x0, y0, size, top):
     """top[I, J] = max(top, highest z) of the triangles ``faces[first:stop]`` (indices into ``vertices``, local
     float32) whose xy box overlaps coarse cell (I, J) of side ``size`` [m] from (x0, y0)."""
@@ -65,7 +66,7 @@ def rasterise_tops(vertices, faces, first, stop, x0, y0, size, top):
                     top[i, j] = zmax
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def seabed_face_at(grid, x, y):
     """The height field's face under local (x, y), numbered from ``grid.face0`` (terrain.HeightField.height's choice
     of triangle), -1 off the height field."""
@@ -87,7 +88,7 @@ def seabed_face_at(grid, x, y):
 CLEARANCE_M = 1e-3
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def seabed_planes(vertices, faces, first, stop, plane):
     """plane[f - first] = (n, n . a) of faces first .. stop - 1, n = (b - a) x (c - a) in float64 of the float32
     vertices a, b, c."""
@@ -101,7 +102,7 @@ def seabed_planes(vertices, faces, first, stop, plane):
         plane[i, 0], plane[i, 1], plane[i, 2], plane[i, 3] = nx, ny, nz, nx * ax + ny * ay + nz * az
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, n, foot_x, foot_y, foot_r, foot_zmin):
     """Can nothing meet the n straight segments from the seabed points (hx, hy, hz)[j] up to the heights
     z_end[j], each rising ``rise[j]`` per horizontal metre along the horizontal unit direction (wx, wy)[j] away from
@@ -171,7 +172,7 @@ def _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, n, foot_x, foot_y, foot
     return True
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@kernel(inline="always", error_model="numpy")
 def _rising_segment(x, y, z, tx, ty, tz, s, hx, hy, hz, z_end, wx, wy, rise):
     """Segment ``s`` of a bundle for :func:`_bundle_clear`: from the seabed point (x, y, z) straight up to the point
     (tx, ty, tz) [m] (a receiver aperture). False, and nothing written, where that point is not above it."""
@@ -188,7 +189,7 @@ def _rising_segment(x, y, z, tx, ty, tz, s, hx, hy, hz, z_end, wx, wy, rise):
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shadow, prim, tfar, analytic):
     """The ``auto`` level's analytic sub-ray hits on the seabed, for one block of pulses.
 
@@ -274,7 +275,7 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
         analytic[q] = ok
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def unproven_shadows(pulse, p0, analytic, length):
     """Indices of the shadow rays to cast: those not empty (length > 0) of hit rows whose pulse (``pulse`` - p0)
     :func:`analytic_block` did not prove."""
@@ -287,12 +288,12 @@ def unproven_shadows(pulse, p0, analytic, length):
     return out[:k]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def shadows_to_cast(grid, rows, local_origin, rx_local, sh_len, first, count, m, need):
     """Which of a block's shadow rays Embree must cast: writes their indices (0 .. ``count`` - 1, for hit rows
     ``first`` ..) into ``need`` and returns how many.
 
-    rows: :class:`scanner_sim.rays.kernels.HitRows` in scan order, ``m`` sub-rays per pulse at most; sh_len (count,):
+    rows: :class:`scanner_sim.rays.hits.HitColumns` in scan order, ``m`` sub-rays per pulse at most; sh_len (count,):
     each row's shadow-ray length (<= 0: empty, never cast); rx_local (n_pulses, 3): the receiver apertures in the
     local frame (``local_origin`` [m] off the world frame). A pulse's non-empty shadow rays are all left out when
     every one of them starts on the seabed (``grid.object_id``) and :func:`_bundle_clear` proves that
@@ -301,7 +302,7 @@ def shadows_to_cast(grid, rows, local_origin, rx_local, sh_len, first, count, m,
     hx, hy, hz = np.empty(m), np.empty(m), np.empty(m)
     z_end, wx, wy, rise = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
     rows_of = np.empty(m, np.int64)
-    pulse, point = rows.pulse, rows.point
+    pulse, point = rows.pulse_index, rows.point
     k, c = 0, 0
     while c < count:
         p = pulse[first + c]

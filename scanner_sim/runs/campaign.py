@@ -28,11 +28,12 @@ from scanner_sim import io
 from scanner_sim.config import ConfigError, SceneConfig, build, load_scene
 from scanner_sim.config.base import Choice, Integer, Positive, StrictModel
 from scanner_sim.config.errors import invalid
-from scanner_sim.config.loading import _StrictLoader
+from scanner_sim.config.loading import load_strict_yaml
 from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.render import viz
-from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassJob, PassOutcome, run_jobs, run_pass_segmented
-from scanner_sim.survey.pipeline import PassOptions
+from scanner_sim.runs.jobs import PassOutcome, run_jobs, run_pass_segmented
+from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassJob
+from scanner_sim.survey.setup import PassOptions
 
 __all__ = ["AXIS_ALIASES", "CHART_FIGURES", "Campaign", "CampaignConfig", "load_campaign", "parse_campaign",
            "run_campaign", "run_pass_segmented"]
@@ -195,7 +196,7 @@ def load_campaign(path: str | Path) -> Campaign:
     if not path.is_file():
         raise ConfigError(f"campaign = {str(path)!r}: file not found")
     try:
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_StrictLoader)
+        data = load_strict_yaml(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

@@ -20,8 +20,10 @@ from muls.errors import ParameterError
 from muls.presets import instrument_preset, water_preset
 from scanner_sim.config import SceneConfig
 from scanner_sim.metrics.coverage import CoverageSettings
-from scanner_sim.runs.tasks import PassJob, cached_scene, maybe_client, run_jobs
-from scanner_sim.survey.pipeline import PassOptions
+from scanner_sim.runs.cluster import maybe_client
+from scanner_sim.runs.jobs import run_jobs
+from scanner_sim.runs.tasks import PassJob, cached_scene
+from scanner_sim.survey.setup import PassOptions
 
 INSTRUMENTS = ("mul2023", "single_channel", "coaxial")
 GATE_MODES = ("follow", "fixed")

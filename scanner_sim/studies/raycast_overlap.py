@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from scanner_sim.rays.beams import beam_pattern
-from scanner_sim.rays.cast import RayCaster, cast_beams
+from scanner_sim.rays.cast import CastScene, cast_beams
 from scanner_sim.world.scene import plate_scene
 
 
@@ -23,7 +23,7 @@ def raycast_overlap(distances_m, geometry, subrays_count: int = 61, profile: str
     for z in np.asarray(distances_m, float):  # one small scene per distance
         scene = plate_scene(float(z), size_m=max(4.0, 4.0 * z), origin_m=o)
         down = np.array([[0.0, 0.0, -1.0]])
-        hits = cast_beams(RayCaster.for_scene(scene), scene, o[None, :], down, np.array([[1.0, 0.0, 0.0]]),
+        hits = cast_beams(CastScene.build(scene), o[None, :], down, np.array([[1.0, 0.0, 0.0]]),
                           o[None, :] + [geometry.offset_m, 0, 0], down, pattern, geometry, shadow_rays=shadow_rays)
         out.append(hits.seen_fraction()[0])
     return np.array(out)

@@ -21,11 +21,11 @@ import numpy as np
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.fidelity import FIDELITY_LEVELS, FidelityLevel
-from scanner_sim.rays.beams import beam_pattern
 from scanner_sim.studies import accuracy
 from scanner_sim.survey import sinks
-from scanner_sim.survey.pipeline import PassOptions, PassSetup, pass_chunks
+from scanner_sim.survey.pipeline import pass_chunks, stream_pass
 from scanner_sim.survey.point_records import PointRecords
+from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import build_scene
 
 #: The level every other is measured against.
@@ -71,11 +71,6 @@ def knob_level(name: str) -> FidelityLevel:
     return replace(FIDELITY_LEVELS["balanced"], name=name, **{key: value})
 
 
-def with_level(setup: PassSetup, level: FidelityLevel) -> PassSetup:
-    """``setup`` run at ``level`` (its sub-ray pattern rebuilt)."""
-    return replace(setup, level=level, pattern=beam_pattern(level.subrays, setup.config.survey.beam_profile))
-
-
 #: [m] Occluders this close to a point's truth surface do not hide it: the point is placed on the surface along its
 #: estimated line of sight, which navigation noise (5 cm sigma in the shipped scenes) moves over the relief.
 HIDDEN_MARGIN_M = 0.1
@@ -98,7 +93,7 @@ def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     origin, direction = setup.scanner.beam_rays(setup.trajectory.estimate_of(truth))
     _, _, _, rx_origin, _ = setup.scanner.world_rays(truth)
     local = origin - setup.scene.local_origin
-    ray, tri, _ = setup.caster.first_hits(local.astype(np.float32), direction.astype(np.float32))
+    ray, tri, _ = setup.target.caster.first_hits(local.astype(np.float32), direction.astype(np.float32))
     first_object = np.full(times.size, -1)
     first_object[ray] = setup.scene.face_object[tri]
     judged = first_object == points.object_id[known]
@@ -107,39 +102,33 @@ def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     length = np.linalg.norm(to_rx, axis=1)
     to_rx /= length[:, None]
     start = surface + HIDDEN_MARGIN_M * to_rx - setup.scene.local_origin
-    blocked = setup.caster.occluded(start.astype(np.float32), to_rx.astype(np.float32),
+    blocked = setup.target.caster.occluded(start.astype(np.float32), to_rx.astype(np.float32),
                                     (length - HIDDEN_MARGIN_M).astype(np.float32))
     out[known] = blocked & judged
     return out
 
 
 def _timed_pass(setup: PassSetup):
-    """The pass's chunks as a pass runs them (:func:`scanner_sim.survey.pipeline.pass_chunks`, one per core at once), with
-    the coverage tally over a seabed: (points, covered share or None, wall seconds of the loop)."""
-    seabed = setup.scene.heightfield is not None
-    coverage = sinks.CoverageSink(setup.scene) if seabed else None
-    parts, started = [], time.perf_counter()
-    for chunk in pass_chunks(setup, PassOptions(progress=False)):
-        chunk = chunk._replace(records=None)
-        if coverage is not None:
-            coverage.add(chunk)
-        parts.append(chunk.points)
-    wall_s = time.perf_counter() - started
-    return PointRecords.concatenate(parts), None if coverage is None else coverage.figures()["covered_fraction"], wall_s
+    """The pass's chunks as a pass runs them (:func:`scanner_sim.survey.pipeline.pass_chunks`, one per core at once)
+    into memory, with the coverage tally where the pass measures it: (points, covered share or None, wall seconds
+    of the loop)."""
+    points = sinks.MemorySink()
+    _, coverage, wall_s = stream_pass(setup, pass_chunks(setup, PassOptions(progress=False)), [points],
+                                      PassOptions(progress=False))
+    return points.points(), None if coverage is None else coverage.figures()["covered_fraction"], wall_s
 
 
 def run_level(base: PassSetup, level: FidelityLevel, waveform_pulses: int) -> LevelRun:
     """The pulses of pass ``base`` (its ``max_pulses``) at ``level``, timed once, with their metrics' inputs."""
-    setup = with_level(base, level)
-    seabed = setup.scene.heightfield is not None
+    setup = base.at_level(level)
     slots = list(setup.slot_chunks())
-    setup.simulate_chunk(slots[0][:WARM_UP_PULSES], footprint=seabed)  # compiled kernels and caches warm
+    setup.simulate_chunk(slots[0][:WARM_UP_PULSES])  # compiled kernels and caches warm
     points, covered, wall_s = _timed_pass(setup)
     n = int(sum(s.size for s in slots))
     if covered is None:
         covered = np.unique(points.pulse_index[points.object_id >= 0]).size / max(n, 1)
     first = np.concatenate(slots)[:waveform_pulses]
-    records = setup.simulate_chunk(first, whole_records=True).records  # every sample, for the waveforms' R^2
+    records = setup.simulate_chunk(first, whole_records=True).waveforms  # every sample, for the waveforms' R^2
     return LevelRun(level, n / wall_s, n, points, covered, hidden_from_receiver(setup, points), records)
 
 
@@ -150,7 +139,7 @@ def best_speed(base: PassSetup, runs: dict, repeat: int) -> dict:
     best = {name: run.pulses_per_s for name, run in runs.items()}
     for _ in range(repeat - 1):
         for name, run in runs.items():
-            setup = with_level(base, run.level)
+            setup = base.at_level(run.level)
             _, _, wall_s = _timed_pass(setup)
             best[name] = max(best[name], run.n_pulses / wall_s)
     return {name: replace(run, pulses_per_s=best[name]) for name, run in runs.items()}

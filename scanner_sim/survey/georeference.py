@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 
 from muls.ranging import Ranging
-from scanner_sim.rays.cast import Hits
+from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.point_records import PointRecords
 from scanner_sim.world.materials import NOISE_CLASS
 

@@ -1,14 +1,17 @@
-"""Where a pass's chunks go, and the files written once it is done.
+"""Where a pass's chunks go, and the files written once it is done. Each sink receives what it writes and
+nothing else: no sink reads the pass's set-up or calls back into the pipeline.
 
-Each chunk sink has ``add(chunk)``: :class:`LasSink` and :class:`DropoutSink` stream to disk (atomically: a
-file appears under its final name only when complete), :class:`PassStats` keeps the summary's running
-figures, :class:`CoverageSink` tallies coverage. After the chunks, :func:`pass_summary` assembles the summary
-and :func:`write_pass_files`, :func:`render_pass` and :func:`render_coverage_map` write the rest.
+Chunk sinks have ``add(chunk)`` (a :class:`scanner_sim.survey.setup.Chunk`): :class:`LasSink`, :class:`LegLasSink`
+and :class:`DropoutSink` stream to disk (atomically: a file appears under its final name only when complete),
+:class:`PassStats` keeps the summary's running figures, :class:`CoverageSink` tallies coverage,
+:class:`WaveformSink` keeps the whole records of the pulses the pass keeps, :class:`CloudSample` a decimated copy
+of the points for the picture. After the chunks, :func:`pass_summary` assembles the summary from
+:class:`PassFacts`, and the writers below put the rest in files.
 """
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +27,40 @@ from scanner_sim.version import __version__
 ERROR_BIN_M = 5e-4
 ERROR_MAX_M = 20.0
 
-#: Trajectory output rate [Hz].
-TRAJECTORY_RATE_HZ = 10.0
+#: Points the picture of a pass shows at most (decimated evenly as the pass goes).
+RENDER_MAX_POINTS = 1_500_000
+
+
+@dataclass(frozen=True)
+class PassFacts:
+    """What made a pass, as its summary and its files' metadata state it: scene name, water, seed, fidelity level
+    and its settings, instrument and channel names, chunk size and pulse limit, the scene file, the altitude
+    (None when the platform holds a depth)."""
+
+    scene: str
+    water: str
+    seed: int
+    fidelity: str
+    instrument: str
+    channels: tuple[str, ...]
+    record_mode: str
+    subrays: int
+    shadow_rays: bool
+    chunk_pulses: int
+    max_pulses: int | None
+    scene_file: str | None
+    altitude_m: float | None
+
+    def metadata(self) -> dict:
+        """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file."""
+        return {"scene": self.scene, "water": self.water, "instrument": self.instrument, "fidelity": self.fidelity,
+                "seed": self.seed, "muls_scanner_version": __version__, "scene_file": self.scene_file}
+
+    @property
+    def label(self) -> str:
+        """'scene, water, instrument[, altitude]' for picture titles."""
+        return (f"{self.scene}, {self.water}, {self.instrument}"
+                + (f", {self.altitude_m:g} m altitude" if self.altitude_m is not None else ""))
 
 
 class LasSink(io.LasWriter):
@@ -67,6 +102,15 @@ class LegLasSink:
     def __exit__(self, exc_type, exc, tb) -> None:
         for writer in self.writers.values():
             writer.__exit__(exc_type, exc, tb)
+
+
+def point_cloud_sinks(output, out: Path, local_origin: np.ndarray, metadata: dict) -> list:
+    """The point-cloud writers a scene's ``output`` section asks for: points.las and/or points.laz, or one file per
+    leg of each, every one carrying ``metadata`` and placing points off ``local_origin`` (3,) [m]."""
+    suffixes = [s for s, on in ((".las", output.las), (".laz", output.laz)) if on]
+    if output.split_legs:
+        return [LegLasSink(out, s, local_origin, metadata) for s in suffixes]
+    return [LasSink(out / f"points{s}", local_origin, metadata) for s in suffixes]
 
 
 class DropoutSink(io.DropoutWriter):
@@ -129,143 +173,122 @@ class PassStats:
         return round((k + 0.5) * ERROR_BIN_M, 7)  # the bin's centre, without float noise in summary.json
 
 
-def pass_summary(setup, stats: PassStats, n_points: int, dropout_counts: dict, wall_s: float, setup_s: float) -> dict:
+class WaveformSink:
+    """waveforms.npz: the whole records of the pulses a pass keeps (``Chunk.kept_waveforms``), gathered in slot
+    order and written by :meth:`write`. digitizer: the instrument's (sample times); channel_names: its signal
+    channels, in record order."""
+
+    def __init__(self, digitizer, channel_names):
+        self.digitizer, self.channel_names = digitizer, tuple(channel_names)
+        self._slots, self._time_ns, self._reference, self._codes = [], [], [], []
+
+    def add(self, chunk) -> None:
+        if chunk.kept_waveforms is None:
+            return
+        slots, records = chunk.kept_waveforms
+        dig = self.digitizer
+        k = np.arange(records.reference.shape[1])[None, :]  # full records: the reference spans the record
+        self._slots.append(slots)
+        self._time_ns.append((-dig.pretrigger_s + k * dig.sample_interval_s + records.phase_s[:, None]) * 1e9)
+        self._reference.append(records.reference)
+        self._codes.append(records.codes)
+
+    def write(self, path: Path) -> None:
+        codes = np.concatenate(self._codes)
+        channels = {"ch0": np.concatenate(self._reference)}
+        channels.update({name: codes[:, i, :] for i, name in enumerate(self.channel_names)})
+        io.write_waveforms_npz(path, np.concatenate(self._slots), np.concatenate(self._time_ns), channels)
+
+
+class CloudSample:
+    """An even sample of the pass's points, at most ``max_points`` (every k-th point, k doubling as the pass
+    grows): positions (n, 3) [m] and classes for the picture of the pass."""
+
+    def __init__(self, max_points: int = RENDER_MAX_POINTS):
+        self.max_points, self.stride, self._seen = max_points, 1, 0
+        self._xyz, self._classes = [], []
+
+    def add(self, chunk) -> None:
+        points = chunk.points
+        keep = (self._seen + np.arange(len(points))) % self.stride == 0
+        self._seen += len(points)
+        self._xyz.append(points.xyz[keep])
+        self._classes.append(points.classification[keep])
+        if sum(len(c) for c in self._classes) > self.max_points:
+            self.stride *= 2
+            first = 0
+            for i, part in enumerate(self._classes):  # keep every other kept point, in pass order
+                pick = (first + np.arange(len(part))) % 2 == 0
+                first += len(part)
+                self._xyz[i], self._classes[i] = self._xyz[i][pick], part[pick]
+
+    @property
+    def xyz(self) -> np.ndarray:
+        return np.concatenate(self._xyz) if self._xyz else np.zeros((0, 3))
+
+    @property
+    def classification(self) -> np.ndarray:
+        return np.concatenate(self._classes) if self._classes else np.zeros(0, np.uint8)
+
+
+def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_counts: dict, wall_s: float,
+                 setup_s: float) -> dict:
     """The summary of a pass: counts, speed, range error quantiles and the settings that made it."""
-    config, channels = setup.config, setup.model.instrument.channels
     return {
-        "scene": config.name,
-        "water": setup.water_name,
-        "seed": setup.seed,
-        "fidelity": setup.level.name,
+        "scene": facts.scene,
+        "water": facts.water,
+        "seed": facts.seed,
+        "fidelity": facts.fidelity,
         "pulses": stats.pulses,
         "points": n_points,
         "dropouts": {cause: int(dropout_counts.get(cause, 0)) for cause in DROPOUT_CAUSES},
-        "channels": {ch.name: int(stats.channels[i + 1]) for i, ch in enumerate(channels)},
+        "channels": {name: int(stats.channels[i + 1]) for i, name in enumerate(facts.channels)},
         "wall_s": round(wall_s, 3),
         "setup_s": round(setup_s, 3),
         "pulses_per_s": round(stats.pulses / wall_s, 1) if wall_s > 0 else None,
         "range_error_m": {"median": stats.error_quantile_m(0.5), "p95": stats.error_quantile_m(0.95)},
         "settings": {
-            "instrument": setup.model.instrument.name,
-            "record_mode": setup.level.record_mode,
-            "subrays": setup.pattern.count,
-            "shadow_rays": setup.level.shadow_rays,
-            "chunk_pulses": setup.chunk_slots,
-            "max_pulses": setup.max_pulses,
-            "scene_file": str(config.source_path) if config.source_path else None,
+            "instrument": facts.instrument,
+            "record_mode": facts.record_mode,
+            "subrays": facts.subrays,
+            "shadow_rays": facts.shadow_rays,
+            "chunk_pulses": facts.chunk_pulses,
+            "max_pulses": facts.max_pulses,
+            "scene_file": facts.scene_file,
         },
     }
 
 
-def pass_metadata(setup) -> dict:
-    """What made a pass, for the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version."""
-    return {"scene": setup.config.name, "water": setup.water_name, "instrument": setup.model.instrument.name,
-            "fidelity": setup.level.name, "seed": setup.seed, "muls_scanner_version": __version__,
-            "scene_file": str(setup.config.source_path) if setup.config.source_path else None}
+def write_trajectory(out: Path, table: dict[str, np.ndarray], split_legs: bool) -> None:
+    """trajectory.csv, or one ``legNNN_trajectory.csv`` per leg, from a trajectory table
+    (:meth:`scanner_sim.motion.trajectory.Trajectory.table`)."""
+    legs = np.unique(table["leg"]) if split_legs else [None]
+    for leg in legs:
+        rows = slice(None) if leg is None else table["leg"] == leg
+        name = "trajectory.csv" if leg is None else f"leg{leg:03d}_trajectory.csv"
+        io.write_trajectory_csv(out / name, table["time_s"][rows], table["position_m"][rows],
+                                table["attitude_deg"][rows], estimated_position_m=table["est_position_m"][rows],
+                                estimated_attitude=table["est_attitude_deg"][rows])
 
 
-def write_pass_files(setup, out: Path, options) -> None:
-    """scene.ply (unless ``options.write_scene`` is False), the trajectory (per the scene's
-    ``output.trajectory_csv``, one file per leg under ``output.split_legs``) and waveforms.npz (the
-    ``options.waveforms`` pulses spread over the pass and every ``output.waveform_every_n_pulses``-th)."""
-    scene, output = setup.scene, setup.config.output
-    if options.write_scene:
-        io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
-    if output.trajectory_csv:
-        table = trajectory_table(setup)
-        legs = np.unique(table["leg"]) if output.split_legs else [None]
-        for leg in legs:
-            rows = slice(None) if leg is None else table["leg"] == leg
-            name = "trajectory.csv" if leg is None else f"leg{leg:03d}_trajectory.csv"
-            io.write_trajectory_csv(out / name, table["time_s"][rows], table["position_m"][rows],
-                                    table["attitude_deg"][rows], estimated_position_m=table["est_position_m"][rows],
-                                    estimated_attitude=table["est_attitude_deg"][rows])
-    pick = waveform_slots(setup, options.waveforms, output.waveform_every_n_pulses)
-    if pick.size:
-        write_waveforms(setup, out / "waveforms.npz", pick)
-
-
-def trajectory_table(setup, rate_hz: float = TRAJECTORY_RATE_HZ) -> dict[str, np.ndarray]:
-    """True and estimated poses over the pass at ``rate_hz``: time_s (n,), position_m (n, 3), attitude_deg
-    (n, 3) roll, pitch, yaw, est_position_m, est_attitude_deg, leg (n,)."""
-    t0 = setup.first_slot / setup.scanner.pulse_rate_hz
-    t1 = setup.end_slot / setup.scanner.pulse_rate_hz
-    t = np.arange(t0, t1, 1.0 / rate_hz)
-    true = setup.trajectory.poses(t)
-    est = setup.trajectory.estimate_of(true)
-
-    def rpy(p):
-        return np.degrees(np.c_[p.roll_rad, p.pitch_rad, p.yaw_rad])
-
-    return {"time_s": t, "position_m": true.position, "attitude_deg": rpy(true), "est_position_m": est.position,
-            "est_attitude_deg": rpy(est), "leg": setup.trajectory.leg(t)}
-
-
-def waveform_slots(setup, count: int, every_n: int) -> np.ndarray:
-    """Slots of the pulses whose full records to keep: ``count`` spread evenly over the pass, and every
-    ``every_n``-th fired pulse (0: none of either)."""
-    if not count and not every_n:
-        return np.zeros(0, np.int64)
-    slots = np.concatenate(list(setup.slot_chunks()))
-    picks = [slots[::every_n]] if every_n else []
-    if count:
-        picks.append(slots[np.unique(np.linspace(0, slots.size - 1, min(count, slots.size)).astype(np.int64))])
-    return np.unique(np.concatenate(picks))
-
-
-def write_waveforms(setup, path: Path, pick: np.ndarray) -> None:
-    """Full records of the pulses in slots ``pick`` (same noise as in the pass itself)."""
-    records = setup.simulate_chunk(pick, record_mode="full", every_channel=True).records
-    time_ns = records.reference_times_s(setup.model) * 1e9  # full mode: the reference spans the record
-    channels = {"ch0": records.reference}
-    channels.update({ch.name: records.codes[:, i, :] for i, ch in enumerate(setup.model.instrument.channels)})
-    io.write_waveforms_npz(path, pick, time_ns, channels)
-
-
-def render_pass(setup, cloud, out: Path, window_size=(1600, 1000), max_points: int = 1_500_000) -> None:
-    """render.png: the point cloud coloured by class over the faded truth mesh (decimated read-back of the
-    ``cloud`` sink's file or files)."""
-    import laspy
-
-    paths = [w.path for w in cloud.writers.values()] if isinstance(cloud, LegLasSink) else [cloud.path]
-    total = 0
-    for path in paths:
-        with laspy.open(path) as reader:
-            total += reader.header.point_count
-    stride = max(1, math.ceil(total / max_points))
-    xyz, cls = [], []
-    for path in paths:
-        with laspy.open(path) as reader:
-            for part in reader.chunk_iterator(1_000_000):
-                xyz.append(np.c_[part.x, part.y, part.z][::stride])
-                cls.append(np.asarray(part.classification)[::stride])
-    xyz = np.concatenate(xyz) if xyz else np.zeros((0, 3))
-    cls = np.concatenate(cls) if cls else np.zeros(0, np.uint8)
-    scene = setup.scene
-    viz.render_point_cloud(out / "render.png", xyz, cls, truth_vertices=scene.vertices, truth_faces=scene.faces,
-                           title=f"{pass_label(setup)}: {xyz.shape[0]:,} points ({setup.level.name})",
+def render_points(path: Path, sample: CloudSample, scene, facts: PassFacts, window_size=(1600, 1000)) -> None:
+    """render.png: the sampled points coloured by class over the faded truth mesh of ``scene``."""
+    viz.render_point_cloud(path, sample.xyz, sample.classification, truth_vertices=scene.vertices,
+                           truth_faces=scene.faces, title=f"{facts.label}: {len(sample.xyz):,} points ({facts.fidelity})",
                            window_size=window_size)
 
 
-def pass_label(setup) -> str:
-    """'scene, water, instrument[, altitude]' for picture titles."""
-    altitude = setup.config.platform.altitude_m
-    return (f"{setup.config.name}, {setup.water_name}, {setup.model.instrument.name}"
-            + (f", {altitude:g} m altitude" if altitude is not None else ""))
-
-
-def render_coverage_map(setup, coverage: CoverageAccumulator, path: Path, summary: dict) -> None:
-    """coverage_map.png: plan cells covered or missed by cause, cables drawn along, objects marked."""
-    scene = setup.scene
+def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts: PassFacts, figures: dict) -> None:
+    """coverage_map.png: plan cells covered or missed by cause, cables drawn along, objects marked; ``figures``:
+    the coverage figures of the summary."""
     lines = [(o.name, o.centreline[:, :2]) for o in scene.objects if o.centreline is not None]
     markers = []
     for o in scene.objects:
         if o.kind not in BACKGROUND_KINDS and o.centreline is None:
             corners = np.unique(scene.faces[o.face_start:o.face_stop].ravel())
             markers.append((o.name, scene.vertices[corners, :2].mean(axis=0)))
-    figures = summary["coverage"]
     fraction = figures["covered_fraction"]
-    title = (f"{pass_label(setup)}\ncovered {fraction:.1%} of {figures['reached_area_m2']:.0f} m² reached"
-             if fraction is not None else f"{pass_label(setup)}\nthe scan reaches no seabed cell")
+    title = (f"{facts.label}\ncovered {fraction:.1%} of {figures['reached_area_m2']:.0f} m² reached"
+             if fraction is not None else f"{facts.label}\nthe scan reaches no seabed cell")
     viz.plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
                           markers=markers, title=title)

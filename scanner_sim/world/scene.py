@@ -11,10 +11,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from muls.errors import ParameterError
+from muls.runtime import kernel
 from scanner_sim.config import (
     CableObject,
     ConeMineObject,
@@ -98,11 +98,6 @@ class Scene:
     def n_faces(self) -> int:
         return int(self.faces.shape[0])
 
-    @property
-    def bounds_m(self) -> np.ndarray:
-        """(2, 3) world bounding box [m]."""
-        return np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
-
     def surface_height(self, x_m, y_m) -> np.ndarray:
         """Seabed z [m] at world (x, y) from the height field (rocks and objects not included)."""
         if self.heightfield is None:
@@ -115,12 +110,6 @@ class Scene:
                 return o
         raise ParameterError(f"object = {name!r}: the scene has {', '.join(o.name for o in self.objects)}")
 
-    def to_trimesh(self):
-        import trimesh
-
-        return trimesh.Trimesh(self.vertices, self.faces, process=False)
-
-
 #: A triangle with twice its area below this times the square of its mesh's size is degenerate.
 DEGENERATE_AREA = 1e-14
 
@@ -129,7 +118,7 @@ def _mesh_scale(v: np.ndarray) -> float:
     return max(1e-12, float(np.ptp(v, axis=0).max()) if len(v) else 1.0)
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _face_geometry(vertices, faces):
     """Unit normal (n, 3) (right-hand winding; nan for a degenerate face) and twice the area (n,) of each face
     (n, 3) of ``vertices`` (m, 3) float64, in one pass: the same arithmetic as numpy's cross and norm."""

@@ -1,0 +1,121 @@
+"""Subcommands that look at a pass's point cloud: ``view`` and ``swath``."""
+
+from __future__ import annotations
+
+import json
+
+from muls.command import (
+    nonempty,
+    output_file,
+    positive_float,
+    positive_int,
+)
+from scanner_sim.cli.registry import subcommand
+
+# -- view ---------------------------------------------------------------------------------------------------
+#: ``--color`` name (also the ``viz`` colouring) -> the PointRecords field it shows.
+_VIEW_FIELDS = {"class": "classification", "intensity": "intensity", "channel": "channel",
+                "range_error": "range_error_m", "snr": "snr"}
+
+
+@subcommand("view")
+def _add_view(sub):
+    p = sub.add_parser("view", help="look at a points.las over its scene.ply: a window, or a PNG without a display")
+    p.add_argument("las", metavar="POINTS.las", type=nonempty(), help="a LAS file, e.g. out/cable_survey/points.las")
+    p.add_argument("--color", default="class", choices=list(_VIEW_FIELDS), help="point colouring (default: class)")
+    p.add_argument("--screenshot", metavar="PNG", type=output_file(),
+                   help="render off-screen to this PNG instead of opening a window "
+                   "(without a display the default is POINTS.<color>.png beside the LAS)")
+    p.add_argument("--no-mesh", action="store_true", help="do not draw the scene.ply beside the LAS (or one directory up)")
+    p.add_argument("--point-size", type=positive_float(), default=3.0, help="pixels")
+    p.add_argument("--max-points", type=positive_int(), default=2_000_000, help="thin larger clouds by a fixed stride")
+    p.add_argument("--window-size", type=positive_int(), nargs=2, default=[1600, 1000], metavar=("WIDTH", "HEIGHT"),
+                   help="pixels")
+    p.add_argument("--open3d", action="store_true",
+                   help="an interactive open3d window instead of pyvista (needs a display and the open3d extra)")
+    p.set_defaults(func=_cmd_view)
+
+
+def _cmd_view(args) -> int:
+    import os
+    from pathlib import Path
+
+    import laspy
+
+    from scanner_sim.io import read_las, read_scene_ply
+    from scanner_sim.render import viz
+
+    las = Path(args.las)
+    if not las.is_file():
+        raise ValueError(f"POINTS.las = {str(las)!r}: no such file; expected a LAS file such as points.las")
+    try:
+        points = read_las(las)
+    except (laspy.LaspyException, EOFError, OSError, ValueError) as exc:
+        raise ValueError(f"POINTS.las = {str(las)!r}: not a readable LAS file ({exc})") from None
+    mesh = {}
+    # A pass writes scene.ply beside its LAS; a coverage study writes it once, one directory up.
+    ply = next((d / "scene.ply" for d in (las.parent, las.parent.parent) if (d / "scene.ply").is_file()), None)
+    if not args.no_mesh and ply is not None:
+        scene = read_scene_ply(ply)
+        mesh = {"truth_vertices": scene["vertices"], "truth_faces": scene["faces"]}
+    values = getattr(points, _VIEW_FIELDS[args.color])
+    colouring = ({"classification": values} if args.color == "class" else
+                 {"color_by": args.color, "scalars": values})
+    options = dict(title=f"{las}: {len(values):,} points coloured by {args.color}", point_size=args.point_size,
+                   max_points=args.max_points, window_size=tuple(args.window_size), **colouring, **mesh)
+    png = args.screenshot
+    if args.open3d:
+        if not os.environ.get("DISPLAY"):
+            raise ValueError("--open3d: opens a window, and there is no display (DISPLAY is unset); "
+                             "use --screenshot PNG instead")
+        viz.show_open3d(points.xyz, viz.point_rgb(values, args.color), title=str(las),
+                        **{k: v for k, v in mesh.items()})
+        return 0
+    if png is None and os.environ.get("DISPLAY"):
+        viz.show_point_cloud(points.xyz, **options)
+        return 0
+    png = Path(png) if png is not None else las.with_suffix(f".{args.color}.png")
+    viz.render_point_cloud(png, points.xyz, **options)
+    print(png)
+    return 0
+
+
+# -- swath --------------------------------------------------------------------------------------------------
+@subcommand("swath")
+def _add_swath(sub):
+    p = sub.add_parser("swath", help="swath-to-swath consistency of overlapping survey lines (open3d extra)")
+    p.add_argument("path", type=nonempty(), help="a pass folder (points.las/laz or leg*_points.*) or one LAS/LAZ file")
+    p.add_argument("--overlap-m", type=positive_float(), default=0.5,
+                   help="largest nearest-neighbour distance [m] of a point in the overlap")
+    p.add_argument("--json", action="store_true", help="print the pairs as JSON")
+    p.set_defaults(func=_cmd_swath)
+
+
+def _cmd_swath(args) -> int:
+    from pathlib import Path
+
+    from scanner_sim.io import read_las
+    from scanner_sim.metrics.swath import swath_consistency
+    from scanner_sim.survey.point_records import PointRecords
+
+    path = Path(args.path)
+    if path.is_file():
+        files = [path]
+    elif path.is_dir():  # one cloud of the pass: its LAS or its LAZ, whole or per leg
+        files = (sorted(path.glob("points.la[sz]"))[:1]
+                 or sorted(path.glob("leg*_points.las")) or sorted(path.glob("leg*_points.laz")))
+    else:
+        files = []
+    if not files:
+        raise ValueError(f"path = {str(path)!r}: no points.las/laz, leg*_points.las/laz nor LAS file there")
+    pairs = swath_consistency(PointRecords.concatenate([read_las(f) for f in files]), args.overlap_m)
+    if args.json:
+        print(json.dumps({"pairs": pairs, "overlap_m": args.overlap_m}))
+        return 0
+    if not pairs:
+        print("no two survey lines with points: nothing to compare")
+    for r in pairs:
+        print(f"lines {r['leg_a']}-{r['leg_b']}: {r['overlap_points']:,} points in the overlap, C2C median "
+              f"{100 * r['c2c_median_m']:.1f} cm (p95 {100 * r['c2c_p95_m']:.1f} cm), vertical difference "
+              f"{100 * r['dz_mean_m']:+.1f} cm mean, {100 * r['dz_rms_m']:.1f} cm RMS")
+    return 0

@@ -1,0 +1,220 @@
+"""Subcommands that run studies of many passes: ``overlap``, ``tradeoff``, ``coverage``, ``campaign``."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from muls.command import (
+    non_negative_int,
+    nonempty,
+    output_dir,
+    output_file,
+    positive_float,
+    positive_int,
+    seed,
+)
+from scanner_sim.cli.registry import subcommand
+from scanner_sim.fidelity import FIDELITY_LEVELS
+from scanner_sim.rays.beams import SUBRAY_COUNTS
+
+
+# -- overlap ------------------------------------------------------------------------------------------------
+@subcommand("overlap")
+def _add_overlap(sub):
+    p = sub.add_parser("overlap", help="ray-cast overlap on a perpendicular plate vs MULS Eq. 11")
+    p.add_argument("--distances-m", type=positive_float(), nargs="+", default=[1, 1.5, 2, 2.5, 3, 4, 5, 6, 7, 8],
+                   help="plate distances [m]")
+    p.add_argument("--subrays", type=positive_int(), choices=SUBRAY_COUNTS, default=61, metavar="N",
+                   help=f"beam sub-rays, one of {', '.join(map(str, SUBRAY_COUNTS))}")
+    p.add_argument("--profile", default="top_hat", choices=["top_hat", "gaussian"])
+    p.add_argument("--instrument", default="mul2023", type=nonempty(), help="muls instrument preset (geometry only)")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--out", type=output_file(), help="write a PNG plot here")
+    p.set_defaults(func=_cmd_overlap)
+
+
+def _cmd_overlap(args) -> int:
+    import numpy as np
+
+    from muls.errors import ParameterError
+    from muls.presets import instrument_preset, water_preset
+    from scanner_sim.studies.raycast_overlap import raycast_overlap
+
+    dist = np.asarray(args.distances_m, float)
+    if np.any(~np.isfinite(dist)) or np.any(dist <= 0):
+        raise ParameterError(f"--distances-m = {args.distances_m}: must all be finite and > 0")
+    geometry = instrument_preset(args.instrument, water_preset("coastal_ocean")).geometry
+    ray = raycast_overlap(dist, geometry, args.subrays, args.profile)
+    ana = geometry.overlap(dist)
+    result = {
+        "distance_m": dist.tolist(),
+        "raycast": [round(float(v), 6) for v in ray],
+        "analytic": [round(float(v), 6) for v in ana],
+        "max_abs_error": round(float(np.abs(ray - ana).max()), 6),
+        "subrays": args.subrays,
+        "profile": args.profile,
+        "instrument": args.instrument,
+        "blind_zone_m": round(geometry.blind_zone_m, 4),
+        "full_overlap_m": round(geometry.full_overlap_m, 4),
+    }
+    if args.out:
+        from scanner_sim.render.viz import plot_overlap
+
+        dense = np.linspace(0.0, float(dist.max()) * 1.05, 400)
+        plot_overlap(args.out, dist, ray, ana, title=f"Beam / receiver-FOV overlap, {args.instrument} geometry",
+                     raycast_label=f"ray-cast, {args.subrays} sub-rays", dense_distance_m=dense,
+                     dense_analytic=geometry.overlap(dense))
+        result["plot"] = str(args.out)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{'distance_m':>10s} {'raycast':>8s} {'Eq. 11':>8s} {'error':>8s}")
+        for z, r, a in zip(dist, ray, ana):
+            print(f"{z:10.3f} {r:8.4f} {a:8.4f} {r - a:+8.4f}")
+        print(f"max |error| {result['max_abs_error']:.4f} with {args.subrays} sub-rays")
+    return 0
+
+
+# -- tradeoff -----------------------------------------------------------------------------------------------
+@subcommand("tradeoff")
+def _add_tradeoff(sub):
+    from scanner_sim.studies.tradeoff import DEFAULT_PULSES, DEFAULT_REPEAT, DEFAULT_WAVEFORM_PULSES, KNOBS
+
+    p = sub.add_parser("tradeoff", help="speed against accuracy: each fidelity level and knob on the same pulses, "
+                       "against the truth and the reference level (chart, table, JSON)")
+    p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path")
+    p.add_argument("--levels", nargs="+", choices=list(FIDELITY_LEVELS), default=list(FIDELITY_LEVELS),
+                   metavar="LEVEL", help=f"levels to run, of {', '.join(FIDELITY_LEVELS)} (default: all)")
+    p.add_argument("--knobs", nargs="*", choices=list(KNOBS), default=list(KNOBS), metavar="KNOB",
+                   help=f"single changes to balanced, of {', '.join(KNOBS)} (default: all; none: --knobs)")
+    p.add_argument("--pulses", type=positive_int(), default=DEFAULT_PULSES, help="pulses per run (default: %(default)s)")
+    p.add_argument("--waveform-pulses", type=positive_int(), default=DEFAULT_WAVEFORM_PULSES,
+                   help="pulses whose records are compared (default: %(default)s)")
+    p.add_argument("--repeat", type=positive_int(), default=DEFAULT_REPEAT,
+                   help="timed passes of each run, round-robin, the fastest kept (default: %(default)s)")
+    p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /tradeoff)")
+    p.add_argument("--json", action="store_true", help="print tradeoff.json instead of the table")
+    p.add_argument("--no-render", action="store_true", help="no chart")
+    p.add_argument("--no-convergence", action="store_true",
+                   help="skip the reference run at 217 sub-rays that shows the reference has converged")
+    p.set_defaults(func=_cmd_tradeoff)
+
+
+def _cmd_tradeoff(args) -> int:
+    from pathlib import Path
+
+    from scanner_sim.config import load_scene
+    from scanner_sim.studies.tradeoff import markdown_table, tradeoff, write_tradeoff
+
+    config = load_scene(args.scene)
+    out = Path(args.out or Path(config.output_dir) / "tradeoff")
+    progress = None if args.json else (lambda name: print(f"running {name}", file=sys.stderr, flush=True))
+    result = tradeoff(config, tuple(args.levels), tuple(args.knobs), args.pulses, args.waveform_pulses, progress,
+                      convergence=not args.no_convergence, repeat=args.repeat)
+    path = write_tradeoff(result, out, render=not args.no_render)
+    print(json.dumps(result) if args.json else markdown_table(result) + str(path))
+    return 0
+
+
+# -- coverage -----------------------------------------------------------------------------------------------
+@subcommand("coverage")
+def _add_coverage(sub):
+    from scanner_sim.metrics.coverage import CoverageSettings
+    from scanner_sim.studies.coverage_study import DEFAULT_INSTRUMENTS, DEFAULT_WATERS, GATE_MODES, INSTRUMENTS
+
+    p = sub.add_parser("coverage", help="mapping coverage per water type x altitude x instrument, with its report")
+    p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
+    p.add_argument("--waters", nargs="+", default=list(DEFAULT_WATERS), metavar="WATER", type=nonempty(),
+                   help="water presets (default: %(default)s)")
+    p.add_argument("--altitudes-m", nargs="+", type=positive_float("altitudes_m"), metavar="M",
+                   help="altitudes [m] (default: the scene's)")
+    p.add_argument("--instruments", nargs="+", default=list(DEFAULT_INSTRUMENTS), choices=INSTRUMENTS,
+                   metavar="INSTRUMENT", help=f"instrument presets, of {', '.join(INSTRUMENTS)} (default: %(default)s)")
+    p.add_argument("--gate", default="follow", choices=GATE_MODES,
+                   help="far gate at other altitudes: follow the nadir echo (default) or keep the scene's delay")
+    p.add_argument("--cell-m", type=positive_float("cell_m"), default=CoverageSettings.cell_m,
+                   help="plan cell and cable stretch [m] (default: %(default)s)")
+    p.add_argument("--min-points", type=positive_int("min_points"), default=CoverageSettings.min_points,
+                   help="valid points a cell needs (default: %(default)s)")
+    p.add_argument("--tolerance-m", type=positive_float("tolerance_m"), default=CoverageSettings.tolerance_m,
+                   help="largest |range error| of a valid point [m] (default: %(default)s, IHO S-44 Exclusive Order)")
+    p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /coverage)")
+    p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), help="fidelity level (default: the scene's)")
+    p.add_argument("--seed", type=seed(), help="seed of every pass (default: the scene's survey.seed)")
+    p.add_argument("--max-pulses", type=positive_int(), help="stop each pass after this many pulses")
+    p.add_argument("--no-render", action="store_true", help="tables and coverage.json only: no pictures, no report")
+    p.add_argument("--quiet", action="store_true", help="no progress; print only the path of coverage.json")
+    _add_dask_arguments(p)
+    p.set_defaults(func=_cmd_coverage)
+
+
+def _cmd_coverage(args) -> int:
+    from pathlib import Path
+
+    from scanner_sim.config import load_scene
+    from scanner_sim.metrics.coverage import CoverageSettings
+    from scanner_sim.render.report import main_table, markdown_table
+    from scanner_sim.studies.coverage_study import StudyPlan, run_study
+
+    config = load_scene(args.scene)
+    plan = StudyPlan(tuple(args.waters), tuple(args.altitudes_m) if args.altitudes_m else (None,),
+                     tuple(args.instruments), args.gate)
+    settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m)
+    out = Path(args.out or Path(config.output_dir) / "coverage")
+    study = run_study(config, plan, out, settings=settings, fidelity=args.fidelity, seed=args.seed,
+                      max_pulses=args.max_pulses, render=not args.no_render, progress=not args.quiet,
+                      workers=_workers(args), scheduler=args.scheduler, redo=args.redo)
+    if not args.quiet:
+        print(markdown_table(*main_table(study)))
+        print(f"{len(study['records'])} passes in {study['wall_s']:.0f} s")
+    print(out / "coverage.json")
+    return 0
+
+
+# -- campaign -----------------------------------------------------------------------------------------------
+def _add_dask_arguments(p) -> None:
+    """--scheduler, --workers and --redo, shared by the commands that run passes on Dask."""
+    p.add_argument("--scheduler", metavar="tcp://HOST:8786", type=nonempty(),
+                   help="address of a running Dask scheduler (default: a local cluster on this machine)")
+    p.add_argument("--workers", type=non_negative_int(), metavar="N", help="workers of the local cluster, one thread each "
+                   "(default: one per core; 0: every pass in this process, without Dask)")
+    p.add_argument("--redo", action="store_true", help="run every pass again, even those already complete in --out")
+
+
+def _workers(args) -> int:
+    """--workers, by default one per core."""
+    from scanner_sim.runs.cluster import default_workers
+
+    return default_workers() if args.workers is None else args.workers
+
+
+@subcommand("campaign")
+def _add_campaign(sub):
+    p = sub.add_parser("campaign", help="one pass per combination of the swept scene keys, on Dask "
+                       "(docs/campaigns.md)")
+    p.add_argument("campaign", metavar="CAMPAIGN.yaml", type=nonempty(),
+                   help="campaign file (e.g. scenes/campaigns/example_campaign.yaml)")
+    p.add_argument("--out", type=output_dir(), help="output directory (default: out/campaigns/NAME)")
+    p.add_argument("--quiet", action="store_true", help="no progress; print only the path of campaign.json")
+    _add_dask_arguments(p)
+    p.set_defaults(func=_cmd_campaign)
+
+
+def _cmd_campaign(args) -> int:
+    from pathlib import Path
+
+    from scanner_sim.runs.campaign import load_campaign, run_campaign
+    from scanner_sim.runs.cluster import maybe_client
+
+    campaign = load_campaign(args.campaign)
+    out = Path(args.out or Path("out") / "campaigns" / campaign.name)
+    with maybe_client(scheduler=args.scheduler, workers=_workers(args), announce=not args.quiet) as client:
+        result = run_campaign(campaign, out, client, redo=args.redo, progress=not args.quiet)
+    if not args.quiet:
+        print(f"{len(result['passes'])} passes in {result['wall_s']:.0f} s: {result['ran']} ran, "
+              f"{result['skipped']} already complete, {result['failed']} failed")
+        for failed in (p for p in result["passes"] if p["status"] == "failed"):
+            print(f"failed: {failed['dir']}: {failed['error']} (run the campaign again to redo it)")
+    print(out / "campaign.json")
+    return 1 if result["failed"] else 0

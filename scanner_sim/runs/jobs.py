@@ -1,0 +1,146 @@
+"""Many passes into one folder: a :class:`~scanner_sim.runs.tasks.PassJob` per pass, run here or as Dask tasks,
+each written into its own sub-folder summary.json last; a pass already complete there for the same inputs is
+skipped on a re-run (:func:`completed_summary`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import uuid
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from scanner_sim import io
+from scanner_sim.config import SceneConfig
+from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassFiles, PassJob, compute_pass, submit_pass
+from scanner_sim.survey.pipeline import PassResult
+from scanner_sim.survey.setup import PassOptions, PassPlan
+
+#: Keys of summary.json that time the pass: they differ from run to run.
+TIMING_KEYS = ("wall_s", "setup_s", "pulses_per_s")
+
+
+
+@dataclass(frozen=True)
+class PassOutcome:
+    """What became of a job: ``status`` is ``ran``, ``skipped`` (complete from an earlier run) or ``failed``;
+    ``summary`` as written to summary.json (None when failed), ``error`` the failure in one line."""
+
+    job: PassJob
+    status: str
+    summary: dict | None
+    error: str | None = None
+
+
+def write_pass(folder: Path, files: PassFiles) -> dict:
+    """Write a pass's files into ``folder`` (each atomically), summary.json last; returns the summary.
+
+    An earlier summary.json is removed first, so until this pass is wholly written the folder does not
+    look complete."""
+    folder.mkdir(parents=True, exist_ok=True)
+    with contextlib.suppress(FileNotFoundError):
+        (folder / "summary.json").unlink()
+    for name, data in sorted(files.files.items(), key=lambda item: item[0] == "summary.json"):
+        with io.atomic_path(folder / name) as tmp:
+            tmp.write_bytes(data)
+    return json.loads(files.files["summary.json"])
+
+
+def fingerprint(summary: dict) -> dict:
+    """What a summary says about the inputs of its pass: scene, water, seed, fidelity, instrument, pulses
+    and coverage settings."""
+    settings, coverage = summary.get("settings") or {}, summary.get("coverage") or {}
+    return {"scene": summary.get("scene"), "water": summary.get("water"), "seed": summary.get("seed"),
+            "fidelity": summary.get("fidelity"), "instrument": settings.get("instrument"),
+            "max_pulses": settings.get("max_pulses"),
+            **{key: coverage.get(key) for key in ("cell_m", "min_points", "tolerance_m")}}
+
+
+def job_fingerprint(job: PassJob) -> dict:
+    """:func:`fingerprint` of the summary ``job`` would write."""
+    config, plan = job.config.with_overrides(job.options.scene_overrides()), PassPlan.of(job.config, job.options)
+    settings = job.options.coverage
+    coverage = ({"cell_m": settings.cell_m, "min_points": settings.min_points, "tolerance_m": settings.tolerance_m}
+                if plan.measures_coverage else dict.fromkeys(("cell_m", "min_points", "tolerance_m")))
+    return {"scene": config.name, "water": config.water.preset or config.water_model().name,
+            "seed": config.survey.seed, "fidelity": plan.level.name,
+            "instrument": config.instrument_model().name, "max_pulses": config.survey.max_pulses, **coverage}
+
+
+def completed_summary(folder: Path, job: PassJob) -> dict | None:
+    """The summary of ``job``'s pass if ``folder`` holds it complete, else None.
+
+    Complete: summary.json (written last, after every other file) parses and names the same scene, water,
+    seed, fidelity, instrument, pulse limit and coverage settings, and every file of the pass's plan
+    (:class:`~scanner_sim.survey.setup.PassPlan`) is there (a pass run before without renders is run again with them)."""
+    try:
+        summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(summary, dict) or fingerprint(summary) != job_fingerprint(job):
+        return None
+    if not all((folder / name).is_file() for name in PassPlan.of(job.config, job.options).files):
+        return None
+    return summary
+
+
+def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retries: int = DEFAULT_RETRIES,
+             redo: bool = False, progress: bool = True) -> list[PassOutcome]:
+    """Run ``jobs`` into ``out_dir/JOB.name/`` and return their outcomes in the order of ``jobs``.
+
+    Passes already complete there are skipped (unless ``redo``). With a Dask ``client``, every other pass
+    is submitted at once and written as it finishes; a pass whose task fails (after ``retries``) is
+    reported failed and the others go on. Without one, they run here one after another, and an error
+    propagates.
+    """
+    out = Path(out_dir)
+    names = [job.name for job in jobs]
+    if len(set(names)) != len(names):
+        raise ValueError(f"passes: folder names repeat ({sorted({n for n in names if names.count(n) > 1})})")
+    outcomes: dict[int, PassOutcome] = {}
+    todo = []
+    for k, job in enumerate(jobs):
+        summary = None if redo else completed_summary(out / job.name, job)
+        if summary is not None:
+            outcomes[k] = PassOutcome(job, "skipped", summary)
+        else:
+            todo.append(k)
+    bar = tqdm(total=len(jobs), initial=len(jobs) - len(todo), unit="pass", disable=not progress, desc="passes")
+    if client is None:
+        for k in todo:
+            bar.set_postfix_str(jobs[k].name)
+            outcomes[k] = PassOutcome(jobs[k], "ran", write_pass(out / jobs[k].name, compute_pass(jobs[k])))
+            bar.update()
+    else:
+        from dask.distributed import as_completed
+
+        token = uuid.uuid4().hex[:8]
+        futures = {submit_pass(client, jobs[k], retries=retries, token=token): k for k in todo}
+        for future in as_completed(futures):
+            k = futures[future]
+            try:
+                outcomes[k] = PassOutcome(jobs[k], "ran", write_pass(out / jobs[k].name, future.result()))
+            except Exception as exc:  # the task's own error, after its retries; the others go on
+                outcomes[k] = PassOutcome(jobs[k], "failed", None, f"{type(exc).__name__}: {exc}".splitlines()[0])
+            future.release()
+            bar.set_postfix_str(jobs[k].name)
+            bar.update()
+    bar.close()
+    return [outcomes[k] for k in range(len(jobs))]
+
+
+def run_pass_segmented(config: SceneConfig, out_dir: str | Path, options: PassOptions = PassOptions(),
+                       segments: int = 4, client=None) -> PassResult:
+    """One pass cut into ``segments`` runs of pulse slots, simulated as separate tasks on ``client`` (in this
+    process without one) and merged in order into ``out_dir``: points.las, dropouts.npz and the other files
+    are byte-identical to :func:`run_pass`'s, summary.json too but for its timings (:data:`TIMING_KEYS`)."""
+    if not (isinstance(segments, int) and segments >= 1):
+        raise ValueError(f"segments = {segments!r}: must be an integer >= 1")
+    out = Path(out_dir or config.output_dir)
+    job = PassJob(out.name, config, options, segments)
+    files = compute_pass(job) if client is None else submit_pass(client, job).result()
+    return PassResult(write_pass(out, files), out)

@@ -1,0 +1,300 @@
+"""What a pass builds once, and its stages chosen once, the way pvlib's ModelChain picks its models: the scene
+and its ray caster, the trajectory and the scanner, the instrument in its water, and, from the fidelity level, the
+ray stage, the hand-off and the physics. The chunk loop (:mod:`scanner_sim.survey.pipeline`) only calls them.
+
+:class:`PassPlan` is what the scene and the options decide before anything is built (the level, whether coverage
+is measured, the files a pass writes): the pass and the campaign's completeness check read the same plan.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from muls.detection import Records
+from muls.ranging import Ranging
+from muls.runtime import configure_process
+from muls.simulate import simulate
+from muls.waveform import OpticalModel, PulseBatch
+from scanner_sim.config import SceneConfig
+from scanner_sim.fidelity import FidelityLevel
+from scanner_sim.metrics.coverage import CoverageSettings, Footprint, nominal_footprint
+from scanner_sim.motion.scanner import Scanner
+from scanner_sim.motion.track_checks import build_trajectory
+from scanner_sim.motion.trajectory import Poses, Trajectory
+from scanner_sim.rays.auto import AutoCast
+from scanner_sim.rays.beams import BeamPattern, beam_pattern
+from scanner_sim.rays.cast import BeamCast, CastScene
+from scanner_sim.rays.hits import Hits
+from scanner_sim.survey.budget import check_pass_budget
+from scanner_sim.survey.georeference import LinesOfSight, georeference
+from scanner_sim.survey.handoff import Handoff
+from scanner_sim.survey.point_records import DropoutRecords, PointRecords
+from scanner_sim.world.scene import Scene, build_scene
+
+
+@dataclass(frozen=True)
+class PassOptions:
+    """How to run a pass. ``water``, ``seed``, ``fidelity``, ``max_pulses`` and ``chunk_pulses`` override the
+    scene's keys (None keeps the scene's value) and are validated like them; the rest choose the outputs."""
+
+    water: str | None = None
+    seed: int | None = None
+    fidelity: str | None = None
+    max_pulses: int | None = None
+    chunk_pulses: int | None = None
+    waveforms: int = 0
+    progress: bool = True
+    render: bool = True
+    render_size: tuple[int, int] = (1600, 1000)
+    write_scene: bool = True
+    coverage: CoverageSettings = CoverageSettings()
+
+    def scene_overrides(self) -> dict[str, Any]:
+        """The scene keys these options set, by dotted name."""
+        keys = {"water": self.water, "survey.seed": self.seed, "survey.fidelity": self.fidelity,
+                "survey.max_pulses": self.max_pulses, "survey.chunk_pulses": self.chunk_pulses}
+        return {k: v for k, v in keys.items() if v is not None}
+
+
+@dataclass(frozen=True)
+class PassPlan:
+    """What a pass does, decided from its scene (every override applied) and options before anything is built.
+
+    level: the fidelity level (the scene's ``survey.fidelity`` with its ``subrays`` and ``shadow_rays`` overrides,
+    or one given); measures_coverage: the pass tallies coverage (the scene has a seabed); files: the names of the
+    files a complete pass writes into its folder, summary.json last, per-leg point clouds and trajectories aside
+    (how many legs a pass reaches is known only when it has run)."""
+
+    level: FidelityLevel
+    measures_coverage: bool
+    files: tuple[str, ...]
+
+    @classmethod
+    def of(cls, config: SceneConfig, options: PassOptions = PassOptions(), level: FidelityLevel | None = None
+           ) -> PassPlan:
+        """The plan of ``config`` with ``options`` applied (or already applied: they are idempotent)."""
+        config = config.with_overrides(options.scene_overrides())
+        output, coverage = config.output, config.seabed is not None
+        clouds = [s for s, on in ((".las", output.las), (".laz", output.laz)) if on]
+        files = [] if output.split_legs else [f"points{s}" for s in clouds]
+        files += ["dropouts.npz"]
+        files += ["coverage_grid.npz"] if coverage else []
+        files += ["trajectory.csv"] if output.trajectory_csv and not output.split_legs else []
+        files += ["scene.ply"] if options.write_scene else []
+        files += ["waveforms.npz"] if options.waveforms or output.waveform_every_n_pulses else []
+        files += ["render.png"] if options.render and clouds else []
+        files += ["coverage_map.png"] if options.render and coverage else []
+        return cls(level or config.survey.level, coverage, (*files, "summary.json"))
+
+
+class CastChunk(NamedTuple):
+    """A chunk after its ray stage: pulse slots (n,), the sub-ray hits, the muls input built from them, each
+    pulse's estimated line of sight with the truth along it, and the nominal footprint (None unless the pass
+    measures coverage)."""
+
+    slots: np.ndarray
+    hits: Hits
+    batch: PulseBatch
+    sight: LinesOfSight
+    footprint: Footprint | None
+
+
+class Chunk(NamedTuple):
+    """One chunk through the flow: its pulse slots (n,), points, dropouts, the muls digitised records of its pulses
+    (``waveforms``; as far as the ranging read them, None once dropped), the nominal beam footprint (None unless
+    the pass measures coverage), and the whole records of the pulses among its slots that the pass keeps
+    (``kept_waveforms``: slots (k,) and records; None when none)."""
+
+    slots: np.ndarray
+    points: PointRecords
+    dropouts: DropoutRecords
+    waveforms: Records | None
+    footprint: Footprint | None
+    kept_waveforms: tuple[np.ndarray, Records] | None = None
+
+
+@dataclass(frozen=True)
+class Physics:
+    """The MULS stage bound to its pass: a chunk's muls input -> digitised records and ranging
+    (:func:`muls.simulate.simulate`, every draw keyed by ``seed`` and the pulse's slot)."""
+
+    model: OpticalModel
+    seed: int
+    record_mode: str
+    deciding_only: bool
+
+    def __call__(self, batch: PulseBatch, record_mode: str | None = None, every_channel: bool = False,
+                 whole_records: bool = False) -> tuple[Records, Ranging]:
+        """``record_mode`` and ``every_channel`` override the level's record mode and its ``deciding_only`` (for
+        records kept whole, as waveforms.npz keeps them). Unless ``every_channel`` or ``whole_records``, only the
+        samples the ranging reads are synthesised (the same points, :func:`muls.detection.digitise`'s
+        ``ranging_only``): of each CH0 record the span of its peak, and of a full record the samples the peak
+        search may read."""
+        return simulate(self.model, batch, self.seed, record_mode or self.record_mode,
+                        deciding_only=self.deciding_only and not every_channel,
+                        ranging_only=not (every_channel or whole_records))
+
+
+def ray_stage(level: FidelityLevel, target: CastScene, pattern: BeamPattern, geometry) -> BeamCast:
+    """The ray stage of ``level``: the ``auto`` level's (:class:`~scanner_sim.rays.auto.AutoCast`) or the beam cast
+    every other level shares (:class:`~scanner_sim.rays.cast.BeamCast`)."""
+    return (AutoCast if level.adaptive else BeamCast)(target, pattern, geometry, level.shadow_rays)
+
+
+def _stages(config: SceneConfig, target: CastScene, model: OpticalModel, level: FidelityLevel):
+    """The sub-ray pattern and the stages of a pass at ``level``: (pattern, rays, handoff, physics)."""
+    pattern = beam_pattern(level.subrays, config.survey.beam_profile)
+    return (pattern, ray_stage(level, target, pattern, model.instrument.geometry),
+            Handoff(model, config.water.background_radiance_w_m2_sr_nm, level.column_cut),
+            Physics(model, config.survey.seed, level.record_mode, level.deciding_only))
+
+
+def checked_trajectory(config: SceneConfig, scene: Scene | None) -> Trajectory:
+    """The trajectory of ``config`` over its built ``scene``, after the set-up checks: the pass's size, estimated
+    before anything pass-sized is allocated (:func:`~scanner_sim.survey.budget.check_pass_budget`), and the built
+    track against the water surface, the seabed and the objects
+    (:func:`~scanner_sim.motion.track_checks.build_trajectory`)."""
+    check_pass_budget(config)
+    return build_trajectory(config, scene)
+
+
+@dataclass(frozen=True)
+class PassSetup:
+    """What a pass builds once, and its stages: the scene (every override applied) and what the rays are cast
+    into, the trajectory, the scanner, the instrument in its water, the plan, and the stages the chunk loop calls
+    (``rays``: hits of a chunk's pulses; ``handoff``: their muls input; ``physics``: records and ranging); the
+    pass's slot range and the water's name."""
+
+    config: SceneConfig
+    plan: PassPlan
+    target: CastScene
+    trajectory: Trajectory
+    scanner: Scanner
+    model: OpticalModel
+    pattern: BeamPattern
+    rays: BeamCast
+    handoff: Handoff
+    physics: Physics
+    first_slot: int
+    end_slot: int
+    water_name: str
+
+    @classmethod
+    def build(cls, config: SceneConfig, options: PassOptions = PassOptions(), scene: Scene | None = None,
+              level: FidelityLevel | None = None) -> PassSetup:
+        """``scene``: the already built :class:`Scene` of ``config`` to reuse, if any; ``level``: run at this
+        fidelity level instead of the scene's (the trade-off study's knobs)."""
+        configure_process()
+        config = config.with_overrides(options.scene_overrides())
+        survey = config.survey
+        water = config.water_model()
+        model = OpticalModel.build(config.instrument.to_instrument(water), water)
+        scene = build_scene(config) if scene is None else scene
+        target = CastScene.build(scene)  # the Embree BVH and the seabed's proof grid: set-up, not part of the pass
+        trajectory = checked_trajectory(config, scene)
+        scanner = Scanner.from_config(config.scanner, model.instrument)
+        rate = scanner.pulse_rate_hz
+        duration = survey.duration_s if survey.duration_s is not None else trajectory.duration_s
+        plan = PassPlan.of(config, options, level)
+        return cls(config, plan, target, trajectory, scanner, model, *_stages(config, target, model, plan.level),
+                   math.ceil(survey.start_s * rate - 1e-9), math.ceil((survey.start_s + duration) * rate - 1e-9),
+                   config.water.preset or water.name)
+
+    def at_level(self, level: FidelityLevel) -> PassSetup:
+        """This pass at fidelity ``level``: its plan, sub-ray pattern and stages chosen again (the built scene,
+        trajectory and tables kept)."""
+        pattern, rays, handoff, physics = _stages(self.config, self.target, self.model, level)
+        return dataclasses.replace(self, plan=dataclasses.replace(self.plan, level=level), pattern=pattern, rays=rays,
+                                   handoff=handoff, physics=physics)
+
+    @property
+    def level(self) -> FidelityLevel:
+        return self.plan.level
+
+    @property
+    def scene(self) -> Scene:
+        return self.target.scene
+
+    @property
+    def seed(self) -> int:
+        return self.config.survey.seed
+
+    @property
+    def max_pulses(self) -> int | None:
+        return self.config.survey.max_pulses
+
+    @property
+    def chunk_slots(self) -> int:
+        return self.config.survey.chunk_pulses
+
+    def expected_pulses(self) -> int:
+        n = int((self.end_slot - self.first_slot) * self.scanner.active_fraction)
+        return min(n, self.max_pulses) if self.max_pulses else n
+
+    def slot_chunks(self):
+        """Yield (n,) int64 slot numbers of the fired pulses, ``chunk_slots`` slots at a time."""
+        rate, fired = self.scanner.pulse_rate_hz, 0
+        for k0 in range(self.first_slot, self.end_slot, self.chunk_slots):
+            k1 = min(self.end_slot, k0 + self.chunk_slots)
+            slots = self.scanner.pulse_slots(k0 / rate, k1 / rate)
+            if self.max_pulses is not None:
+                slots = slots[: self.max_pulses - fired]
+            if slots.size:
+                fired += slots.size
+                yield slots
+            if self.max_pulses is not None and fired >= self.max_pulses:
+                return
+
+    def cast_chunk(self, slots: np.ndarray) -> CastChunk:
+        """The ray stage of one chunk of pulse slots (n,): poses, mirror directions, beam sub-rays and their hits,
+        the muls input, each pulse's estimated line of sight with the truth along it, and (when the pass measures
+        coverage) the nominal beam footprint."""
+        poses = self.trajectory.poses(slots / self.scanner.pulse_rate_hz)
+        beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(poses)
+        hits = self.rays(beam_o, beam_d, shaft, rx_o, rx_d)
+        return CastChunk(slots, hits, self.handoff(hits, slots), self.lines_of_sight(slots, poses, hits, (beam_o, beam_d)),
+                         nominal_footprint(hits) if self.plan.measures_coverage else None)
+
+    def finish_chunk(self, cast: CastChunk, record_mode: str | None = None, every_channel: bool = False,
+                     whole_records: bool = False) -> Chunk:
+        """The physics of a chunk after its ray stage: MULS waveforms and ranging, georeferencing, dropouts
+        (``record_mode``, ``every_channel``, ``whole_records``: as :class:`Physics`)."""
+        records, ranging = self.physics(cast.batch, record_mode, every_channel, whole_records)
+        sight, lost = cast.sight, ranging.dropout_cause >= 0
+        dropouts = DropoutRecords(pulse_index=cast.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
+                                  direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
+        return Chunk(cast.slots, georeference(ranging, cast.hits, sight), dropouts, records, cast.footprint)
+
+    def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, every_channel: bool = False,
+                       whole_records: bool = False) -> Chunk:
+        """One chunk of pulse slots (n,) through the whole flow (``record_mode``, ``every_channel``,
+        ``whole_records``: as :class:`Physics`)."""
+        return self.finish_chunk(self.cast_chunk(slots), record_mode, every_channel, whole_records)
+
+    def lines_of_sight(self, slots: np.ndarray, poses: Poses, hits: Hits,
+                       true_beam: tuple[np.ndarray, np.ndarray]) -> LinesOfSight:
+        """Each pulse's estimated beam, with the first truth surface along it. Without navigation noise the
+        estimated beam is the true beam axis (``true_beam``: its origins and directions (n, 3), as the ray stage
+        cast them from the true ``poses``), whose first hit the beam cast already holds (sub-ray 0 of every pattern is
+        the axis), so only a noisy navigation needs its estimated poses, its beam and a cast of its own."""
+        noisy, times = self.trajectory.has_navigation_noise, poses.time_s
+        if noisy:
+            origin, direction = self.scanner.beam_rays(self.trajectory.estimate_of(poses))
+        else:
+            origin, direction = true_beam
+        true_range, first_object = np.full(slots.size, np.nan), np.full(slots.size, -1)
+        if noisy:
+            ray, tri, dist = self.target.caster.first_hits((origin - self.scene.local_origin).astype(np.float32),
+                                                           direction.astype(np.float32))
+            true_range[ray], first_object[ray] = dist, self.scene.face_object[tri]
+        else:
+            axis = hits.subray_index == 0
+            true_range[hits.pulse_index[axis]] = hits.range_m[axis]
+            first_object[hits.pulse_index[axis]] = hits.object_id[axis]
+        return LinesOfSight(origin, direction, true_range, first_object,
+                            np.degrees(self.scanner.scan_angle_rad(times)), times, slots, self.trajectory.leg(times))
