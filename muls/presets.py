@@ -73,8 +73,8 @@ def jerlov_beta_pi_per_m_sr(scattering_per_m: float) -> float:
     return PURE_WATER_PHASE_PI_PER_SR * water + PARTICLE_PHASE_PI_PER_SR * (scattering_per_m - water)
 
 
-def _jerlov(kind: str, table: int, a: tuple[float, float], b: tuple[float, float], kd: tuple[float, float]) -> Water:
-    """Jerlov type ``kind``: a and b [1/m] from Solonenko & Mobley's Table ``table``, K_d [1/m] from Jerlov's
+def _jerlov(kind: str, table: str, a: tuple[float, float], b: tuple[float, float], kd: tuple[float, float]) -> Water:
+    """Jerlov type ``kind``: a and b [1/m] from Solonenko & Mobley's ``table``, K_d [1/m] from Jerlov's
     Table XXVII, each as printed at (525, 550) nm."""
     sun = "the sun at the zenith" if kind in ("I", "IA", "IB", "II", "III") else "a solar elevation of 45 deg"
     scattering = at_laser_wavelength(*b)
@@ -86,7 +86,7 @@ def _jerlov(kind: str, table: int, a: tuple[float, float], b: tuple[float, float
         beta_pi_measured_per_m_sr=jerlov_beta_pi_per_m_sr(scattering),
         kd_per_m=at_laser_wavelength(*kd),
         source=(f"Jerlov type {kind}: a = {a[0]}, {a[1]} and b = {b[0]}, {b[1]} per m at 525, 550 nm from "
-                f"{_SOLONENKO_MOBLEY}, Table {table}; K_d = {kd[0]}, {kd[1]} per m ({sun}) from {_JERLOV_1976}; "
+                f"{_SOLONENKO_MOBLEY}, {table}; K_d = {kd[0]}, {kd[1]} per m ({sun}) from {_JERLOV_1976}; "
                 "each linear in wavelength to 532 nm; beta(180) from b split into pure water (their Eq. 8, "
                 "Morel 1974 phase function) and particles (Petzold average phase function)"),
     )
@@ -95,17 +95,17 @@ def _jerlov(kind: str, table: int, a: tuple[float, float], b: tuple[float, float
 #: The ten Jerlov types: (a, b) of Solonenko & Mobley (2015) and K_d of Jerlov (1976) at (525, 550) nm.
 JERLOV_PRESETS: dict[str, Water] = {w.name: w for w in (
     # oceanic types (sun at the zenith)
-    _jerlov("I", 4, a=(0.046, 0.062), b=(2.05e-3, 1.70e-3), kd=(0.043, 0.063)),
-    _jerlov("IA", 4, a=(0.0468, 0.0622), b=(4.02e-3, 3.54e-3), kd=(0.048, 0.067)),
-    _jerlov("IB", 5, a=(0.0469, 0.0623), b=(0.0565, 0.0536), kd=(0.054, 0.072)),
-    _jerlov("II", 5, a=(0.0469, 0.0622), b=(0.387, 0.358), kd=(0.076, 0.089)),
-    _jerlov("III", 6, a=(0.0507, 0.0646), b=(1.06, 0.980), kd=(0.116, 0.12)),
+    _jerlov("I", "Tables 4-5", a=(0.046, 0.062), b=(2.05e-3, 1.70e-3), kd=(0.043, 0.063)),
+    _jerlov("IA", "Tables 4-5", a=(0.0468, 0.0622), b=(4.02e-3, 3.54e-3), kd=(0.048, 0.067)),
+    _jerlov("IB", "Tables 4-5", a=(0.0469, 0.0623), b=(0.0565, 0.0536), kd=(0.054, 0.072)),
+    _jerlov("II", "Tables 4-5", a=(0.0469, 0.0622), b=(0.387, 0.358), kd=(0.076, 0.089)),
+    _jerlov("III", "Table 6", a=(0.0507, 0.0646), b=(1.06, 0.980), kd=(0.116, 0.12)),
     # coastal types (solar elevation 45 deg)
-    _jerlov("1C", 6, a=(0.068, 0.076), b=(0.395, 0.365), kd=(0.13, 0.12)),
-    _jerlov("3C", 7, a=(0.078, 0.082), b=(1.15, 1.06), kd=(0.20, 0.19)),
-    _jerlov("5C", 7, a=(0.127, 0.117), b=(1.44, 1.33), kd=(0.31, 0.30)),
-    _jerlov("7C", 8, a=(0.233, 0.195), b=(2.54, 2.35), kd=(0.49, 0.46)),
-    _jerlov("9C", 8, a=(0.430, 0.348), b=(3.38, 3.12), kd=(0.78, 0.63)),
+    _jerlov("1C", "Table 6", a=(0.068, 0.076), b=(0.395, 0.365), kd=(0.13, 0.12)),
+    _jerlov("3C", "Table 7", a=(0.078, 0.082), b=(1.15, 1.06), kd=(0.20, 0.19)),
+    _jerlov("5C", "Table 7", a=(0.127, 0.117), b=(1.44, 1.33), kd=(0.31, 0.30)),
+    _jerlov("7C", "Table 8", a=(0.233, 0.195), b=(2.54, 2.35), kd=(0.49, 0.46)),
+    _jerlov("9C", "Table 8", a=(0.430, 0.348), b=(3.38, 3.12), kd=(0.78, 0.63)),
 )}
 
 WATER_PRESETS: dict[str, Water] = {
