@@ -1,5 +1,6 @@
-"""Presets: the waters of the paper and of Petzold's measurements, and the instruments (the MUL prototype,
-its coaxial variant, a single-channel comparison unit whose gain is set for the water).
+"""Presets: the waters of the paper, of Petzold's measurements and of Jerlov's classification, and the
+instruments (the MUL prototype, its coaxial variant, a single-channel comparison unit whose gain is set for
+the water).
 
 Values come from the paper's Table 1 and sections 3-4, or from the cited measurements; anything else is a
 named assumption listed in docs/assumptions.md. This module sits above the physics (it needs the
@@ -16,6 +17,7 @@ import numpy as np
 from .channels import shot_noise_lsb2_per_w
 from .errors import ParameterError
 from .instrument import Channel, Instrument
+from .phase import PETZOLD_VALUES_PER_SR
 from .water import GROUP_INDEX_FRESHWATER, GROUP_INDEX_SEAWATER, Water
 from .waveform import OpticalModel
 
@@ -35,6 +37,77 @@ def _petzold(name: str, a: float, b: float, beta_pi_over_b: float) -> Water:
     )
 
 
+# Jerlov's water types (docs/assumptions.md#jerlov-water-types). Jerlov classified sea water by its downwelling
+# diffuse attenuation K_d; Solonenko and Mobley (2015) found the a and b that reproduce it. Both tabulate 525
+# and 550 nm: every value below is the printed pair, taken to 532 nm linearly in wavelength.
+
+_SOLONENKO_MOBLEY = "Solonenko & Mobley (2015), Appl. Opt. 54, 5392-5401"
+_JERLOV_1976 = "Jerlov (1976), Marine Optics, Table XXVII"
+
+#: The tabulated wavelengths either side of the laser's 532 nm [nm].
+JERLOV_TABLE_WAVELENGTHS_NM = (525.0, 550.0)
+LASER_WAVELENGTH_NM = 532.0
+
+#: Scattering by pure water at 532 nm [1/m]: the water term of Solonenko & Mobley's Eq. 8 (from Haltrin 1999),
+#: 0.00583 (400/lambda)^4.322. Their b is this plus particle scattering.
+PURE_WATER_SCATTERING_532_PER_M = 0.00583 * (400.0 / LASER_WAVELENGTH_NM) ** 4.322
+
+#: Phase function of pure water at 180 deg [1/sr]: Morel (1974), beta_w(psi) proportional to 1 + 0.835 cos^2 psi
+#: (depolarisation ratio 0.09), normalised over the sphere: 1.835 / (4 pi (1 + 0.835/3)) = 0.114.
+PURE_WATER_PHASE_PI_PER_SR = (1.0 + 0.835) / (4.0 * math.pi * (1.0 + 0.835 / 3.0))
+
+#: Petzold's average particle phase function at 180 deg [1/sr], as published (Mobley 1994, Table 3.10).
+PARTICLE_PHASE_PI_PER_SR = float(PETZOLD_VALUES_PER_SR[-1])
+
+
+def at_laser_wavelength(at_525: float, at_550: float) -> float:
+    """A value tabulated at 525 and 550 nm, taken to 532 nm linearly in wavelength."""
+    lo, hi = JERLOV_TABLE_WAVELENGTHS_NM
+    return at_525 + (LASER_WAVELENGTH_NM - lo) / (hi - lo) * (at_550 - at_525)
+
+
+def jerlov_beta_pi_per_m_sr(scattering_per_m: float) -> float:
+    """beta(180 deg) [1/(m sr)] of a Jerlov type of scattering b: pure water's share of b scatters with its
+    own phase function (Morel 1974), the rest (particles) with Petzold's average particle phase function."""
+    water = min(PURE_WATER_SCATTERING_532_PER_M, scattering_per_m)
+    return PURE_WATER_PHASE_PI_PER_SR * water + PARTICLE_PHASE_PI_PER_SR * (scattering_per_m - water)
+
+
+def _jerlov(kind: str, table: str, a: tuple[float, float], b: tuple[float, float], kd: tuple[float, float]) -> Water:
+    """Jerlov type ``kind``: a and b [1/m] from Solonenko & Mobley's ``table``, K_d [1/m] from Jerlov's
+    Table XXVII, each as printed at (525, 550) nm."""
+    sun = "the sun at the zenith" if kind in ("I", "IA", "IB", "II", "III") else "a solar elevation of 45 deg"
+    scattering = at_laser_wavelength(*b)
+    return Water(
+        f"jerlov_{kind}",
+        absorption_per_m=at_laser_wavelength(*a),
+        scattering_per_m=scattering,
+        group_index=GROUP_INDEX_SEAWATER,
+        beta_pi_measured_per_m_sr=jerlov_beta_pi_per_m_sr(scattering),
+        kd_per_m=at_laser_wavelength(*kd),
+        source=(f"Jerlov type {kind}: a = {a[0]}, {a[1]} and b = {b[0]}, {b[1]} per m at 525, 550 nm from "
+                f"{_SOLONENKO_MOBLEY}, {table}; K_d = {kd[0]}, {kd[1]} per m ({sun}) from {_JERLOV_1976}; "
+                "each linear in wavelength to 532 nm; beta(180) from b split into pure water (their Eq. 8, "
+                "Morel 1974 phase function) and particles (Petzold average phase function)"),
+    )
+
+
+#: The ten Jerlov types: (a, b) of Solonenko & Mobley (2015) and K_d of Jerlov (1976) at (525, 550) nm.
+JERLOV_PRESETS: dict[str, Water] = {w.name: w for w in (
+    # oceanic types (sun at the zenith)
+    _jerlov("I", "Tables 4-5", a=(0.046, 0.062), b=(2.05e-3, 1.70e-3), kd=(0.043, 0.063)),
+    _jerlov("IA", "Tables 4-5", a=(0.0468, 0.0622), b=(4.02e-3, 3.54e-3), kd=(0.048, 0.067)),
+    _jerlov("IB", "Tables 4-5", a=(0.0469, 0.0623), b=(0.0565, 0.0536), kd=(0.054, 0.072)),
+    _jerlov("II", "Tables 4-5", a=(0.0469, 0.0622), b=(0.387, 0.358), kd=(0.076, 0.089)),
+    _jerlov("III", "Table 6", a=(0.0507, 0.0646), b=(1.06, 0.980), kd=(0.116, 0.12)),
+    # coastal types (solar elevation 45 deg)
+    _jerlov("1C", "Table 6", a=(0.068, 0.076), b=(0.395, 0.365), kd=(0.13, 0.12)),
+    _jerlov("3C", "Table 7", a=(0.078, 0.082), b=(1.15, 1.06), kd=(0.20, 0.19)),
+    _jerlov("5C", "Table 7", a=(0.127, 0.117), b=(1.44, 1.33), kd=(0.31, 0.30)),
+    _jerlov("7C", "Table 8", a=(0.233, 0.195), b=(2.54, 2.35), kd=(0.49, 0.46)),
+    _jerlov("9C", "Table 8", a=(0.430, 0.348), b=(3.38, 3.12), kd=(0.78, 0.63)),
+)}
+
 WATER_PRESETS: dict[str, Water] = {
     "clean_ocean": _petzold("clean_ocean", 0.114, 0.037, 0.0135),
     "coastal_ocean": _petzold("coastal_ocean", 0.179, 0.219, 0.0047),
@@ -48,6 +121,7 @@ WATER_PRESETS: dict[str, Water] = {
         "pond", 1.44, 0.22, group_index=GROUP_INDEX_FRESHWATER,
         source="MULS paper section 4.2: anechoic pond (WETLabs ac-s), c = 1.44, a = 0.22 per m at 532 nm",
     ),
+    **JERLOV_PRESETS,
 }
 
 

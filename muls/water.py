@@ -47,9 +47,10 @@ def hg_backward_fraction(g: float = HG_ASYMMETRY) -> float:
 class Water:
     """Inherent optical properties of one water type at 532 nm.
 
-    absorption_per_m: a [1/m]; scattering_per_m: b [1/m]; beta_pi_measured_per_m_sr: measured
-    beta(180 deg) [1/(m sr)] or None; kd_per_m: measured diffuse attenuation K_d [1/m] or None;
-    group_index: n_g of the water (ranging speed c/n_g).
+    absorption_per_m: a [1/m]; scattering_per_m: b [1/m]; beta_pi_measured_per_m_sr: beta(180 deg)
+    [1/(m sr)] from measured volume scattering functions (Petzold's waters: measured in that water; Jerlov's
+    types: pure water's and Petzold's average particle function, weighted by their shares of b) or None;
+    kd_per_m: measured diffuse attenuation K_d [1/m] or None; group_index: n_g of the water (ranging speed c/n_g).
     """
 
     name: str

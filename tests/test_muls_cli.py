@@ -91,7 +91,7 @@ def test_bad_arguments_give_one_line_and_exit_2(capsys, argv, option):
 def test_bad_water_lists_the_allowed_names(capsys):
     code, _, err = _run(capsys, "waveform", "--water", "mud")
     assert code == 2
-    for name in ("clean_ocean", "coastal_ocean", "pond", "pool", "turbid_harbor"):
+    for name in ("clean_ocean", "coastal_ocean", "pond", "pool", "turbid_harbor", "jerlov_I", "jerlov_9C"):
         assert name in err
 
 
