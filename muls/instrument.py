@@ -47,6 +47,7 @@ class Receiver:
     window_reflectance: float = 0.0039  # assumption: T_s, Fresnel glass (n 1.52) to water (n 1.34)
     window_distance_m: float = 0.05  # assumption: D of Eq. 3, window 5 cm in front of the receiver lens
     window_coupling: float = 0.0  # O of Eq. 3: 0 for non-coaxial optics (the window is outside the FOV)
+    overlap_model: str = "finite_aperture"  # each aperture point sees its own field (muls.overlap); "eq11": MULS Eq. 11
 
     def __post_init__(self):
         for key in ("area_m2", "fov_full_rad", "filter_bandwidth_m", "window_distance_m"):
@@ -210,6 +211,7 @@ class Instrument:
             receiver_diameter_m=self.receiver.diameter_m,
             fov_full_rad=self.receiver.fov_full_rad,
             offset_m=self.receiver.offset_m,
+            overlap_model=self.receiver.overlap_model,
         )
 
     @cached_property

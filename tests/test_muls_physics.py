@@ -22,6 +22,11 @@ from muls.waveform import OpticalModel
 REL_TOL_TABLE = 2e-3  # column tables: trapezoid rule on a 25 ps grid
 
 
+def with_overlap(instrument, model: str):
+    """``instrument`` whose receiver sees the beam by overlap ``model`` (muls.overlap.OVERLAP_MODELS)."""
+    return replace(instrument, receiver=replace(instrument.receiver, overlap_model=model))
+
+
 def test_pulse_has_unit_area_fwhm_and_peak_at_0409_width():
     pulse = PulseShape(10e-9)
     t = np.linspace(0.0, 400e-9, 400001)
@@ -77,24 +82,29 @@ def test_group_velocity():
     assert water_preset("pool").speed_m_s == pytest.approx(299_792_458 / 1.357)
 
 
-def test_overlap_blind_zone_and_full_overlap_from_closed_form():
-    g = mul2023().geometry
+@pytest.mark.parametrize("model", ["eq11", "finite_aperture"])
+def test_overlap_blind_zone_and_full_overlap_from_closed_form(model):
+    """Both models start where the beam first touches the union of the aperture points' fields (1.68 m); Eq. 11
+    reaches 1 where the spot lies inside that union, a finite aperture where every aperture point's own field holds
+    the whole spot (d + r_ap + r_beam = z tan(theta_r / 2), 3.59 m for the MUL)."""
+    g = with_overlap(mul2023(), model).geometry
     r10, r20, t1, t2, d = 0.005, g.receiver_diameter_m / 2, math.tan(2e-3), math.tan(50e-3), 0.13
     assert g.blind_zone_m == pytest.approx((d - r10 - r20) / (t1 + t2))
     assert g.blind_zone_m == pytest.approx(1.683, abs=1e-3)  # docs/design.md#angles: 1.68 m (half-angle reading)
-    assert g.full_overlap_m == pytest.approx((d - r20 + r10) / (t2 - t1))
+    full = (d - r20 + r10) / (t2 - t1) if model == "eq11" else (d + r20 + r10) / (t2 - t1)
+    assert g.full_overlap_m == pytest.approx(full)
     z = np.linspace(0.0, 10.0, 20001)
     o = g.overlap(z)
     assert np.all(o[z <= g.blind_zone_m] == 0.0)
     assert np.all(o[z >= g.full_overlap_m] == pytest.approx(1.0))
     assert np.all(np.diff(o) >= -1e-12)  # monotone
     assert np.max(np.abs(np.diff(o))) < 5e-3  # continuous: no jump on a 0.5 mm grid
-    inside = (z > g.blind_zone_m) & (z < g.full_overlap_m)
+    inside = (z > g.blind_zone_m) & (z < g.full_overlap_m - 0.05)  # a finite aperture nears 1 quadratically
     assert np.all((o[inside] > 0.0) & (o[inside] < 1.0))
 
 
-def test_overlap_equals_lens_area_by_monte_carlo():
-    g = mul2023().geometry
+def test_eq11_overlap_equals_lens_area_by_monte_carlo():
+    g = with_overlap(mul2023(), "eq11").geometry
     z = 1.85
     r1, r2 = float(g.beam_radius_m(z)), float(g.footprint_radius_m(z))
     rng = np.random.default_rng(1)
@@ -103,6 +113,26 @@ def test_overlap_equals_lens_area_by_monte_carlo():
     x, y = rad * np.cos(ang), rad * np.sin(ang)
     inside = (x - g.offset_m) ** 2 + y**2 <= r2**2
     assert float(g.overlap(z)) == pytest.approx(inside.mean(), abs=4e-3)
+
+
+@pytest.mark.parametrize("z", [1.9, 2.5, 3.0, 3.4])
+def test_finite_aperture_overlap_is_the_share_of_the_aperture_that_sees_each_point_of_the_spot(z):
+    """Sampled directly: uniform points of the beam spot and of the aperture; a pair counts when the spot point lies
+    within the aperture point's own field of view (z tan(theta_r / 2) of its axis). Both sample sets are independent
+    of the quadrature the model integrates with."""
+    g = mul2023().geometry
+    rng = np.random.default_rng(7)
+
+    def disc(n, radius):
+        rad, ang = radius * np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
+        return np.c_[rad * np.cos(ang), rad * np.sin(ang)]
+
+    spot = disc(3000, float(g.beam_radius_m(z)))
+    aperture = disc(3000, g.receiver_diameter_m / 2) + [g.offset_m, 0.0]
+    rho = z * math.tan(0.5 * g.fov_full_rad)
+    seen = np.mean(((spot[:, None, :] - aperture[None, :, :]) ** 2).sum(axis=2) <= rho**2)
+    assert float(g.overlap(z)) == pytest.approx(seen, abs=0.01)
+    assert float(g.overlap(z)) < float(g.eq11_overlap(z))  # Eq. 11 counts the whole aperture for the union
 
 
 def test_full_angle_reading_moves_blind_zone_to_337_m():
@@ -145,7 +175,7 @@ def test_flat_plate_echo_energy_in_the_record_equals_eq7():
 
 
 def test_column_with_a_short_pulse_is_the_eq4_closed_form():
-    ins = mul2023()
+    ins = with_overlap(mul2023(), "eq11")  # Eq. 11's overlap is 1 from 2.03 m on
     ins = replace(ins, transmitter=replace(ins.transmitter, pulse_width_s=1e-9),
                   digitizer=replace(ins.digitizer, bandwidth_hz=1e12))
     water = water_preset("coastal_ocean")
@@ -352,23 +382,36 @@ def test_small_angle_rule_against_the_monte_carlo():
         assert k_rule <= k_mc * 1.01
 
 
-def test_eq7_and_eq4_inside_the_first_metre_and_at_zero_range():
+@pytest.mark.parametrize("model", ["eq11", "finite_aperture"])
+def test_eq4_inside_the_first_metre_and_at_zero_range(model):
+    """The coaxial receiver: Eq. 4's density is A_r beta_pi eta_t eta_o (1 - T_s)^2 exp(-2 k z) / z^2 with A_r / z^2
+    capped at the field stop's pi tan^2(theta_r / 2): closer than sqrt(A_r / pi) / tan(0.05) = 0.75 m the z^2 is
+    gone. Under Eq. 11 the cap is the collection limit; a finite aperture holds it already (a point on the axis is
+    seen by the aperture points within z tan(theta_r / 2) of it), exactly where the whole spot lies within
+    r_ap - z tan(theta_r / 2) of the axis (z <= 0.5 m) or every aperture point sees all of it (z >= 0.9 m); in
+    between its own integral gives less. At zero and negative range there is no column."""
+    ins, water = with_overlap(coaxial(), model), water_preset("pool")
+    k = 0.050923  # Eq. 6 for the pool, worked by hand in tests/test_budget_chain.py
+    optics = 0.9 * 0.6 * (1 - 0.0039) ** 2
+    for z in (0.3, 0.5, 0.9, 1.2):
+        collected = min(math.pi * math.tan(0.05) ** 2, 4.4e-3 / z**2)
+        assert float(column_density_per_m(ins, water, z)) == pytest.approx(
+            collected * water.beta_pi_per_m_sr * optics * math.exp(-2 * k * z), rel=2e-3)
+    for z in (0.0, -1.0):
+        assert float(column_density_per_m(ins, water, z)) == 0.0
+
+
+def test_eq7_inside_the_first_metre_and_at_zero_range():
     """Where Eq. 11's overlap is 1 from the window on (the coaxial receiver), Eq. 7 holds at 0.5 m as at any
-    range, and Eq. 4's density is A_r beta_pi eta_t eta_o (1 - T_s)^2 exp(-2 k z) / z^2 with A_r / z^2 capped
-    at the field stop's pi tan^2(theta_r / 2): closer than sqrt(A_r / pi) / tan(0.05) = 0.75 m the z^2 is gone.
-    At zero and negative range there is no echo and no column (0, never inf or NaN)."""
-    ins, water = coaxial(), water_preset("pool")
+    range; at zero and negative range there is no echo (0, never inf or NaN)."""
+    ins, water = with_overlap(coaxial(), "eq11"), water_preset("pool")
     k = 0.050923  # Eq. 6 for the pool, worked by hand in tests/test_budget_chain.py
     optics = 0.9 * 0.6 * (1 - 0.0039) ** 2
     for z in (0.3, 0.5, 0.7, 0.9):
         assert float(target_factor(ins, water, z, 0.01)) == pytest.approx(
             4.4e-3 * 0.01 * optics * math.exp(-2 * k * z) / z**2, rel=1e-4)
-        collected = min(math.pi * math.tan(0.05) ** 2, 4.4e-3 / z**2)
-        assert float(column_density_per_m(ins, water, z)) == pytest.approx(
-            collected * water.beta_pi_per_m_sr * optics * math.exp(-2 * k * z), rel=1e-4)
     for z in (0.0, -1.0):
         assert float(target_factor(ins, water, z, 0.01)) == 0.0
-        assert float(column_density_per_m(ins, water, z)) == 0.0
 
 
 def test_lambertian_weight_follows_the_cosine_of_incidence():

@@ -46,7 +46,7 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
     geometry = inst.geometry
 
     # The exact float32 rays the pipeline casts (primary and shadow), prepared outside the raw timing.
-    pulse_rays, layout, faces, cone = kernel_inputs(scene, *rays, pattern, geometry)
+    pulse_rays, layout, faces, view = kernel_inputs(scene, *rays, pattern, geometry)
     n_pulses = len(times)
     o32 = np.empty((n_pulses * pattern.count, 3), np.float32)
     d32 = np.empty_like(o32)
@@ -57,8 +57,7 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
     n_sub = o32.shape[0]
     shadows = _raykernels.ShadowRays(np.empty((n_sub, 3), np.float32), np.empty((n_sub, 3), np.float32),
                                      np.empty(n_sub, np.float32))
-    c = _raykernels.hit_block(prim, tfar, 0, 0, pulse_rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov,
-                              empty_columns(n_sub), shadows)
+    c = _raykernels.hit_block(prim, tfar, 0, 0, pulse_rays, layout, faces, view, empty_columns(n_sub), shadows)
     sh_o, sh_d, sh_len = shadows
     sh_o, sh_d, sh_len = sh_o[:c].copy(), sh_d[:c].copy(), sh_len[:c].copy()
     n_shadow = int(np.count_nonzero(sh_len > 0))

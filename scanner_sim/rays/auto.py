@@ -27,7 +27,7 @@ AUTO_BLOCK_RAYS = 32768
 
 
 @kernel(nogil=True)
-def _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, apex_behind, cos_half_fov, rows, shadows):
+def _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, view, rows, shadows):
     """:func:`scanner_sim.rays.kernels.hit_block` over the block's pulses that ``analytic`` leaves to Embree:
     their hit rows and shadow rays packed from 0, in pulse order. Returns the row count."""
     m = layout.xy.shape[0]
@@ -35,13 +35,12 @@ def _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, apex_behind, c
     for q in range(analytic.shape[0]):
         if not analytic[q]:
             c += hit_block(prim[q * m:(q + 1) * m], tfar[q * m:(q + 1) * m], (p0 + q) * m, c, rays, layout, faces,
-                           apex_behind, cos_half_fov, rows,
-                           ShadowRays(shadows.origin[c:], shadows.direction[c:], shadows.length[c:]))
+                           view, rows, ShadowRays(shadows.origin[c:], shadows.direction[c:], shadows.length[c:]))
     return c
 
 
 @kernel(nogil=True)
-def _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, apex_behind, cos_half_fov, unproven, one, out):
+def _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, view, unproven, one, out):
     """The block's rows as :func:`collapse_simple` keeps them, pulse by pulse into ``out`` (room for every
     sub-ray): a proven pulse's hit rows made (:func:`scanner_sim.rays.kernels.hit_block`, into the m-row scratch
     ``one``) and collapsed while in cache, the others' collapsed from ``unproven`` (their rows, shadow rays
@@ -55,7 +54,7 @@ def _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, apex_behind,
         p = p0 + q
         if analytic[q]:
             c = hit_block(prim[q * m:(q + 1) * m], tfar[q * m:(q + 1) * m], p * m, 0, rays, layout, faces,
-                          apex_behind, cos_half_fov, one, shadows)
+                          view, one, shadows)
             beam, rho_mean, cosine, mean_range = pulse_figures(0, c, m, one, False, energy, tau, nodes, share)
             o = emit_rows(0, c, one, False, out, o, beam, rho_mean, cosine, mean_range, nodes, share)
         else:
@@ -89,7 +88,7 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
         hits = cast_beams(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry, shadow_rays)
         return collapse_simple(hits) if collapse else hits
     n_pulses, m = beam_origin.shape[0], pattern.count
-    rays, layout, faces, cone = kernel_inputs(target.scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir,
+    rays, layout, faces, view = kernel_inputs(target.scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir,
                                               pattern, geometry)
     block = max(1, AUTO_BLOCK_RAYS // m)
     size = min(n_pulses, block) * m  # every block's scratch, fetched once (a workspace call is ~10 us)
@@ -118,17 +117,14 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
             at = (cast[:, None] * m + rest_sub).ravel()
             prim[at], tfar[at] = caster.first_hits_raw(o32[at], d32[at])
         if collapse:
-            c = _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov,
-                               rows, shadows)
+            c = _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, view, rows, shadows)
             if shadow_rays and c:
                 occluded = caster.occluded_raw(shadows.origin[:c], shadows.direction[:c], shadows.length[:c])
                 clear_blocked(occluded, shadows.length[:c], rows.receiver_weight, 0)
-            k = _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, cone.apex_behind_m,
-                                 cone.cos_half_fov, head(rows, c), one, out)
+            k = _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, view, head(rows, c), one, out)
             parts.append(Hits.from_columns(head(out, k), p1 - p0, m, copy=True))
             continue
-        c = hit_block(prim, tfar, p0 * m, 0, rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov, rows,
-                      shadows)
+        c = hit_block(prim, tfar, p0 * m, 0, rays, layout, faces, view, rows, shadows)
         if shadow_rays and c:
             need = unproven_shadows(rows.pulse_index[:c], p0, analytic, shadows.length[:c])
             if need.size:

@@ -1,6 +1,7 @@
 """The geometry stage of a pass: beam sub-rays of a chunk of pulses -> first hits -> per-hit range, point,
-normal, incidence, material -> receiver check (FOV cone, then a shadow ray from the hit to the receiver
-aperture) -> :class:`~scanner_sim.rays.hits.Hits`, struct-of-arrays in scan order with back-references.
+normal, incidence, material -> receiver check (the share of the aperture whose field holds the hit, then a
+shadow ray from the hit to the aperture) -> :class:`~scanner_sim.rays.hits.Hits`, struct-of-arrays in scan order
+with back-references.
 """
 
 from __future__ import annotations
@@ -37,25 +38,6 @@ class CastScene:
         return cls(scene, caster, seabed_grid(scene, caster))
 
 
-@dataclass(frozen=True)
-class ReceiverCone:
-    """The receiver's field of view as a cone with a virtual apex behind the aperture.
-
-    The apex sits ``apex_behind_m`` = (d_r / 2) / tan(fov / 2) behind the aperture centre on the receiver
-    axis, so the cone's cross-section at range z in front of the aperture has radius d_r / 2 + z tan(fov / 2),
-    the receiver footprint r2 of MULS Eq. 11: on a flat plate the ray-cast overlap converges to Eq. 11.
-    """
-
-    apex_behind_m: float
-    cos_half_fov: float
-
-    @classmethod
-    def from_geometry(cls, geometry) -> ReceiverCone:
-        """From a :class:`muls.overlap.TransceiverGeometry`."""
-        half = 0.5 * geometry.fov_full_rad
-        return cls(apex_behind_m=0.5 * geometry.receiver_diameter_m / math.tan(half), cos_half_fov=math.cos(half))
-
-
 def shadow_offset_m(local_extent_m: float) -> float:
     """Scale-aware step [m] off a surface for a shadow ray: well above the float32 spacing of the local frame.
 
@@ -73,7 +55,7 @@ def cast_beams(target: CastScene, beam_origin: np.ndarray, beam_dir: np.ndarray,
     beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir: (n_pulses, 3) float64 world frame (from
     :meth:`scanner_sim.motion.scanner.Scanner.world_rays`); pattern: sub-ray layout; geometry: the instrument's
     :class:`muls.overlap.TransceiverGeometry` (beam radius, divergence, receiver aperture and FOV);
-    shadow_rays: cast a visibility ray from each in-cone hit to the receiver aperture (else only the cone);
+    shadow_rays: cast a visibility ray from each hit the receiver sees to its aperture (else only its field);
     prove_shadows: over a seabed height field, leave out the shadow rays of each pulse whose hits all lie on the
     seabed with nothing that can stand between them and the aperture (proven on the seabed's coarse grid,
     :func:`scanner_sim.rays.seabed_kernels.shadows_to_cast`): Embree would find none of them blocked, so the hits are
@@ -84,7 +66,7 @@ def cast_beams(target: CastScene, beam_origin: np.ndarray, beam_dir: np.ndarray,
     """
     n_pulses, m = beam_origin.shape[0], pattern.count
     scene, caster = target.scene, target.caster
-    rays, layout, faces, cone = kernel_inputs(scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern,
+    rays, layout, faces, view = kernel_inputs(scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern,
                                               geometry)
     rows = empty_columns(n_pulses * m)  # sized for every sub-ray hitting; only rows written are kept
     grid = target.seabed_grid if shadow_rays and prove_shadows else None
@@ -102,9 +84,8 @@ def cast_beams(target: CastScene, beam_origin: np.ndarray, beam_dir: np.ndarray,
         shadows = kernels.ShadowRays(caster.workspace("shadow_origins32", (b, 3), np.float32),
                                      caster.workspace("shadow_dirs32", (b, 3), np.float32),
                                      caster.workspace("shadow_length32", (b,), np.float32))
-        c = kernels.hit_block(prim, tfar, p0 * m, base, rays, layout, faces, cone.apex_behind_m, cone.cos_half_fov,
-                              rows, shadows)
-        if shadow_rays and c and grid is None:  # hits outside the cone have empty (length -1) shadow rays
+        c = kernels.hit_block(prim, tfar, p0 * m, base, rays, layout, faces, view, rows, shadows)
+        if shadow_rays and c and grid is None:  # hits the receiver cannot see have empty (length -1) shadow rays
             occluded = caster.occluded_raw(shadows.origin[:c], shadows.direction[:c], shadows.length[:c])
             kernels.clear_blocked(occluded, shadows.length[:c], rows.receiver_weight, base)
         elif shadow_rays and c:
@@ -122,7 +103,7 @@ def cast_beams(target: CastScene, beam_origin: np.ndarray, beam_dir: np.ndarray,
 
 def kernel_inputs(scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern: BeamPattern, geometry):
     """What the ray-stage kernels take, from :func:`cast_beams`' arguments: the pulses' rays in the local frame,
-    the sub-ray layout, the scene's faces and the receiver cone (scanner_sim.rays.kernels' named tuples)."""
+    the sub-ray layout, the scene's faces and how the receiver sees a hit (scanner_sim.rays.kernels' named tuples)."""
     beam_dir = np.ascontiguousarray(beam_dir, dtype=np.float64)
     u, v = perpendicular_basis(beam_dir, np.asarray(shaft_dir, float))
     rays = kernels.PulseRays(np.ascontiguousarray(beam_origin - scene.local_origin), beam_dir, u, v,
@@ -132,7 +113,7 @@ def kernel_inputs(scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pa
                                   math.tan(0.5 * geometry.beam_divergence_full_rad))
     faces = kernels.SceneFaces(scene.face_normal, scene.face_reflectance, scene.face_label, scene.face_object,
                                scene.local_origin, shadow_offset_m(scene.local_extent_m))
-    return rays, layout, faces, ReceiverCone.from_geometry(geometry)
+    return rays, layout, faces, kernels.ReceiverView.of(geometry)
 
 
 

@@ -1,7 +1,7 @@
 """Numba kernels of the ray stage (scanner_sim.rays.cast.cast_beams): one pass in, one pass out.
 
 They fuse what numpy would do in a dozen temporaries (sub-ray generation; hit point, normal, incidence,
-FOV cone and shadow-ray set-up), so the stage keeps most of Embree's throughput. Compiled on first use and
+receiver's view and shadow-ray set-up), so the stage keeps most of Embree's throughput. Compiled on first use and
 cached on disk. Geometry as in scanner_sim.rays.beams: sub-ray j of pulse p starts at o_p + r_t (x_j u_p + y_j v_p)
 and points along a_p + tan(theta_h) (x_j u_p + y_j v_p), normalised (MULS Eq. 11's r1 at every range).
 """
@@ -13,6 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from muls.overlap import aperture_share
 from muls.runtime import kernel
 from scanner_sim.rays.echoes import echo_range_m
 
@@ -51,6 +52,26 @@ class SceneFaces(NamedTuple):
     eps: float
 
 
+class ReceiverView(NamedTuple):
+    """How the receiver sees a hit: ``finite`` (each aperture point sees its own field of view: the share of the
+    aperture, :func:`muls.overlap.aperture_share`, of radius ``aperture_radius`` [m] and field ``tan_half_fov``) or,
+    for MULS Eq. 11, the cone around the union of the fields, its virtual apex ``apex_behind`` [m] behind the
+    aperture and its half-angle cosine ``cos_half_fov``."""
+
+    finite: bool
+    aperture_radius: float
+    tan_half_fov: float
+    apex_behind: float
+    cos_half_fov: float
+
+    @classmethod
+    def of(cls, geometry) -> ReceiverView:
+        """From a :class:`muls.overlap.TransceiverGeometry` (its ``overlap_model`` decides)."""
+        half = 0.5 * geometry.fov_full_rad
+        return cls(geometry.overlap_model != "eq11", geometry.aperture_radius_m, math.tan(half),
+                   geometry.aperture_radius_m / math.tan(half), math.cos(half))
+
+
 class ShadowRays(NamedTuple):
     """Shadow rays of one block: origin (b, 3), unit direction (b, 3) and length (b,), float32 local frame."""
 
@@ -83,18 +104,18 @@ def subrays_local32(rays, p0, p1, layout, origins, dirs):
 
 
 @kernel(fastmath=False, nogil=True)
-def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half_fov, rows, shadows):
+def hit_block(prim, tfar, ray0, base, rays, layout, faces, view, rows, shadows):
     """Turn one block of Embree first-hit results into hit rows, and set up their shadow rays.
 
     prim (b,) int32 / tfar (b,) float32: Embree's answer for rays ray0 .. ray0 + b - 1 (-1: miss) of the
     chunk's :class:`PulseRays` with the sub-rays of ``layout``. Hits are written in ray (scan) order at rows
     base, base + 1, ... of ``rows`` (:class:`scanner_sim.rays.hits.HitColumns`), every field but one as the hit
     record declares it: ``incidence_rad`` holds the cosine of the incidence angle, which the caller turns into
-    the angle with numpy's vectorised arccos. ``receiver_weight`` is 1 when the hit is inside the receiver's FOV
-    cone (virtual apex ``apex_behind`` [m] behind the aperture, half-angle cosine ``cos_half_fov``) with the
-    aperture on the lit side, else 0. Shadow ray c of the block (for hit row base + c) goes into ``shadows``
+    the angle with numpy's vectorised arccos. ``receiver_weight`` is the share of the aperture that sees the hit
+    (:class:`ReceiverView`: each aperture point's own field, or 1 inside Eq. 11's cone), 0 when the aperture is
+    not on the lit side. Shadow ray c of the block (for hit row base + c) goes into ``shadows``
     (float32, local frame): from the hit stepped ``faces.eps`` off the surface toward the aperture, stopping
-    ``eps`` short of it; length -1 (an empty ray Embree skips) when the hit is not in the cone. Returns the
+    ``eps`` short of it; length -1 (an empty ray Embree skips) when the receiver cannot see the hit. Returns the
     block's hit count.
     """
     beam_local, beam_dir, u, v, rx_local, rx_dir = rays
@@ -144,19 +165,22 @@ def hit_block(prim, tfar, ray0, base, rays, layout, faces, apex_behind, cos_half
         rows.normal[i, 1] = ny
         rows.normal[i, 2] = nz
         rows.incidence_rad[i] = -dn if -dn < 1.0 else 1.0  # the cosine; arccos in numpy (SIMD) afterwards
-        # Receiver FOV cone: virtual apex behind the aperture (rays.cast.ReceiverCone).
         rx, ry, rz = rx_local[p, 0], rx_local[p, 1], rx_local[p, 2]
         kx, ky, kz = rx_dir[p, 0], rx_dir[p, 1], rx_dir[p, 2]
-        wx = qx - (rx - apex_behind * kx)
-        wy = qy - (ry - apex_behind * ky)
-        wz = qz - (rz - apex_behind * kz)
-        along = wx * kx + wy * ky + wz * kz
         tx, ty, tz = rx - qx, ry - qy, rz - qz
         dist = math.sqrt(tx * tx + ty * ty + tz * tz)
         # The return leg at float32 precision (0.5 um at 10 m), as Embree gives the outgoing one.
         rows.echo_range_m[i] = echo_range_m(t, np.float64(np.float32(dist)))
-        ok = along >= cos_half_fov * math.sqrt(wx * wx + wy * wy + wz * wz) and nx * tx + ny * ty + nz * tz > 0.0
-        rows.receiver_weight[i] = 1.0 if ok else 0.0
+        along = -(tx * kx + ty * ky + tz * kz)  # the hit's distance in front of the aperture, along its axis
+        if view.finite:
+            share = aperture_share(view.aperture_radius, view.tan_half_fov, along,
+                                   math.sqrt(max(dist * dist - along * along, 0.0)))
+        else:  # Eq. 11's cone: virtual apex behind the aperture
+            behind = along + view.apex_behind
+            wx, wy, wz = qx - (rx - view.apex_behind * kx), qy - (ry - view.apex_behind * ky), qz - (rz - view.apex_behind * kz)
+            share = 1.0 if behind >= view.cos_half_fov * math.sqrt(wx * wx + wy * wy + wz * wz) else 0.0
+        ok = share > 0.0 and nx * tx + ny * ty + nz * tz > 0.0
+        rows.receiver_weight[i] = share if ok else 0.0
         shadows.origin[c, 0] = qx + eps * nx
         shadows.origin[c, 1] = qy + eps * ny
         shadows.origin[c, 2] = qz + eps * nz
