@@ -14,20 +14,25 @@ import numpy as np
 
 from . import smallangle
 from .instrument import Instrument
-from .water import Water
+from .scattering import ScatteringTables, scattering_tables
+from .water import RANGE_DEPENDENT_MODELS, Water
 
 
-def attenuation_per_m(instrument: Instrument, water: Water, range_m):
+def attenuation_per_m(instrument: Instrument, water: Water, range_m, tables: ScatteringTables | None = None):
     """The k of exp(-2 k z) in Eqs. 4, 7, 9, 10 for light scattered back at ``range_m`` [m] (any shape) [1/m].
 
-    The water's ``attenuation_model`` decides: Eq. 6's k_lidar, c or K_d are constants; ``small_angle``
-    keeps the forward scattering that stays inside the receiver's footprint r2(z) of Eq. 11, so it depends
-    on the range and the field of view (:mod:`muls.smallangle`, docs/design.md#attenuation).
+    The water's ``attenuation_model`` decides: Eq. 6's k_lidar, c or K_d are constants; ``monte_carlo`` is the
+    Monte Carlo reference's transmission for this water and receiver, range by range (:mod:`muls.scattering`;
+    ``tables``: those tables if the caller holds them, else they are found or built); ``small_angle`` keeps the
+    forward scattering that stays inside the receiver's footprint r2(z) of Eq. 11 (:mod:`muls.smallangle`).
+    docs/design.md#attenuation compares them.
     """
     r = np.asarray(range_m, dtype=float)
-    if water.attenuation_model != "small_angle":
+    if water.attenuation_model not in RANGE_DEPENDENT_MODELS:
         return np.full(r.shape, water.two_way_attenuation_per_m)
     g = instrument.geometry
+    if water.attenuation_model == "monte_carlo":
+        return (tables or scattering_tables(g, water)).attenuation_per_m(r)
     return smallangle.attenuation_per_m(water.attenuation_per_m, water.scattering_per_m, 0.5 * g.receiver_diameter_m,
                                         math.tan(0.5 * g.fov_full_rad), r)
 
@@ -38,14 +43,15 @@ def two_way_transmission(instrument: Instrument) -> float:
     return tx.efficiency * rx.efficiency * (1.0 - rx.window_reflectance) ** 2
 
 
-def target_factor(instrument: Instrument, water: Water, range_m, weight_per_sr):
+def target_factor(instrument: Instrument, water: Water, range_m, weight_per_sr, tables: ScatteringTables | None = None):
     """Echo energy over emitted energy for hits at ``range_m`` [m] (any shape).
 
     weight_per_sr = sum over the footprint of w_j (rho_j / pi) cos(theta_j) times the receiver weight,
     which for a flat Lambertian plate at normal incidence is (rho / pi) O(Z), giving exactly Eq. 7.
+    ``tables``: as :func:`attenuation_per_m`.
     """
     r = np.asarray(range_m, dtype=float)
-    k = attenuation_per_m(instrument, water, r)
+    k = attenuation_per_m(instrument, water, r, tables)
     with np.errstate(divide="ignore", invalid="ignore"):
         f = (instrument.receiver.area_m2 * np.asarray(weight_per_sr, float) * two_way_transmission(instrument)
              * np.exp(-2.0 * k * r) / r**2)  # MULS Eq. 7
@@ -58,15 +64,16 @@ def lambertian_weight(instrument: Instrument, range_m, reflectance, incidence_ra
             * instrument.geometry.overlap(range_m))
 
 
-def column_density_per_m(instrument: Instrument, water: Water, z_m):
-    """Water-column backscatter per unit range, over emitted energy [1/m] (MULS Eq. 4).
+def column_density_per_m(instrument: Instrument, water: Water, z_m, tables: ScatteringTables | None = None):
+    """Water-column backscatter per unit range, over emitted energy [1/m] (MULS Eq. 4), single scattering.
 
     The column power is P_C(t) = E_t integral of this (z) w(t - 2 z / c_w) dz. The receiver's field-stop
-    limit (``TransceiverGeometry.collection_limit``) keeps A_r O(z) / z^2 finite near the window.
+    limit (``TransceiverGeometry.collection_limit``) keeps A_r O(z) / z^2 finite near the window. ``tables``: as
+    :func:`attenuation_per_m`.
     """
     z = np.asarray(z_m, dtype=float)
     geometry = instrument.geometry
-    k = attenuation_per_m(instrument, water, z)
+    k = attenuation_per_m(instrument, water, z, tables)
     with np.errstate(divide="ignore", invalid="ignore"):
         density = (instrument.receiver.area_m2 * geometry.overlap(z) * geometry.collection_limit(z)
                    * water.beta_pi_per_m_sr * two_way_transmission(instrument) * np.exp(-2.0 * k * z) / z**2)  # MULS Eq. 4
@@ -85,11 +92,12 @@ def window_factor(instrument: Instrument) -> float:
 
 
 def background_power_w(instrument: Instrument, water: Water, spectral_radiance_w_m2_sr_nm: float,
-                       range_m, reflectance):
+                       range_m, reflectance, tables: ScatteringTables | None = None):
     """Background light power [W] (MULS Eqs. 8-10) for targets at ``range_m`` with ``reflectance``.
 
     spectral_radiance_w_m2_sr_nm: L_b of the artificial light [W/(m^2 sr nm)]; 0 in deep, dark water.
-    A pulse that meets nothing has no target term; its scattered term uses the record's far end.
+    A pulse that meets nothing has no target term; its scattered term uses the record's far end. ``tables``: as
+    :func:`attenuation_per_m`.
     """
     if spectral_radiance_w_m2_sr_nm == 0.0:
         return np.zeros(np.shape(range_m))
@@ -100,7 +108,7 @@ def background_power_w(instrument: Instrument, water: Water, spectral_radiance_w
     far = water.speed_m_s * instrument.digitizer.record_length_s / 2.0
     r = np.where(np.isfinite(r), r, far)
     rho = np.where(np.isfinite(np.asarray(range_m, float)), reflectance, 0.0)
-    attenuation = np.exp(-2.0 * attenuation_per_m(instrument, water, r) * r)
+    attenuation = np.exp(-2.0 * attenuation_per_m(instrument, water, r, tables) * r)
     common = spectral_radiance_w_m2_sr_nm * rx.area_m2 * rx.efficiency * band_nm * attenuation
     p_target = common * rho * theta_r**2 / 4.0  # MULS Eq. 9
     p_scatter = common * water.beta_pi_per_m_sr * np.pi * theta_r**2 / 4.0  # MULS Eq. 10

@@ -17,6 +17,8 @@ from .waveform import Echoes, OpticalModel, PulseBatch, optical_power
 
 DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
 NO_DROPOUT = -1
+#: Times over an echo, from its start to the end of its pulse, at which a channel's clipping by the column is judged.
+ECHO_SPAN_POINTS = 9
 
 
 @dataclass(frozen=True)
@@ -97,10 +99,11 @@ def best_of_clusters(new, saturated, score):
 def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped, echoes: Echoes) -> np.ndarray:
     """Cause of each pulse without a return (index into DROPOUT_CAUSES), NO_DROPOUT otherwise.
 
-    Judged on the noise-free signal at the strongest echo's peak: ``blind_zone`` if no light reaches the
-    receiver, ``saturated`` if clipped returns were dropped, ``masked_by_backscatter`` if the echo alone would
-    clear the threshold over dark noise but the column (its shot noise or its clipping) hides it,
-    ``outside_gate`` if only a gated channel could see it and its gate is shut then, else ``below_threshold``.
+    Judged on the noise-free signal of the strongest echo: ``blind_zone`` if no light reaches the receiver,
+    ``saturated`` if clipped returns were dropped, ``masked_by_backscatter`` if in a channel open at its peak the
+    echo alone would clear the threshold over dark noise but the column hides it (its shot noise at the peak, or
+    its clipping anywhere over the echo, :data:`ECHO_SPAN_POINTS` times from its start to its end), ``outside_gate``
+    if only a gated channel could see it and its gate is shut then, else ``below_threshold``.
     """
     ins = model.instrument
     dig = ins.digitizer
@@ -131,6 +134,9 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
         echo = np.maximum(total - model.column_power_w(t_star, batch.column_cut_m[todo].min(axis=1))
                           - batch.background_w[todo], 0.0)
         k = ins.processing.threshold_sigma
+        # The column (and background) over the echo, from its start to its end: where it clips, no peak shows.
+        span = delay[strongest[todo]][:, None] + ins.pulse.duration_s * np.linspace(0.0, 1.0, ECHO_SPAN_POINTS)
+        span_base = batch.background_w[todo][:, None] + model.column_power_w(span.ravel()).reshape(span.shape)
         masked = np.zeros(todo.size, bool)
         gated_out = np.zeros(todo.size, bool)
         for c in range(1, len(ins.channels) + 1):
@@ -138,7 +144,9 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
             amp = chans.lsb_per_w[c] * echo
             dark = math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
             noise = np.sqrt(dark**2 + chans.shot_lsb2_per_w[c] * base)
-            clipped = chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * base >= dig.max_code
+            open_over = (chans.gate_open_s[c] <= span) & (span < chans.gate_close_s[c])
+            clipped = np.any(open_over & (chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * span_base >= dig.max_code),
+                             axis=1)
             visible_alone = amp > k * dark
             masked |= in_gate & visible_alone & ((amp <= k * noise) | clipped)
             gated_out |= ~in_gate & visible_alone

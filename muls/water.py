@@ -1,8 +1,9 @@
 """Water optical properties at 532 nm: presets with sources, attenuation and backscatter options.
 
 A water type is (a, b, group index, optional measured beta(pi) and K_d). The lidar sees it through two
-numbers: the two-way attenuation coefficient k [1/m] (MULS Eq. 6 by default) and the volume scattering
-function at 180 degrees, beta_pi [1/(m sr)] (measured where known, docs/design.md#backscatter).
+numbers: the two-way attenuation coefficient k [1/m] (by default the ``monte_carlo`` rule: what the Monte Carlo
+reference gives for the water and the receiver, range by range) and the volume scattering function at 180
+degrees, beta_pi [1/(m sr)] (measured where known, docs/design.md#backscatter).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import math
 from dataclasses import dataclass, replace
 
 from .errors import ParameterError, check_choice, check_non_negative
+from .phase import petzold
 
 SPEED_OF_LIGHT_M_S = 299_792_458.0
 
@@ -26,11 +28,19 @@ PETZOLD_BACKSCATTER_RATIO = 0.0183
 GROUP_INDEX_SEAWATER = 1.364
 GROUP_INDEX_FRESHWATER = 1.357
 
-#: ``small_angle``: forward scattering kept by the receiver's field of view, from the small-angle
-#: approximation (muls.smallangle, docs/design.md#attenuation); it depends on the range and the receiver.
-ATTENUATION_MODELS = ("k_lidar", "c", "kd", "small_angle")
+#: Attenuation rules (docs/design.md#attenuation). ``monte_carlo`` (the default): the two-way transmission of the
+#: Monte Carlo reference for this water and receiver, tabulated against range (muls.scattering); ``small_angle``:
+#: forward scattering kept by the receiver's field of view, from the small-angle approximation (muls.smallangle);
+#: both depend on the range and the receiver. ``k_lidar``: MULS Eq. 6; ``c``: beam attenuation; ``kd``: diffuse.
+ATTENUATION_MODELS = ("monte_carlo", "k_lidar", "c", "kd", "small_angle")
+#: The rules that depend on the range and the receiver (muls.radiometry.attenuation_per_m evaluates them).
+RANGE_DEPENDENT_MODELS = ("monte_carlo", "small_angle")
 
-BACKSCATTER_MODELS = ("measured", "hg", "eq5")
+#: Backscatter rules (docs/design.md#backscatter): ``measured`` (the default) takes beta(180 deg) measured in the water
+#: where the preset has it, else ``petzold``'s; ``petzold``: b p(pi) of Petzold's average particle phase function,
+#: the phase function the Monte Carlo reference and the small-angle rule use for every water; ``hg``: b p(pi) of
+#: Henyey-Greenstein with MULS's g; ``eq5``: MULS Eq. 5 read literally.
+BACKSCATTER_MODELS = ("measured", "petzold", "hg", "eq5")
 
 
 def henyey_greenstein(cos_theta, g: float = HG_ASYMMETRY):
@@ -59,7 +69,7 @@ class Water:
     group_index: float = GROUP_INDEX_SEAWATER
     beta_pi_measured_per_m_sr: float | None = None
     kd_per_m: float | None = None
-    attenuation_model: str = "k_lidar"
+    attenuation_model: str = "monte_carlo"
     backscatter_model: str = "measured"
     source: str = ""
 
@@ -116,8 +126,9 @@ class Water:
     def two_way_attenuation_per_m(self) -> float:
         """The k used in exp(-2 k z) of Eqs. 4, 7, 9, 10, per ``attenuation_model`` [1/m].
 
-        The ``small_angle`` rule depends on the range and the receiver (:func:`muls.radiometry.attenuation_per_m`
-        gives it); here it gives K_d, about its value for a footprint many free paths wide.
+        The ``monte_carlo`` and ``small_angle`` rules depend on the range and the receiver
+        (:func:`muls.radiometry.attenuation_per_m` gives them); here they give K_d, about their value for a
+        footprint many free paths wide.
         """
         if self.attenuation_model == "k_lidar":
             return self.k_lidar_per_m
@@ -131,6 +142,8 @@ class Water:
         b = self.scattering_per_m
         if self.backscatter_model == "measured" and self.beta_pi_measured_per_m_sr is not None:
             return self.beta_pi_measured_per_m_sr
+        if self.backscatter_model in ("measured", "petzold"):
+            return b * petzold().value_at_pi_per_sr
         if self.backscatter_model == "eq5":
             # MULS Eq. 5 read literally: HG value at pi over the HG backward fraction.
             return b * henyey_greenstein(-1.0) / hg_backward_fraction()

@@ -28,7 +28,9 @@ class FidelityLevel:
     (:func:`scanner_sim.survey.handoff.column_cuts`). adaptive: decide per pulse (:mod:`scanner_sim.rays.auto`):
     where all ``subrays`` hit one surface within 5 cm of range, two echoes with their delays' energy, mean,
     variance and skewness, else one per sub-ray. deciding_only: synthesise and search in each record window only the
-    channels that can decide a return (:mod:`muls.deciding_channels`).
+    channels that can decide a return (:mod:`muls.deciding_channels`). multiple_scattering: ``"table"`` (the Monte
+    Carlo's water column and each echo's spread in time, :mod:`muls.scattering`) or ``"none"`` (single scattering),
+    ``muls.waveform.MULTIPLE_SCATTERING``.
     """
 
     name: str
@@ -38,6 +40,7 @@ class FidelityLevel:
     column_cut: str
     adaptive: bool = False
     deciding_only: bool = False
+    multiple_scattering: str = "table"
 
 
 FIDELITY_LEVELS: dict[str, FidelityLevel] = {

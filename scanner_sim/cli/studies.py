@@ -126,13 +126,14 @@ def _add_coverage(sub):
     p = sub.add_parser("coverage", help="mapping coverage per water type x altitude x instrument, with its report")
     p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--waters", nargs="+", default=list(DEFAULT_WATERS), metavar="WATER", type=nonempty(),
-                   help="water presets (default: %(default)s)")
+                   help="water presets, or 'scene' for the scene's own water (default: %(default)s)")
     p.add_argument("--altitudes-m", nargs="+", type=positive_float("altitudes_m"), metavar="M",
                    help="altitudes [m] (default: the scene's)")
     p.add_argument("--instruments", nargs="+", default=list(DEFAULT_INSTRUMENTS), choices=INSTRUMENTS,
                    metavar="INSTRUMENT", help=f"instrument presets, of {', '.join(INSTRUMENTS)} (default: %(default)s)")
     p.add_argument("--gate", default="follow", choices=GATE_MODES,
-                   help="far gate at other altitudes: follow the nadir echo (default) or keep the scene's delay")
+                   help="a gate the scene sets, at other altitudes: follow the nadir echo (default) or keep the scene's "
+                        "delay; a scene without one gets the operator's rule at every altitude")
     p.add_argument("--cell-m", type=positive_float("cell_m"), default=CoverageSettings.cell_m,
                    help="plan cell and cable stretch [m] (default: %(default)s)")
     p.add_argument("--min-points", type=positive_int("min_points"), default=CoverageSettings.min_points,

@@ -28,6 +28,8 @@ from scanner_sim.survey.setup import PassOptions
 INSTRUMENTS = ("mul2023", "single_channel", "coaxial")
 GATE_MODES = ("follow", "fixed")
 DEFAULT_WATERS = ("clean_ocean", "coastal_ocean", "turbid_harbor")
+#: The name that asks for the scene's own water (a preset, or a water given by its properties).
+SCENE_WATER = "scene"
 DEFAULT_INSTRUMENTS = ("mul2023", "single_channel")
 #: Picture size of each combination's point-cloud render in the study (the report embeds them all).
 STUDY_RENDER_SIZE = (960, 600)
@@ -50,7 +52,8 @@ class StudyPlan:
             if len(set(values)) != len(values):
                 raise ParameterError(f"{name} = {list(values)}: repeated value")
         for w in self.waters:
-            water_preset(w)
+            if w != SCENE_WATER:
+                water_preset(w)
         for a in self.altitudes_m:
             if a is not None and not (isinstance(a, (int, float)) and math.isfinite(a) and a > 0):
                 raise ParameterError(f"altitudes_m: {a!r} is not allowed; each must be a finite number > 0 [m]")
@@ -76,13 +79,15 @@ def combination_config(config: SceneConfig, water: str, altitude_m: float | None
         raise ParameterError(f"altitudes_m: scene '{config.name}' flies at constant depth or stands still "
                              "(platform.altitude_m is not set), so its altitude cannot be varied")
     changes: dict = {"instrument.preset": instrument}
-    gated = [ch for ch in instrument_preset(instrument, water_preset(water)).channels if ch.gated]
+    if water != SCENE_WATER:
+        changes["water"] = water
+    water_model = config.with_overrides(changes).water_model()
+    gated = [ch for ch in instrument_preset(instrument, water_model).channels if ch.gated]
     own = config.instrument
-    if gated and gate == "follow" and altitude_m is not None:
-        delay_ns = own.gate_delay_ns if own.gate_delay_ns is not None else gated[0].gate_delay_s * 1e9
-        width_ns = own.gate_width_ns if own.gate_width_ns is not None else gated[0].gate_width_s * 1e9
-        shift_ns = 2.0 * (altitude_m - base_altitude) / water_preset(water).speed_m_s * 1e9
-        changes |= {"instrument.gate_delay_ns": max(0.0, delay_ns + shift_ns), "instrument.gate_width_ns": width_ns}
+    if gated and gate == "follow" and altitude_m is not None and own.gate_delay_ns is not None:
+        shift_ns = 2.0 * (altitude_m - base_altitude) / water_model.speed_m_s * 1e9
+        changes |= {"instrument.gate_delay_ns": max(0.0, own.gate_delay_ns + shift_ns),
+                    "instrument.gate_width_ns": own.gate_width_ns}
     elif not gated:
         changes |= {"instrument.gate_delay_ns": None, "instrument.gate_width_ns": None}
     if altitude_m is not None:
@@ -120,7 +125,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     # every combination is built (and so checked) before any pass runs
     jobs = [PassJob(combination_name(water, altitude, instrument),
                     combination_config(config, water, altitude, instrument, plan.gate),
-                    PassOptions(water=water, seed=seed, fidelity=fidelity, max_pulses=max_pulses, progress=False,
+                    PassOptions(water=None if water == SCENE_WATER else water, seed=seed, fidelity=fidelity, max_pulses=max_pulses, progress=False,
                                 render=render, render_size=STUDY_RENDER_SIZE, write_scene=False, coverage=settings))
             for water, altitude, instrument in combos]
     out = Path(out_dir)

@@ -31,6 +31,7 @@ from scanner_sim.rays.beams import BeamPattern, beam_pattern
 from scanner_sim.rays.cast import BeamCast, CastScene
 from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.budget import check_pass_budget
+from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.georeference import LinesOfSight, georeference
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
@@ -147,11 +148,35 @@ def ray_stage(level: FidelityLevel, target: CastScene, pattern: BeamPattern, geo
 
 
 def _stages(config: SceneConfig, target: CastScene, model: OpticalModel, level: FidelityLevel):
-    """The sub-ray pattern and the stages of a pass at ``level``: (pattern, rays, handoff, physics)."""
+    """The model, the sub-ray pattern and the stages of a pass at ``level``: (model, pattern, rays, handoff,
+    physics); ``model`` is rebuilt when the level models multiple scattering otherwise."""
+    if model.multiple_scattering != level.multiple_scattering:
+        model = OpticalModel.build(model.instrument, model.water, level.multiple_scattering)
     pattern = beam_pattern(level.subrays, config.survey.beam_profile)
-    return (pattern, ray_stage(level, target, pattern, model.instrument.geometry),
+    return (model, pattern, ray_stage(level, target, pattern, model.instrument.geometry),
             Handoff(model, config.water.background_radiance_w_m2_sr_nm, level.column_cut),
             Physics(model, config.survey.seed, level.record_mode, level.deciding_only))
+
+
+def gated(config: SceneConfig, water, target: CastScene, trajectory: Trajectory, scanner: Scanner,
+          first_slot: int, end_slot: int) -> SceneConfig:
+    """``config`` with its far channel's gate set by the operator's rule where the scene gives none
+    (:mod:`scanner_sim.survey.gate`), and a warning where the scene's own gate shuts out the survey's echoes; as it
+    is when the instrument has no gated channel."""
+    instrument = config.instrument.to_instrument(water)
+    far = [ch for ch in instrument.channels if ch.gated]
+    if not far:
+        return config
+    span = echo_span(target, trajectory, scanner, water.speed_m_s, first_slot, end_slot)
+    duration_s = instrument.pulse.duration_s
+    if config.instrument.gate_delay_ns is not None:
+        warn_if_shut_out(span, far[0].gate_delay_s, far[0].gate_delay_s + far[0].gate_width_s, duration_s)
+        return config
+    gate = rule_gate(span, duration_s)
+    if gate is None:
+        return config
+    return config.with_overrides({"instrument.gate_delay_ns": round(gate[0] * 1e9, 3),
+                                  "instrument.gate_width_ns": round(gate[1] * 1e9, 3)})
 
 
 def checked_trajectory(config: SceneConfig, scene: Scene | None) -> Trajectory:
@@ -193,24 +218,25 @@ class PassSetup:
         config = config.with_overrides(options.scene_overrides())
         survey = config.survey
         water = config.water_model()
-        model = OpticalModel.build(config.instrument.to_instrument(water), water)
         scene = build_scene(config) if scene is None else scene
         target = CastScene.build(scene)  # the Embree BVH and the seabed's proof grid: set-up, not part of the pass
         trajectory = checked_trajectory(config, scene)
-        scanner = Scanner.from_config(config.scanner, model.instrument)
+        scanner = Scanner.from_config(config.scanner, config.instrument.to_instrument(water))
         rate = scanner.pulse_rate_hz
         duration = survey.duration_s if survey.duration_s is not None else trajectory.duration_s
+        first_slot, end_slot = math.ceil(survey.start_s * rate - 1e-9), math.ceil((survey.start_s + duration) * rate - 1e-9)
+        config = gated(config, water, target, trajectory, scanner, first_slot, end_slot)
         plan = PassPlan.of(config, options, level)
-        return cls(config, plan, target, trajectory, scanner, model, *_stages(config, target, model, plan.level),
-                   math.ceil(survey.start_s * rate - 1e-9), math.ceil((survey.start_s + duration) * rate - 1e-9),
-                   config.water.preset or water.name)
+        model = OpticalModel.build(config.instrument.to_instrument(water), water, plan.level.multiple_scattering)
+        return cls(config, plan, target, trajectory, scanner, *_stages(config, target, model, plan.level),
+                   first_slot, end_slot, config.water.preset or water.name)
 
     def at_level(self, level: FidelityLevel) -> PassSetup:
         """This pass at fidelity ``level``: its plan, sub-ray pattern and stages chosen again (the built scene,
         trajectory and tables kept)."""
-        pattern, rays, handoff, physics = _stages(self.config, self.target, self.model, level)
-        return dataclasses.replace(self, plan=dataclasses.replace(self.plan, level=level), pattern=pattern, rays=rays,
-                                   handoff=handoff, physics=physics)
+        model, pattern, rays, handoff, physics = _stages(self.config, self.target, self.model, level)
+        return dataclasses.replace(self, plan=dataclasses.replace(self.plan, level=level), model=model, pattern=pattern,
+                                   rays=rays, handoff=handoff, physics=physics)
 
     @property
     def level(self) -> FidelityLevel:
