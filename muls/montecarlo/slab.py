@@ -19,6 +19,9 @@ and the tallies, so that the transport core can be run on the canonical problems
 - **Roulette.** A packet whose weight falls below ``roulette`` times the unscattered beam's weight at its depth,
   exp(-c z / cos theta_w), survives with probability ROULETTE_SURVIVAL and its weight is divided by it; its
   expectation, and so every estimate, is unchanged.
+- **Orders.** A run may stop every packet at its scattering number ``max_orders`` + 1, before that event
+  makes any estimate: the tallies are then the light scattered at most ``max_orders`` times (0: the
+  unscattered sun alone), which the tests compare with closed forms.
 
 Tallies at each depth z_k (per packet, times the transmitted irradiance they stand for):
 
@@ -61,8 +64,9 @@ STREAM = 2
 # Tally rows (per depth) and energy budget columns.
 ED, EU, EOD, EOU, LU = range(5)
 TALLIES = ("Ed", "Eu", "Eod", "Eou", "Lu")
-TRANSMITTED, ABSORBED, ESCAPED, BOTTOM, ROULETTE = range(5)
-ENERGY_KEYS = ("transmitted", "absorbed_by_water", "escaped_through_surface", "passed_bottom", "roulette_net")
+TRANSMITTED, ABSORBED, ESCAPED, BOTTOM, ROULETTE, STOPPED = range(6)
+ENERGY_KEYS = ("transmitted", "absorbed_by_water", "escaped_through_surface", "passed_bottom", "roulette_net",
+               "stopped_at_max_orders")
 
 
 @numba.njit(cache=True)
@@ -95,14 +99,16 @@ def _cross(tallies, batch, depths, z, dz, step, w, a):
 
 
 @numba.njit(cache=True, parallel=True)
-def trace_slab(seed_key, stream, n_packets, mu_w, a, b, n_water, depths, bottom_m, roulette, phase, tallies, energy):
+def trace_slab(seed_key, stream, n_packets, mu_w, a, b, n_water, depths, bottom_m, roulette, max_orders, phase, tallies,
+               energy):
     """Trace ``n_packets`` packets of the refracted sun in ``tallies.shape[0]`` batches (one thread per batch).
 
     mu_w: cosine of the refracted sun's angle from the nadir; a, b [1/m]; n_water: refractive index of the
     water (the air's is 1); depths: (K,) ascending tally depths [m], > 0; bottom_m: depth of the black bottom
-    [m]; roulette: the threshold over exp(-c z / mu_w); phase = (sampling table, ln p table, ln theta of its
-    first point, 1 / its step). tallies (B, 5, K): sums over each batch's packets of the rows ED .. LU
-    (weights, not yet divided by the packets); energy (B, 5): the budget columns TRANSMITTED .. ROULETTE.
+    [m]; roulette: the threshold over exp(-c z / mu_w); max_orders: the most scatterings a packet undergoes
+    (-1: no limit); phase = (sampling table, ln p table, ln theta of its first point, 1 / its step).
+    tallies (B, 5, K): sums over each batch's packets of the rows ED .. LU (weights, not yet divided by the
+    packets); energy (B, 6): the budget columns TRANSMITTED .. STOPPED.
     """
     n_batches = tallies.shape[0]
     n_k = depths.shape[0]
@@ -116,6 +122,7 @@ def trace_slab(seed_key, stream, n_packets, mu_w, a, b, n_water, depths, bottom_
             state = packet_stream(seed_key, stream, pid)
             z, dx, dy, dz = 0.0, sin_w, 0.0, mu_w
             w = 1.0
+            n_scat = 0
             energy[batch, TRANSMITTED] += 1.0
             while True:
                 state, s_free = free_path(state, b)
@@ -140,6 +147,10 @@ def trace_slab(seed_key, stream, n_packets, mu_w, a, b, n_water, depths, bottom_
                     dz = -dz
                     continue
                 z += step * dz
+                n_scat += 1
+                if n_scat > max_orders >= 0:
+                    energy[batch, STOPPED] += w
+                    break
                 # a scattering event: the nadir radiance it sends up to each shallower depth (local estimate)
                 theta = angle(dx, dy, dz, 0.0, 0.0, -1.0)
                 p = cap if theta < CONE_RAD else value_at(ln_p, ln_theta0, inv_step, theta)
@@ -157,7 +168,7 @@ def trace_slab(seed_key, stream, n_packets, mu_w, a, b, n_water, depths, bottom_
 
 
 def empty_tallies(batches: int, depths: int) -> tuple[np.ndarray, np.ndarray]:
-    """Zeroed (tallies (batches, 5, depths), energy (batches, 5)) for :func:`trace_slab`."""
+    """Zeroed (tallies (batches, 5, depths), energy (batches, 6)) for :func:`trace_slab`."""
     return np.zeros((batches, len(TALLIES), depths)), np.zeros((batches, len(ENERGY_KEYS)))
 
 
@@ -175,15 +186,19 @@ class SlabResult:
 
     depths_m: (K,) tally depths [m]; mean, sigma: dicts of :data:`TALLIES` names to (K,) estimates and their
     standard errors (from the spread of the batches): irradiances Ed, Eu, Eod, Eou [W m^-2 nm^-1] and the
-    nadir-viewing radiance Lu [W m^-2 sr^-1 nm^-1] per W m^-2 nm^-1 of E_perp. energy: the budget as shares of
+    nadir-viewing radiance Lu [W m^-2 sr^-1 nm^-1] per W m^-2 nm^-1 of E_perp; per_batch: (B, 5, K) each
+    batch's estimate of them (rows in the order of :data:`TALLIES`). energy: the budget as shares of
     the irradiance on the surface, E_perp cos(theta_s): ``reflected_by_surface`` (the sun's specular share),
-    then the transmitted share and where it went (:data:`ENERGY_KEYS`); they close to rounding.
+    then the transmitted share and where it went (:data:`ENERGY_KEYS`); they close to rounding. energy_sigma:
+    the standard errors of the :data:`ENERGY_KEYS` shares.
     """
 
     depths_m: np.ndarray
     mean: dict
     sigma: dict
+    per_batch: np.ndarray
     energy: dict
+    energy_sigma: dict
     packets: int
     seconds: float
     settings: dict = field(default_factory=dict)
@@ -192,13 +207,13 @@ class SlabResult:
 def run_slab(phase: str | PhaseFunction, albedo: float, depths_m, attenuation_per_m: float = 1.0,
              sun_zenith_deg: float = 60.0, water_index: float = 1.34, packets: int = 1_000_000, seed: int = 0,
              batches: int = BATCHES, stream: int = STREAM, bottom_m: float | None = None,
-             roulette: float = ROULETTE_THRESHOLD) -> SlabResult:
+             roulette: float = ROULETTE_THRESHOLD, max_orders: int | None = None) -> SlabResult:
     """Trace ``packets`` packets of the sun through a homogeneous water of single-scattering albedo ``albedo``
     (a = (1 - albedo) c, b = albedo c, c = ``attenuation_per_m``) under a level surface, and tally the light
     field at ``depths_m`` (ascending, > 0 [m]). phase: a :class:`muls.phase.PhaseFunction` or its name;
     bottom_m: the black bottom [m] (default :data:`BOTTOM_MARGIN_TAU` / c below the deepest depth); stream: the
-    random stream (runs on different streams are independent). Packets are rounded up to a multiple of
-    ``batches``."""
+    random stream (runs on different streams are independent); max_orders: count only light scattered at
+    most that many times (None: all orders). Packets are rounded up to a multiple of ``batches``."""
     phase = check_phase(phase)
     check_fraction("albedo", albedo)
     check_positive("attenuation_per_m", attenuation_per_m)
@@ -219,6 +234,8 @@ def run_slab(phase: str | PhaseFunction, albedo: float, depths_m, attenuation_pe
     if not bottom > depths[-1]:
         raise ParameterError(f"bottom_m = {bottom_m!r}: must lie below the deepest depth {depths[-1]:g} m")
     check_non_negative("roulette", roulette)
+    if max_orders is not None and (isinstance(max_orders, bool) or int(max_orders) != max_orders or max_orders < 0):
+        raise ParameterError(f"max_orders = {max_orders!r}: must be None or an integer >= 0")
 
     mu_s = math.cos(math.radians(sun_zenith_deg))
     mu_w = math.sqrt(1.0 - (1.0 - mu_s * mu_s) / water_index**2)  # Snell: sin(theta_w) = sin(theta_s) / n
@@ -227,20 +244,23 @@ def run_slab(phase: str | PhaseFunction, albedo: float, depths_m, attenuation_pe
     tallies, energy = empty_tallies(batches, depths.size)
     t0 = time.perf_counter()
     trace_slab(seed_key(seed), int(stream), packets, mu_w, (1.0 - albedo) * c, albedo * c, float(water_index),
-               depths, bottom, float(roulette), (phase.sample_theta_rad, ln_p, ln_theta0, inv_step), tallies, energy)
+               depths, bottom, float(roulette), -1 if max_orders is None else int(max_orders),
+               (phase.sample_theta_rad, ln_p, ln_theta0, inv_step), tallies, energy)
     seconds = time.perf_counter() - t0
 
-    per_batch = packets // batches
-    scale = mu_s * transmitted / per_batch  # a packet stands for the transmitted irradiance E_perp cos T
+    scale = mu_s * transmitted / (packets // batches)  # a packet stands for the transmitted E_perp cos T
     estimates = tallies * scale  # (B, 5, K): each batch's estimate
     mean = {name: estimates[:, i].mean(axis=0) for i, name in enumerate(TALLIES)}
     sigma = {name: np.sqrt(var_of_mean(estimates[:, i])) for i, name in enumerate(TALLIES)}
     budget = energy.sum(axis=0) / packets * transmitted
+    budget_sigma = np.sqrt(var_of_mean(energy / (packets // batches) * transmitted))
     return SlabResult(
-        depths_m=depths, mean=mean, sigma=sigma,
+        depths_m=depths, mean=mean, sigma=sigma, per_batch=estimates,
         energy={"reflected_by_surface": 1.0 - transmitted, **{k: float(v) for k, v in zip(ENERGY_KEYS, budget)}},
+        energy_sigma={k: float(v) for k, v in zip(ENERGY_KEYS, budget_sigma)},
         packets=packets, seconds=seconds,
         settings={"phase": phase.name, "albedo": float(albedo), "attenuation_per_m": c,
                   "sun_zenith_deg": float(sun_zenith_deg), "water_index": float(water_index), "seed": int(seed),
-                  "stream": int(stream), "batches": batches, "bottom_m": bottom, "roulette": float(roulette)},
+                  "stream": int(stream), "batches": batches, "bottom_m": bottom, "roulette": float(roulette),
+                  "max_orders": max_orders},
     )
