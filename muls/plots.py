@@ -288,5 +288,5 @@ def plot_mobley1993(result: dict, path):
     axes[0].set_ylabel("value / the paper's mean")
     axes[0].legend(fontsize=7, loc="upper left")
     fig.suptitle(f"Mobley et al. (1993) Table 5 against the Monte Carlo's transport ({result['photons']:,} photons "
-                 "per run)", fontsize=10)
+                 "per run at albedo 0.9, more at 0.2)", fontsize=10)
     return _save(fig, path, top=0.93)
