@@ -262,7 +262,7 @@ def test_mobley1993_json_keys_table_and_picture(capsys, tmp_path):
     code, out, err = _run(capsys, "mobley1993", "--photons", "20000", "--json", "--out", str(png))
     assert code == 0, err
     r = json.loads(out)
-    assert len(r["problems"]) == 36 and r["photons"] == 20000 and r["seed"] == 0
+    assert len(r["problems"]) == 36 and r["photons"] == 20000 and r["seed"] == 0 and "Table 5" in r["source"]
     for rec in r["problems"]:
         assert {"problem", "albedo", "quantity", "optical_depth", "value", "paper_min", "paper_max",
                 "mc_sigma"} <= set(rec)

@@ -120,7 +120,7 @@ def mobley1993_benchmark(photons: int = DEFAULT_PHOTONS, seed: int = 0) -> dict:
     """Run problems 1 and 2 (albedos 0.9 and 0.2) and set each Table 5 value beside the Monte Carlo's.
 
     photons: per run at albedo 0.9, times :data:`PHOTON_FACTOR` at 0.2. Returns {"problems": [record, ...],
-    "photons", "seed", "seconds", "energy"}; a record has problem, albedo, quantity, optical_depth, value,
+    "source", "photons", "seed", "seconds", "energy"}; a record has problem, albedo, quantity, optical_depth, value,
     mc_sigma (its standard error), paper_min, paper_max, paper_mean, paper_rel_sd, paper_models, ``within``
     (value inside [paper_min - 2 mc_sigma, paper_max + 2 mc_sigma]) and the photons of its run. energy: each
     run's budget (:class:`muls.montecarlo.slab.SlabResult`).
@@ -143,7 +143,7 @@ def mobley1993_benchmark(photons: int = DEFAULT_PHOTONS, seed: int = 0) -> dict:
                         "paper_max": row["paper_max"], "paper_mean": row["paper_mean"],
                         "paper_rel_sd": row["paper_rel_sd"], "paper_models": row["paper_models"], "within": within,
                         "photons": run.packets})
-    return {"problems": records, "photons": int(photons), "seed": int(seed),
+    return {"problems": records, "source": SOURCE, "photons": int(photons), "seed": int(seed),
             "seconds": time.perf_counter() - t0,
             "energy": [{"problem": p, "albedo": a, **run.energy} for (p, a), run in runs.items()]}
 
