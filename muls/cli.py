@@ -1,5 +1,6 @@
 """``muls``: the MULS studies from the command line (waveform, maxrange, precision, coaxial, bench), and the
-multiple-scattering Monte Carlo beside MULS (multiscatter, multiscatter-study).
+multiple-scattering Monte Carlo beside MULS (multiscatter, multiscatter-study) and against a published benchmark
+(mobley1993).
 
 Each command runs one function of :mod:`muls.studies`, prints its result as JSON with ``--json`` (otherwise
 a short table), and, except ``bench``, writes a picture (``--out``, a default name otherwise; ``--no-plot``
@@ -343,9 +344,33 @@ def _cmd_multiscatter_study(args):
     return result, "\n".join(lines), write
 
 
+def _cmd_mobley1993(args):
+    result = montecarlo.mobley1993_benchmark(photons=args.photons, seed=args.seed)
+    records = result["problems"]
+    lines = [f"Mobley et al. (1993) problems 1 and 2 (sun at 60 deg in a black sky, level surface, n 1.34, infinitely "
+             f"deep): Monte Carlo beside Table 5, {result['photons']:,} photons per run at albedo 0.9 "
+             f"({montecarlo.mobley1993.PHOTON_FACTOR[0.2]} times as many at 0.2), seed {result['seed']} "
+             f"({result['seconds']:.1f} s)",
+             "paper: the codes' mean and s/x as printed, N codes, and the range that holds every code's value "
+             "(mean +- s (N-1)/sqrt(N), rounding included)",
+             f"{'problem':>7s} {'albedo':>6s} {'quantity':>8s} {'tau':>4s} {'Monte Carlo':>11s} {'2 sigma':>8s} "
+             f"{'paper mean':>10s} {'s/x':>6s} {'N':>2s} {'paper min':>10s} {'paper max':>10s} {'within':>6s}"]
+    for r in records:
+        lines.append(f"{r['problem']:7d} {r['albedo']:6.1f} {r['quantity']:>8s} {r['optical_depth']:4.0f} "
+                     f"{r['value']:11.4g} {2 * r['mc_sigma'] / r['value']:8.2%} {r['paper_mean']:10.3g} "
+                     f"{r['paper_rel_sd']:6.3f} {r['paper_models']:2d} {r['paper_min']:10.4g} {r['paper_max']:10.4g} "
+                     f"{'yes' if r['within'] else 'NO':>6s}")
+    inside = sum(r["within"] for r in records)
+    lines.append(f"{inside} of {len(records)} values within the paper's range widened by the Monte Carlo's 2 standard "
+                 "errors")
+    from .plots import plot_mobley1993
+
+    return result, "\n".join(lines), plot_mobley1993
+
+
 DEFAULT_OUT = {"waveform": "waveform.png", "maxrange": "maxrange.png", "precision": "precision.png",
                "coaxial": "coaxial.png", "multiscatter": "multiscatter.png", "multiscatter-study": "multiscatter_study",
-               "experiment": "experiment_{experiment}"}
+               "experiment": "experiment_{experiment}", "mobley1993": "mobley1993.png"}
 #: Commands whose --out is a folder of files, each written whole by the command itself.
 FOLDER_OUTPUTS = ("multiscatter-study", "experiment")
 
@@ -455,6 +480,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="MULS's own rule for its maximum range and the correction table (k_lidar, c, kd, small_angle)")
     common(p, out_type=output_dir)  # a folder: the study's chart and its JSON
     p.set_defaults(run=_cmd_multiscatter_study)
+
+    p = sub.add_parser("mobley1993", help="the Monte Carlo's transport against Mobley et al. (1993), problems 1 and 2")
+    p.add_argument("--photons", type=positive_int(), default=montecarlo.MOBLEY1993_PHOTONS,
+                   help="photons per run at albedo 0.9; the runs at albedo 0.2 trace 5 times as many")
+    p.add_argument("--seed", type=seed(), default=0)
+    common(p)
+    p.set_defaults(run=_cmd_mobley1993)
     checked_types(parser)
     return parser
 

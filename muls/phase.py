@@ -11,6 +11,9 @@ uniform grid of probability (for sampling a scattering angle).
 - ``fournier_forand``: the Fournier-Forand analytic form; by default n = 1.10, mu = 3.5835, whose
   backscatter fraction 0.0183 matches Petzold's average.
 - ``henyey_greenstein``: the one-parameter analytic form; by default g = 0.924, the value MULS Eq. 5 uses.
+- ``rayleigh``: 3/(16 pi) (1 + cos^2 theta), the phase function of problem 1 of Mobley et al. (1993).
+- ``mobley1993_particle``: the particle phase function of problem 2 of Mobley et al. (1993), Petzold's average
+  as that paper tabulates and interpolates it (linear between its Table 2 values, a power law below 0.12589 deg).
 """
 
 from __future__ import annotations
@@ -26,8 +29,9 @@ from .lookup import bracket
 from .runtime import kernel
 
 # Petzold's average particle phase function [1/sr], the values published in Mobley (1994), Light and Water,
-# Table 3.10 (also Mobley et al. 1993, Appl. Opt. 32, 7484, Table 1), derived from Petzold (1972), SIO Ref.
-# 72-78. Angles 10^(-1 + 0.1 i) deg for i = 0..20 (0.1 to 10 deg), then 15 to 180 deg in 5 deg steps.
+# Table 3.10, derived from Petzold (1972), SIO Ref. 72-78. Angles 10^(-1 + 0.1 i) deg for i = 0..20 (0.1 to
+# 10 deg), then 15 to 180 deg in 5 deg steps. Mobley et al. (1993) Table 2 gives the same values to six digits
+# (MOBLEY1993_PARTICLE_PER_SR below), except at 0.50119 deg, where it prints 218.839 (here 201.2).
 PETZOLD_ANGLES_DEG = np.concatenate([10.0 ** (-1.0 + 0.1 * np.arange(21)), np.arange(15.0, 181.0, 5.0)])
 PETZOLD_VALUES_PER_SR = np.array([
     1.767e3, 1.296e3, 9.502e2, 6.991e2, 5.140e2, 3.764e2, 2.763e2, 2.012e2, 1.444e2, 1.022e2,
@@ -45,13 +49,35 @@ PETZOLD_SOURCE = ("Petzold (1972) average particle phase function, Mobley (1994)
 FF_PETZOLD_N = 1.10
 FF_PETZOLD_MU = 3.5835
 
+#: The particle phase function of problem 2 of Mobley et al. (1993), Appl. Opt. 32, 7484, Table 2 [1/sr], at
+#: PETZOLD_ANGLES_DEG. The paper derived it from Petzold's three San Diego harbour VSFs less pure sea water,
+#: averaged, and divided by 1.006449 so that the trapezoidal rule over the table plus the power law below 0.1 deg
+#: integrates to 1 (its Section 3). One printed value is corrected: at 0.50119 deg the paper prints 218.839,
+#: out of line with its neighbours; with it that same rule gives 1.0019, with Light and Water's 201.2 it gives
+#: 1.0000 (tests/test_mobley1993.py checks both sums), so 201.2 is used.
+MOBLEY1993_PARTICLE_PER_SR = np.array([
+    1.76661e3, 1.29564e3, 9.50172e2, 6.99092e2, 5.13687e2, 3.76373e2, 2.76318e2,
+    2.01200e2,  # 0.50119 deg: printed 2.18839e2 (see above); Mobley (1994) Light and Water Table 3.10: 2.012e2
+    1.44369e2, 1.02241e2,
+    7.16082e1, 4.95803e1, 3.39511e1, 2.28129e1, 1.51622e1, 1.00154e1, 6.57957, 4.29530, 2.80690, 1.81927,
+    1.15257, 4.89344e-1, 2.44424e-1, 1.47151e-1, 8.60848e-2, 5.93075e-2, 4.20985e-2, 3.06722e-2, 2.27533e-2,
+    1.69904e-2, 1.31254e-2, 1.04625e-2, 8.48826e-3, 6.97601e-3, 5.84232e-3, 4.95306e-3, 4.29232e-3, 3.78161e-3,
+    3.40405e-3, 3.11591e-3, 2.91222e-3, 2.79696e-3, 2.68568e-3, 2.57142e-3, 2.47603e-3, 2.37667e-3, 2.32898e-3,
+    2.31308e-3, 2.36475e-3, 2.50584e-3, 2.66183e-3, 2.83472e-3, 3.03046e-3, 3.09206e-3, 3.15366e-3,
+])
+#: The value Mobley et al. (1993) Table 2 prints at 0.50119 deg (index 7), kept for the test of the correction.
+MOBLEY1993_PRINTED_0_50119_PER_SR = 2.18839e2
+#: The power law of MOBLEY1993_PARTICLE_PER_SR below its second angle (Mobley et al. 1993, Section 3: the
+#: negative slope of log p against log theta between 0.1 and 0.12589 deg).
+MOBLEY1993_SMALL_ANGLE_SLOPE = 1.346
+
 #: Grid of the tables: ln(theta) uniform from THETA_MIN_RAD to pi, and the inverse CDF on SAMPLE_TABLE_SIZE
 #: equal steps of probability.
 THETA_MIN_RAD = 1e-8
 THETA_GRID_SIZE = 12001
 SAMPLE_TABLE_SIZE = 1 << 16
 
-PHASE_FUNCTIONS = ("petzold", "fournier_forand", "henyey_greenstein")
+PHASE_FUNCTIONS = ("petzold", "fournier_forand", "henyey_greenstein", "rayleigh", "mobley1993_particle")
 
 
 @dataclass(frozen=True)
@@ -205,12 +231,47 @@ def henyey_greenstein(g: float = 0.924) -> PhaseFunction:
     return _tabulate("henyey_greenstein", raw, f"Henyey and Greenstein (1941), g = {g}")
 
 
+@lru_cache(maxsize=1)
+def rayleigh() -> PhaseFunction:
+    """The Rayleigh phase function 3/(16 pi) (1 + cos^2 theta) (Mobley et al. 1993, Eq. 3: their problem 1)."""
+
+    def raw(th):
+        return 3.0 / (16.0 * math.pi) * (1.0 + np.cos(th) ** 2)  # Mobley et al. (1993) Eq. 3
+
+    return _tabulate("rayleigh", raw, "Rayleigh, 3/(16 pi) (1 + cos^2 theta): Mobley et al. (1993) Eq. 3")
+
+
+@lru_cache(maxsize=1)
+def mobley1993_particle() -> PhaseFunction:
+    """The particle phase function of problem 2 of Mobley et al. (1993): their Table 2, with the power law
+    theta^-1.346 through its 0.12589 deg value below that angle (their Section 3).
+
+    Between the tabulated angles p sin(theta) is linear in theta: the trapezoidal rule the paper normalised the
+    table with is then the exact integral, and the table integrates to 1 as the paper states (p itself linear,
+    the paper's wording, would integrate to 1.018 over the forward peak's log-spaced angles).
+    """
+    angles = np.radians(PETZOLD_ANGLES_DEG)
+    values = MOBLEY1993_PARTICLE_PER_SR
+    weighted = values * np.sin(angles)
+
+    def raw(th):
+        small = values[1] * (angles[1] / np.minimum(th, angles[1])) ** MOBLEY1993_SMALL_ANGLE_SLOPE
+        # at theta = pi sin vanishes: the last interval is p linear, ending at the tabulated p(pi)
+        inner = np.interp(th, angles, weighted) / np.maximum(np.sin(th), 1e-300)
+        last = values[-2] + (values[-1] - values[-2]) * (th - angles[-2]) / (angles[-1] - angles[-2])
+        return np.where(th < angles[1], small, np.where(th < angles[-2], inner, last))
+
+    return _tabulate("mobley1993_particle", raw, "Mobley et al. (1993) Appl. Opt. 32, 7484, Table 2 (Petzold's "
+                     "average particle phase function), p sin(theta) linear between its angles, theta^-1.346 "
+                     "below 0.12589 deg")
+
+
 def phase_function(name: str, **params) -> PhaseFunction:
-    """The named phase function (``petzold``, ``fournier_forand``, ``henyey_greenstein``) with its parameters."""
-    if name == "petzold":
+    """The named phase function (one of :data:`PHASE_FUNCTIONS`) with its parameters."""
+    if name in ("petzold", "rayleigh", "mobley1993_particle"):
         if params:
-            raise ParameterError(f"phase function 'petzold' takes no parameters, got {sorted(params)}")
-        return petzold()
+            raise ParameterError(f"phase function {name!r} takes no parameters, got {sorted(params)}")
+        return {"petzold": petzold, "rayleigh": rayleigh, "mobley1993_particle": mobley1993_particle}[name]()
     if name == "fournier_forand":
         return fournier_forand(**params)
     if name == "henyey_greenstein":
@@ -270,6 +331,6 @@ def check_phase(phase) -> PhaseFunction:
     raise ParameterError(f"phase = {phase!r}: must be a PhaseFunction or one of {', '.join(PHASE_FUNCTIONS)}")
 
 
-__all__ = ["PHASE_FUNCTIONS", "PETZOLD_ANGLES_DEG", "PETZOLD_VALUES_PER_SR", "PhaseFunction", "check_phase",
-           "cumulative_at", "fournier_forand", "henyey_greenstein", "petzold", "phase_function", "sample_angle",
-           "value_at"]
+__all__ = ["MOBLEY1993_PARTICLE_PER_SR", "PHASE_FUNCTIONS", "PETZOLD_ANGLES_DEG", "PETZOLD_VALUES_PER_SR",
+           "PhaseFunction", "check_phase", "cumulative_at", "fournier_forand", "henyey_greenstein",
+           "mobley1993_particle", "petzold", "phase_function", "rayleigh", "sample_angle", "value_at"]

@@ -259,3 +259,34 @@ def plot_experiment(result: dict, path):
                  f"{s['attenuation_model']} attenuation\n(solid: one shot; dashed: noise-free; v: the peaks the ranging "
                  "found; grey line: the echo's start; shaded: CH3's gate)", fontsize=9)
     return _save(fig, path, top=1.0 - 0.5 / (1.9 * len(waves) + 0.6))
+
+
+def plot_mobley1993(result: dict, path):
+    """Mobley et al. (1993) problems 1 and 2: one panel per problem and albedo, each value of Table 5 (Ed, Eou,
+    Lu at three optical depths) as the Monte Carlo over the paper's mean, with 2-standard-error bars, beside the
+    range of the paper's codes over the same mean (grey bars).
+
+    result: the dict of :func:`muls.montecarlo.mobley1993_benchmark`.
+    """
+    plt = _pyplot()
+    colours = {"Ed": "tab:blue", "Eou": "tab:orange", "Lu": "tab:green"}
+    cases = sorted({(r["problem"], r["albedo"]) for r in result["problems"]}, key=lambda c: (c[0], -c[1]))
+    fig, axes = plt.subplots(1, len(cases), figsize=(3.4 * len(cases), 4.4), sharey=True)
+    for ax, (problem, albedo) in zip(axes, cases):
+        rows = [r for r in result["problems"] if (r["problem"], r["albedo"]) == (problem, albedo)]
+        for x, r in enumerate(rows):
+            m = r["paper_mean"]
+            ax.vlines(x, r["paper_min"] / m, r["paper_max"] / m, color="0.75", lw=7,
+                      label="paper: range of the codes" if x == 0 else None)
+            first = r is next(q for q in rows if q["quantity"] == r["quantity"])
+            ax.errorbar(x, r["value"] / m, yerr=2 * r["mc_sigma"] / m, fmt="o", ms=4, capsize=2, lw=1,
+                        color=colours[r["quantity"]], label=f"{r['quantity']}, Monte Carlo +- 2 sigma" if first else None)
+        ax.axhline(1.0, color="0.4", lw=0.6)
+        ax.set_xticks(range(len(rows)), [f"{r['quantity']}\n{r['optical_depth']:g}" for r in rows], fontsize=7)
+        ax.set_xlabel("quantity, optical depth tau")
+        ax.set_title(f"problem {problem} ({'Rayleigh' if problem == 1 else 'Petzold'}), albedo {albedo:g}", fontsize=9)
+    axes[0].set_ylabel("value / the paper's mean")
+    axes[0].legend(fontsize=7, loc="upper left")
+    fig.suptitle(f"Mobley et al. (1993) Table 5 against the Monte Carlo's transport ({result['photons']:,} photons "
+                 "per run at albedo 0.9, more at 0.2)", fontsize=10)
+    return _save(fig, path, top=0.93)

@@ -146,7 +146,8 @@ def var_of_mean(per_batch: np.ndarray) -> np.ndarray:
     return per_batch.var(axis=0, ddof=1) / per_batch.shape[0]
 
 
-def _seed_key(seed: int) -> np.uint64:
+def seed_key(seed: int) -> np.uint64:
+    """The 64-bit key of the packets' counter-based streams for ``seed`` (an integer >= 0)."""
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
         raise ParameterError(f"seed = {seed!r}: must be an integer >= 0")
     with np.errstate(over="ignore"):
@@ -215,7 +216,7 @@ def run_monte_carlo(instrument: Instrument, water: Water, targets: TargetPlanes 
     cells = (edges.shape[1] - 1) * n_phi if K else 0
     ln_p, ln_theta0, inv_step = phase.log_table
     tables = (phase.sample_theta_rad, ln_p, ln_theta0, inv_step)
-    key = _seed_key(seed)
+    key = seed_key(seed)
 
     column = np.zeros((batches, K + 1, n_t))
     column1 = np.zeros((batches, K + 1, n_t))

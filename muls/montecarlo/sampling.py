@@ -95,14 +95,21 @@ def batch_packets(batch, first_packet, n_packets, n_batches):
 
 
 @kernel(inline="always")
+def free_path(state, b):
+    """(state, a free path [m] drawn with the scattering coefficient ``b`` [1/m]: exponential of mean 1/b, inf when
+    b = 0). Absorption is not drawn: it is the packet's weight, exp(-a s) over a path s."""
+    state, u = uniform(state)
+    return state, (-math.log(1.0 - u) / b if b > 0.0 else math.inf)
+
+
+@kernel(inline="always")
 def flight(state, x, y, z, dx, dy, dz, t, b, speed, t_end, n):
     """A free path and the distances to the flight's other ends.
 
     Returns (state, s_free (drawn with b), s_time (to the end of the run), s_exit (to the plane z = 0),
     the speed of approach to the target planes sd = -n . direction, and the penetration sp = -n . position).
     """
-    state, u = uniform(state)
-    s_free = -math.log(1.0 - u) / b if b > 0.0 else math.inf
+    state, s_free = free_path(state, b)
     s_time = (t_end - t) * speed
     s_exit = -z / dz if dz < 0.0 else math.inf
     sd = -(n[0] * dx + n[1] * dy + n[2] * dz)
