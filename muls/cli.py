@@ -368,6 +368,24 @@ def _cmd_mobley1993(args):
     return result, "\n".join(lines), plot_mobley1993
 
 
+def _cmd_validate_pass(args):
+    from .montecarlo.validate import validate_pass, within_acceptance
+
+    full = validate_pass(tuple(_water_name(w) for w in args.waters), packets=_count("--packets", args.packets),
+                         seed=args.seed)
+    lines = [f"the pass's waveform model (monte_carlo attenuation, finite aperture, multiple scattering from the tables) "
+             f"over a Monte Carlo run of its own ({full['packets']:,} packets, seed {full['seed']}, {full['seconds']:.0f} "
+             "s): flat 0.1 plate at normal incidence, the MUL",
+             f"{'water':14s} {'range m':>7s} {'echo energy':>11s} {'echo peak':>9s} {'column 0-50 ns':>14s} "
+             f"{'MC err':>7s} {'within':>6s}"]
+    for case in full["cases"]:
+        cells = [f"{case[k]:.3f}" if case[k] is not None else "-" for k in ("echo_energy_ratio", "echo_peak_ratio",
+                                                                           "column_ratio")]
+        lines.append(f"{case['water']:14s} {case['range_m']:7.1f} {cells[0]:>11s} {cells[1]:>9s} {cells[2]:>14s} "
+                     f"{case['mc_rel_err']:7.2%} {'yes' if within_acceptance(case) else 'NO':>6s}")
+    return {"cases": full["cases"]}, "\n".join(lines), None
+
+
 DEFAULT_OUT = {"waveform": "waveform.png", "maxrange": "maxrange.png", "precision": "precision.png",
                "coaxial": "coaxial.png", "multiscatter": "multiscatter.png", "multiscatter-study": "multiscatter_study",
                "experiment": "experiment_{experiment}", "mobley1993": "mobley1993.png"}
@@ -397,8 +415,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gate-delay-ns", type=non_negative_float(), default=None,
                    help="CH3 gate delay [ns] (default: that water's experiment)")
     p.add_argument("--gate-width-ns", type=positive_float(), default=None, help="CH3 gate width [ns]")
-    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
-                   help="attenuation rule (k_lidar, c, kd, small_angle)")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
     common(p)
     p.set_defaults(run=_cmd_waveform)
 
@@ -408,8 +426,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--waters", nargs="+", type=nonempty(), default=list(studies.MAXRANGE_WATERS),
                    help=f"water presets ({waters})")
-    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
-                   help="attenuation rule (k_lidar, c, kd, small_angle)")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
     common(p)
     p.set_defaults(run=_cmd_maxrange)
 
@@ -421,8 +439,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--gate-delay-ns", type=non_negative_float(), default=None)
     p.add_argument("--gate-width-ns", type=positive_float(), default=None)
-    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
-                   help="attenuation rule (k_lidar, c, kd, small_angle)")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
     common(p)
     p.set_defaults(run=_cmd_precision)
 
@@ -432,21 +450,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=seed(), default=0)
     p.add_argument("--ranging", default="prototype", type=nonempty(),
                    help="prototype (plain peak detection on the 1 GS/s record) or template (pulse-shape fit)")
-    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
-                   help="attenuation rule (k_lidar, c, kd, small_angle)")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
     common(p, out_type=output_dir)  # a folder: experiment.json and experiment.png
     p.set_defaults(run=_cmd_experiment)
 
     p = sub.add_parser("budget", help="photon budget of every study point; where reported ranges exceed it")
-    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
-                   help="attenuation rule (k_lidar, c, kd, small_angle)")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
     common(p, plot=False)
     p.set_defaults(run=_cmd_budget)
 
     p = sub.add_parser("coaxial", help="column backscatter, coaxial vs non-coaxial (paper Fig. 13)")
     p.add_argument("--water", default="turbid_harbor", type=nonempty(), help=f"water preset ({waters})")
-    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
-                   help="attenuation rule (k_lidar, c, kd, small_angle)")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
     common(p)
     p.set_defaults(run=_cmd_coaxial)
 
@@ -487,6 +505,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=seed(), default=0)
     common(p)
     p.set_defaults(run=_cmd_mobley1993)
+
+    from .montecarlo.validate import VALIDATION_PACKETS, VALIDATION_SEED, VALIDATION_WATERS
+
+    p = sub.add_parser("validate-pass", help="the pass's waveform model against a Monte Carlo run, five waters, 2-30 m")
+    p.add_argument("--waters", nargs="+", default=list(VALIDATION_WATERS), type=nonempty(), metavar="WATER",
+                   help="water presets (default: %(default)s)")
+    p.add_argument("--packets", type=positive_int(), default=VALIDATION_PACKETS, help="beam packets per water")
+    p.add_argument("--seed", type=seed(), default=VALIDATION_SEED)
+    p.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    p.set_defaults(run=_cmd_validate_pass, no_plot=True, out=None)
     checked_types(parser)
     return parser
 

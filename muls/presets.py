@@ -170,10 +170,9 @@ SINGLE_CHANNEL_MAX_GAIN = MAX_PMT_GAIN
 #: assumption: the gain rule keeps this many standard deviations of noise below the top code above the peak.
 GAIN_RULE_SIGMA = 5.0
 
-#: The attenuation rule of the studies that predict the paper (docs/design.md#attenuation): forward
-#: scattering kept by the receiver's field of view (small-angle approximation). The water presets keep Eq.
-#: 6's k_lidar as their own default for now (docs/design.md#attenuation: switching changes every survey pass).
-STUDY_ATTENUATION_MODEL = "small_angle"
+#: The attenuation rule of the studies that predict the paper (docs/design.md#attenuation): the Monte Carlo
+#: reference's, as every water's default and every pass's, so that the studies and the surveys share one physics.
+STUDY_ATTENUATION_MODEL = "monte_carlo"
 
 
 def study_water(water: str | Water, attenuation_model: str | None = STUDY_ATTENUATION_MODEL) -> Water:

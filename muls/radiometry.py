@@ -14,7 +14,7 @@ import numpy as np
 
 from . import smallangle
 from .instrument import Instrument
-from .scattering import ScatteringTables, scattering_tables
+from .scattering import ScatteringTables
 from .water import RANGE_DEPENDENT_MODELS, Water
 
 
@@ -32,7 +32,11 @@ def attenuation_per_m(instrument: Instrument, water: Water, range_m, tables: Sca
         return np.full(r.shape, water.two_way_attenuation_per_m)
     g = instrument.geometry
     if water.attenuation_model == "monte_carlo":
-        return (tables or scattering_tables(g, water)).attenuation_per_m(r)
+        if tables is None:
+            from .montecarlo.tables import scattering_tables  # the Monte Carlo sits above the model: lazily
+
+            tables = scattering_tables(g, water)
+        return tables.attenuation_per_m(r)
     return smallangle.attenuation_per_m(water.attenuation_per_m, water.scattering_per_m, 0.5 * g.receiver_diameter_m,
                                         math.tan(0.5 * g.fov_full_rad), r)
 

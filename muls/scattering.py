@@ -17,26 +17,22 @@ interpolation:
   energy per second at the aperture, all orders of scattering, before the receiver's optics), with the phase
   function's own backscatter b p(pi); the model rescales it to the water's beta_pi.
 
-:func:`scattering_tables` finds the tables for a geometry and a water: in memory, shipped with the package
-(``muls/data/scattering``, the presets with the instruments' geometries), in the user cache, or, failing those,
-by running the Monte Carlo (:func:`muls.montecarlo.tables.build_tables`, about half a minute for a turbid water)
-and caching the result.
+:func:`muls.montecarlo.tables.scattering_tables` finds the tables for a geometry and a water: in memory, shipped with
+the package (:data:`SHIPPED_DIR`, the presets with the instruments' geometries), in the user cache, or, failing
+those, by running the Monte Carlo (about half a minute for a turbid water) and caching the result.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
 import tempfile
-import threading
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .errors import ParameterError
 from .overlap import TransceiverGeometry
 from .water import Water
 
@@ -44,11 +40,8 @@ from .water import Water
 TABLE_FORMAT = 1
 #: Quantile nodes of the scattered part of an echo.
 SPREAD_NODES = 4
-#: Tables shipped with the package (the presets, with the instruments' geometries).
+#: Tables shipped with the package (the presets, with the instruments' geometries: python3 -m muls.montecarlo.shipped_tables).
 SHIPPED_DIR = Path(__file__).resolve().parent / "data" / "scattering"
-
-_lock = threading.Lock()
-_memory: dict[str, ScatteringTables] = {}
 
 
 @dataclass(frozen=True)
@@ -96,7 +89,7 @@ class ScatteringTables:
         """Write the tables to ``path`` (.npz), atomically."""
         path.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".npz", delete=False) as fh:
-            np.savez(fh, key=self.key, ranges_m=self.ranges_m, attenuation_per_m=self.attenuation_per_m_table,
+            np.savez_compressed(fh, key=self.key, ranges_m=self.ranges_m, attenuation_per_m=self.attenuation_per_m_table,
                      transmission_rel_err=self.transmission_rel_err, direct_share=self.direct_share,
                      spread_s=self.spread_s, column_step_s=self.column_step_s, column=self.column,
                      phase_value_at_pi_per_sr=self.phase_value_at_pi_per_sr, source=self.source)
@@ -122,63 +115,9 @@ def tables_key(geometry: TransceiverGeometry, water: Water, phase: str = "petzol
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def user_cache_dir() -> Path:
-    """``$XDG_CACHE_HOME/muls-scanner/scattering`` (``~/.cache`` by default): tables built on this machine."""
-    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "muls-scanner" / "scattering"
-
-
-def find_tables(geometry: TransceiverGeometry, water: Water) -> ScatteringTables | None:
-    """The tables of ``geometry`` and ``water`` if they exist already (memory, shipped, user cache), else None."""
-    key = tables_key(geometry, water)
-    with _lock:
-        if key in _memory:
-            return _memory[key]
-    for folder in (SHIPPED_DIR, user_cache_dir()):
-        path = folder / f"{key}.npz"
-        if path.is_file():
-            try:
-                tables = ScatteringTables.load(path)
-            except (OSError, ValueError, KeyError):  # a damaged cache file is built again
-                continue
-            if tables.key == key:
-                with _lock:
-                    _memory[key] = tables
-                return tables
-    return None
-
-
-def scattering_tables(geometry: TransceiverGeometry, water: Water) -> ScatteringTables:
-    """The tables of ``geometry`` and ``water``: found (:func:`find_tables`), or built by the Monte Carlo and kept
-    in the user cache. A water that does not scatter needs no run: its tables are exp(-2 a R)."""
-    found = find_tables(geometry, water)
-    if found is not None:
-        return found
-    if water.scattering_per_m == 0.0:
-        tables = clear_water_tables(geometry, water)
-    else:
-        from .montecarlo.tables import build_tables  # the Monte Carlo sits above the model it checks
-
-        tables = build_tables(geometry, water)
-        try:
-            tables.save(user_cache_dir() / f"{tables.key}.npz")
-        except OSError:  # an unwritable cache costs a run in the next process, nothing else
-            pass
-    with _lock:
-        _memory[tables.key] = tables
-    return tables
-
-
 def clear_water_tables(geometry: TransceiverGeometry, water: Water) -> ScatteringTables:
     """Tables of a water that absorbs but does not scatter: k = a, every echo on the straight path, no column."""
     ranges = np.array([0.1, 1000.0])
     return ScatteringTables(tables_key(geometry, water), ranges, np.full(2, water.absorption_per_m), np.zeros(2),
                             np.ones(2), np.zeros((2, SPREAD_NODES)), 1e-9, np.zeros(1), 0.0,
                             "no scattering: T = exp(-2 a R)")
-
-
-def check_tables_for(water: Water) -> None:
-    """Refuse a water whose ``monte_carlo`` rule cannot be tabulated (no absorption and no scattering)."""
-    if water.absorption_per_m <= 0.0 and water.scattering_per_m <= 0.0:
-        raise ParameterError(f"water '{water.name}': a and b are both 0; the monte_carlo rule needs a water")
-    if not math.isfinite(water.absorption_per_m + water.scattering_per_m):
-        raise ParameterError(f"water '{water.name}': a and b must be finite")

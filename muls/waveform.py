@@ -34,7 +34,7 @@ from .filters import first_order_filter
 from .instrument import Instrument
 from .radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission, window_factor
 from .runtime import kernel
-from .scattering import ScatteringTables, scattering_tables
+from .scattering import ScatteringTables
 from .shape_tables import ClipTable, FitTable
 from .water import Water
 
@@ -223,7 +223,11 @@ class OpticalModel:
         if multiple_scattering not in MULTIPLE_SCATTERING:
             raise ParameterError(f"multiple_scattering = {multiple_scattering!r}: must be one of "
                                  f"{', '.join(map(repr, MULTIPLE_SCATTERING))}")
-        tables = scattering_tables(instrument.geometry, water) if water.attenuation_model == "monte_carlo" else None
+        tables = None
+        if water.attenuation_model == "monte_carlo":
+            from .montecarlo.tables import scattering_tables  # the Monte Carlo sits above the model: lazily
+
+            tables = scattering_tables(instrument.geometry, water)
         scattering = tables if multiple_scattering == "table" else None
         return cls(instrument, water, ColumnTables.build(instrument, water, scattering=scattering, tables=tables),
                    tables, scattering, multiple_scattering)

@@ -207,8 +207,10 @@ def _assert_same_hits(proven, embree):
     np.testing.assert_array_equal(proven.pulse_index, embree.pulse_index)
     np.testing.assert_array_equal(proven.subray_index, embree.subray_index)
     np.testing.assert_array_equal(proven.object_id, embree.object_id)
-    np.testing.assert_array_equal(proven.receiver_weight, embree.receiver_weight)
-    # Float32 distances along the ray (Embree's and the ray-plane intersection): a few float32 steps at 3 m.
+    # Float32 distances along the ray (Embree's and the ray-plane intersection): a few float32 steps at 3 m, which
+    # move the share of the aperture that sees a hit by a few millionths where the hit lies at its field's edge.
+    np.testing.assert_array_equal(proven.receiver_weight > 0, embree.receiver_weight > 0)
+    np.testing.assert_allclose(proven.receiver_weight, embree.receiver_weight, rtol=0, atol=1e-5)
     np.testing.assert_allclose(proven.range_m, embree.range_m, rtol=0, atol=2e-5)
     np.testing.assert_allclose(proven.point, embree.point, rtol=0, atol=2e-5)
     # The same facet: a hit within float32 rounding of a shared edge may name either neighbour.
@@ -238,7 +240,7 @@ def test_analytic_hits_leave_blocked_and_shadowed_pulses_to_embree():
     on_objects = embree.object_id > 0
     assert on_objects.sum() > 200  # the footprints the plates and the cable cut
     seen_by_cone = _seen_without_shadow_rays(scene, pulses)
-    shadowed = (embree.receiver_weight == 0) & (seen_by_cone == 1)
+    shadowed = (embree.receiver_weight == 0) & (seen_by_cone > 0)
     assert shadowed.sum() > 20  # hits an object hides from the receiver
     _assert_same_hits(proven, embree)
     assert caster.rays < 0.5 * 4000 * 19
@@ -250,7 +252,7 @@ def test_analytic_hits_leave_pulses_the_relief_can_hide_to_embree():
     scene = _seabed_scene(ridges=True)
     pulses = _pulses(4000, seed=4, spread_deg=60.0)
     proven, embree, caster = _both(scene, pulses)
-    shadowed = (embree.receiver_weight == 0) & (_seen_without_shadow_rays(scene, pulses) == 1)
+    shadowed = (embree.receiver_weight == 0) & (_seen_without_shadow_rays(scene, pulses) > 0)
     assert shadowed.sum() > 20  # hits a ridge hides from the receiver
     _assert_same_hits(proven, embree)
     assert caster.rays < 0.6 * 4000 * 19
@@ -334,7 +336,7 @@ def test_shadow_rays_proven_clear_leave_every_hit_as_embree_finds_it(ridges):
     cast = cast_beams(CastScene(scene, every, seabed_grid(scene, every)), *pulses, beam_pattern(19), GEOMETRY,
                       prove_shadows=False)
     proven = cast_beams(CastScene(scene, proving, seabed_grid(scene, proving)), *pulses, beam_pattern(19), GEOMETRY)
-    shadowed = (cast.receiver_weight == 0) & (_seen_without_shadow_rays(scene, pulses) == 1)
+    shadowed = (cast.receiver_weight == 0) & (_seen_without_shadow_rays(scene, pulses) > 0)
     assert shadowed.sum() > 20  # hits hidden from the receiver: what the shadow rays are for
     for f in HIT_FIELDS:
         np.testing.assert_array_equal(getattr(proven, f.name), getattr(cast, f.name), err_msg=f.name)

@@ -41,6 +41,9 @@ CH1_PE_PER_LSB_NS = 67.73
 # Quantum efficiency of a 77 mA/W cathode at 532 nm: S_k h nu / e = 0.077 x 3.7339e-19 / 1.602177e-19
 QE_532 = 0.17945
 
+#: The pond under the paper's Eq. 6 (single scattering): the tests of the noise chain need its strong, smooth column.
+PAPER_POND = water_preset("pond").with_models(attenuation_model="k_lidar")
+
 
 def test_gains_in_volts_and_codes_per_watt_are_table_1():
     ins = mul2023()
@@ -98,7 +101,7 @@ def test_echo_energy_in_codes_by_hand_from_eq7():
     assert k == pytest.approx(0.050923, rel=1e-4)
     energy = 500e-6 * 4.4e-3 * (0.1 / math.pi) * 0.9 * 0.6 * (1 - 0.0039) ** 2 * math.exp(-2 * k * 12.0) / 144.0
     ins = mul2023().with_channel("ch3", gate_delay_s=None, gate_width_s=None)
-    model = OpticalModel.build(ins, water_preset("pool"))
+    model = OpticalModel.build(ins, water_preset("pool").with_models(attenuation_model="k_lidar"))
     rec = [simulate(model, PulseBatch.flat_target(ins, [12.0], r), seed=1, mode="full", keep_noise_free=True,
                     noise=False)[0].noise_free_lsb[0, 1].astype(float) for r in (0.1, 0.0)]
     area_lsb_s = (rec[0] - rec[1]).sum() * 1e-9
@@ -106,9 +109,10 @@ def test_echo_energy_in_codes_by_hand_from_eq7():
 
 
 def test_record_noise_is_dark_plus_hand_shot_plus_rounding():
-    """On the pond's column, CH1's residual variance is 1 + 0.0111330 x level + 1/12 [LSB^2] (hand value)."""
+    """On the pond's column, CH1's residual variance is 1 + 0.0111330 x level + 1/12 [LSB^2] (hand value). The column of
+    Eq. 6's k_lidar gives a few thousand samples of a few hundred LSB to test on."""
     ins = mul2023()
-    model = OpticalModel.build(ins, water_preset("pond"))
+    model = OpticalModel.build(ins, PAPER_POND)
     batch = PulseBatch.flat_target(ins, np.full(400, 30.0), pulse_id=np.arange(400))
     rec, _ = simulate(model, batch, seed=11, mode="full", keep_noise_free=True)
     clean = rec.noise_free_lsb[:, 0, :].astype(float)
@@ -131,8 +135,8 @@ def test_one_pmt_one_shot_noise_draw_split_between_its_outputs():
              Channel("c", "pmt2", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=1.0),
              Channel("d", "pmt3", split_ratio=0.02, voltage_ratio=0.6, gain=2000.0, dark_std_lsb=0.0))
     ins = replace(base, channels=chans)
-    model = OpticalModel.build(ins, water_preset("pond"))
-    batch = PulseBatch.flat_target(ins, np.full(300, 30.0), pulse_id=np.arange(300))
+    model = OpticalModel.build(ins, PAPER_POND)
+    batch = PulseBatch.flat_target(ins, np.full(1200, 30.0), pulse_id=np.arange(1200))
     rec, _ = simulate(model, batch, seed=5, mode="full", keep_noise_free=True)
     clean = rec.noise_free_lsb.astype(float)
     level = clean[:, 0, :] - 8.0

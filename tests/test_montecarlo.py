@@ -371,10 +371,13 @@ def test_study_reduced_runs_and_reports_every_water_and_range():
     assert w["detection"]["muls_m"] > 0 and w["correction_check"][0]["range_m"] == 4.5
 
 
-def test_geometry_factor_is_the_aperture_seen_within_the_field_of_view():
+@pytest.mark.parametrize("overlap_model", ["finite_aperture", "eq11"])
+def test_geometry_factor_is_the_aperture_seen_within_the_field_of_view(overlap_model):
     """Without scattering the echo is Eq. 7 with the exact overlap: the share of the aperture whose own field
-    of view holds the point, averaged over the beam spot (a direct numerical integral here), not Eq. 11."""
+    of view holds the point, averaged over the beam spot (a direct numerical integral here): the finite-aperture
+    overlap, which MULS now uses, not Eq. 11 (the factor is the Monte Carlo over MULS with each)."""
     instrument = mul2023()
+    instrument = replace(instrument, receiver=replace(instrument.receiver, overlap_model=overlap_model))
     g = instrument.geometry
     ranges = (2.5, 3.0, 6.0)
     factor = geometry_factor(instrument, ranges, packets=100_000)
@@ -388,4 +391,7 @@ def test_geometry_factor_is_the_aperture_seen_within_the_field_of_view():
         seen = np.mean([np.mean(((q - p) ** 2).sum(axis=1) <= (z * math.tan(0.5 * g.fov_full_rad)) ** 2) for p in spot])
         exact = seen / float(g.overlap(z)) * (z * z / (z * z + g.offset_m**2)) ** 2
         assert f == pytest.approx(exact, rel=0.03, abs=0.01)
-    assert factor[0] < 0.5  # Eq. 11 says 1 at 2.5 m
+    if overlap_model == "eq11":
+        assert factor[0] < 0.5  # Eq. 11 says 1 at 2.5 m
+    else:
+        assert factor == pytest.approx([(z * z / (z * z + g.offset_m**2)) ** 2 for z in ranges], rel=0.03)

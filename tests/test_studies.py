@@ -72,7 +72,7 @@ def test_waveform_study_keys_shapes_and_gate():
     dark = ch3[0]
     # CH3 is gated: only its dark level before the gate opens, signal (column + echo) inside it.
     assert np.all(ch3[t < 99.0] == pytest.approx(dark))
-    assert ch3[(t > 100.0) & (t < 130.0)].max() > dark + 50.0
+    assert ch3[(t > 100.0) & (t < 130.0)].max() > dark + 5.0  # five times the dark noise
     # The noisy record scatters around the noise-free one (dark noise ~1 LSB far from any signal).
     tail = t > 700.0
     assert abs(np.mean(np.array(r["channels"]["ch1"])[tail]) - np.mean(np.array(r["noise_free"]["ch1"])[tail])) < 0.3
@@ -100,18 +100,20 @@ def test_waveform_study_rejects_bad_range():
 # --- precision --------------------------------------------------------------------------------------------
 
 def test_precision_study_keys_and_ch1_precision_worsens_with_range():
-    r = _json_roundtrip(studies.precision_study("pond", [8.5, 10.0], shots=150, seed=2))
-    assert set(r) == {"8.5", "10", "settings"}
-    for key in ("8.5", "10"):
+    """At 4 and 5 m in the pond, where the Monte Carlo's attenuation leaves CH1 an echo well above its threshold
+    (at the paper's 8.5-11.5 m it leaves less than the dark noise: docs/studies.md)."""
+    r = _json_roundtrip(studies.precision_study("pond", [4.0, 5.0], shots=150, seed=2))
+    assert set(r) == {"4", "5", "settings"}
+    for key in ("4", "5"):
         for ch in ("ch1", "ch2", "ch3"):
             assert CHANNEL_KEYS <= set(r[key][ch])
             assert 0.0 <= r[key][ch]["detected_fraction"] <= 1.0
-    p85, p10 = r["8.5"]["ch1"]["precision_m"], r["10"]["ch1"]["precision_m"]
-    assert p85 is not None and p10 is not None
-    assert p10 > p85  # lower SNR farther away (paper section 4.2)
+    p4, p5 = r["4"]["ch1"]["precision_m"], r["5"]["ch1"]["precision_m"]
+    assert p4 is not None and p5 is not None
+    assert p5 > p4  # lower SNR farther away (paper section 4.2)
     # Detections lie within the 3-bin tolerance, so the mean deviation does too.
     tol = r["settings"]["tolerance_m"]
-    assert abs(r["8.5"]["ch1"]["mean_deviation_m"]) < tol
+    assert abs(r["4"]["ch1"]["mean_deviation_m"]) < tol
 
 
 def test_precision_study_null_when_nothing_is_detected():
@@ -122,11 +124,11 @@ def test_precision_study_null_when_nothing_is_detected():
 
 
 def test_precision_study_is_repeatable_from_its_seed():
-    a = studies.precision_study("pond", [9.0], shots=60, seed=7)
-    b = studies.precision_study("pond", [9.0], shots=60, seed=7)
-    c = studies.precision_study("pond", [9.0], shots=60, seed=8)
+    a = studies.precision_study("pond", [4.5], shots=60, seed=7)
+    b = studies.precision_study("pond", [4.5], shots=60, seed=7)
+    c = studies.precision_study("pond", [4.5], shots=60, seed=8)
     assert a == b
-    assert a["9"]["ch1"] != c["9"]["ch1"]
+    assert a["4.5"]["ch1"] != c["4.5"]["ch1"]
 
 
 # --- coaxial ----------------------------------------------------------------------------------------------
@@ -139,16 +141,27 @@ def test_coaxial_backscatter_exceeds_non_coaxial(water):
     t = np.array(r["time_ns"]) * 1e-9
     non = np.array(r["non_coaxial_w"])
     co = np.array(r["coaxial_w"])
-    # The non-coaxial column is dark until the pulse reaches the blind-zone edge Z1 (overlap 0 before it).
+    # Before the pulse reaches the blind-zone edge Z1 (overlap 0) only multiply scattered light reaches the
+    # non-coaxial receiver: a few hundredths of what the coaxial one sees there at most.
     z1 = r["settings"]["blind_zone_m"]
-    assert np.all(non[t < 2.0 * z1 / water_preset(water).speed_m_s] == 0.0)
-    # Long after the pulse has passed full overlap (and the heavy tail of Eq. 2 has carried off the coaxial
-    # near-field peak) both designs see the same column.
+    blind = t < 2.0 * z1 / water_preset(water).speed_m_s
+    assert np.all(non[blind] <= 0.05 * co[blind])
+    # (Long after the near field the two Monte Carlo runs, one per receiver, differ by their statistical error at
+    # 1e-6 of the peak and less: test_under_single_scattering_... compares the late columns.)
     late = studies.coaxial_study(water, t_max_ns=300.0)
     t = np.array(late["time_ns"])
     co, non = np.array(late["coaxial_w"]), np.array(late["non_coaxial_w"])
-    np.testing.assert_allclose(non[t >= 200.0], co[t >= 200.0], rtol=1e-5)
     assert np.all(co[t < 30.0] >= non[t < 30.0])
+
+
+def test_under_single_scattering_the_blind_zone_is_dark_and_late_columns_agree():
+    """Eq. 4 (the paper's k_lidar, single scattering): the non-coaxial column is exactly dark before Z1, and long
+    after full overlap both designs see the same column."""
+    r = studies.coaxial_study("coastal_ocean", t_max_ns=300.0, attenuation_model="k_lidar")
+    t = np.array(r["time_ns"]) * 1e-9
+    co, non = np.array(r["coaxial_w"]), np.array(r["non_coaxial_w"])
+    assert np.all(non[t < 2.0 * r["settings"]["blind_zone_m"] / water_preset("coastal_ocean").speed_m_s] == 0.0)
+    np.testing.assert_allclose(non[t >= 200e-9], co[t >= 200e-9], rtol=1e-5)
 
 
 def test_coaxial_ratio_grows_with_turbidity():
@@ -160,25 +173,32 @@ def test_coaxial_ratio_grows_with_turbidity():
 
 @pytest.mark.slow
 def test_maxrange_study_orders_waters_and_channels():
+    """Clearer water reaches farther in every group. In the turbid harbor the Monte Carlo's column clips the gated
+    CH3 wherever its gate opens before an echo it could see, so the harbor has no far-field range."""
     r = _json_roundtrip(studies.maxrange_study(shots=60, seed=1))
     waters = ("clean_ocean", "coastal_ocean", "turbid_harbor")
     for w in waters:
         assert MAXRANGE_KEYS <= set(r[w])
-        assert all(r[w][k] is not None for k in MAXRANGE_KEYS)
+        assert all(r[w][k] is not None for k in MAXRANGE_KEYS if not (w == "turbid_harbor" and k == "far_field_m"))
         assert r[w]["total_m"] >= r[w]["single_channel_m"]
         assert r[w]["improvement"] == pytest.approx(r[w]["total_m"] / r[w]["single_channel_m"], abs=1e-3)
         # total (chosen returns) reaches as far as the better of the near and far fields, to the fine step.
-        assert abs(r[w]["total_m"] - max(r[w]["near_field_m"], r[w]["far_field_m"])) <= studies.FINE_STEP_M + 1e-9
-    for key in ("single_channel_m", "total_m", "far_field_m", "near_field_m"):
+        best = max(v for v in (r[w]["near_field_m"], r[w]["far_field_m"]) if v is not None)
+        assert abs(r[w]["total_m"] - best) <= studies.FINE_STEP_M + 1e-9
+    assert r["turbid_harbor"]["far_field_m"] is None
+    for key in ("single_channel_m", "total_m", "near_field_m"):
         assert r["clean_ocean"][key] > r["coastal_ocean"][key] > r["turbid_harbor"][key]
+    assert r["clean_ocean"]["far_field_m"] > r["coastal_ocean"]["far_field_m"]
     assert r["clean_ocean"]["near_field_m"] < r["clean_ocean"]["far_field_m"]
     assert r["settings"]["shots"] == 60
 
 
 def test_maxrange_study_one_water_small():
-    r = studies.maxrange_study(["turbid_harbor"], shots=20, seed=0)
-    t = r["turbid_harbor"]
-    assert MAXRANGE_KEYS <= set(t) and set(r) == {"turbid_harbor", "settings"}
+    """The pond: the gated CH3 reaches beyond the near channels (in the turbid harbor the Monte Carlo's column clips
+    CH3 wherever its gate opens before an echo it could see: no far-field range at all)."""
+    r = studies.maxrange_study(["pond"], shots=20, seed=0)
+    t = r["pond"]
+    assert MAXRANGE_KEYS <= set(t) and set(r) == {"pond", "settings"}
     # The edge is resolved to the fine step: the next fine range fails the 90 % criterion.
     curves = t["curves"]
     ranges = np.array(curves["range_m"])
@@ -210,21 +230,22 @@ def test_maxrange_gains_as_a_designer_sets_them():
 
     r = studies.maxrange_study(["turbid_harbor"], shots=20, seed=0, attenuation_model="k_lidar")
     t = r["turbid_harbor"]
-    water = water_preset("turbid_harbor")
+    water = study_water("turbid_harbor", "k_lidar")
     assert t["gains"]["single"] == pytest.approx(single_channel(water).channels[0].gain)
     mul = designed_mul(water)
     assert t["gains"]["pmt1"] == pytest.approx(mul.channel("ch2").gain) == pytest.approx(mul.channel("ch1").gain)
     assert mul.channel("ch1").volts_per_watt == pytest.approx(9.0 * mul.channel("ch2").volts_per_watt)
     assert t["gains"]["pmt2"] == 20000.0
-    # below the cap, the column just fits in CH2: its noise-free peak ends within a few codes of the rule's
-    # ceiling (top code - 5 sigma), checked on the record of a pulse meeting nothing
-    assert t["gains"]["pmt1"] < 20000.0
+    # the column fits in CH2: its noise-free peak stays under the rule's ceiling (top code - 5 sigma), and ends within
+    # a few codes of it below the cap, checked on the record of a pulse meeting nothing
     model = OpticalModel.build(mul, water)
     rec, _ = simulate(model, PulseBatch.flat_target(mul, np.full(32, np.inf)), seed=0, mode="full",
                       keep_noise_free=True, noise=False)
     top = float(rec.noise_free_lsb[:, 1, :].max())
-    assert 1023.0 - 5.0 * math.sqrt(1.0 + 0.0111330 / 9.0 * t["gains"]["pmt1"] / 2000.0 * top) - top == pytest.approx(
-        0.0, abs=3.0)
+    headroom = 1023.0 - 5.0 * math.sqrt(1.0 + 0.0111330 / 9.0 * t["gains"]["pmt1"] / 2000.0 * top) - top
+    assert headroom >= -3.0
+    if t["gains"]["pmt1"] < 20000.0:
+        assert headroom == pytest.approx(0.0, abs=3.0)
     for group in ("single", "near", "far", "total"):
         assert t["limits"][group]["cause"] in LIMITS
-    assert study_water("turbid_harbor").attenuation_model == "small_angle"
+    assert study_water("turbid_harbor").attenuation_model == "monte_carlo"

@@ -1,17 +1,21 @@
 """The Monte Carlo run behind :class:`muls.scattering.ScatteringTables`: flat 0.1 plates at a grid of ranges in one
-run (the farthest plate's scene gives the water column), tabulated as the model applies them (muls/scattering.py).
+run (the farthest plate's scene gives the water column), tabulated as the model applies them (muls/scattering.py);
+and where a water's tables are found: in memory, shipped with the package, in the user cache, or built by that run.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import threading
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
 from ..overlap import TransceiverGeometry
 from ..phase import check_phase
-from ..scattering import SPREAD_NODES, ScatteringTables, tables_key
+from ..scattering import SHIPPED_DIR, SPREAD_NODES, ScatteringTables, clear_water_tables, tables_key
 from ..water import Water
 from .run import TargetPlanes, run_monte_carlo
 
@@ -139,24 +143,49 @@ def _extended(column: np.ndarray, dt: float) -> np.ndarray:
     return np.concatenate([column, more])
 
 
-def ship(out_dir=None, packets: int = TABLE_PACKETS) -> list:
-    """Build the tables of every water preset with each instrument preset's geometry (the MUL's offset receiver and
-    the coaxial one) into ``out_dir`` (default: the folder the package ships, :data:`muls.scattering.SHIPPED_DIR`);
-    returns the files written. ``python3 -m muls.montecarlo.tables`` runs it."""
-    from ..presets import WATER_PRESETS, coaxial, mul2023
-    from ..scattering import SHIPPED_DIR
-
-    folder = SHIPPED_DIR if out_dir is None else out_dir
-    written = []
-    for geometry in {mul2023().geometry, coaxial().geometry}:
-        for water in WATER_PRESETS.values():
-            tables = build_tables(geometry, water, packets=packets)
-            path = folder / f"{tables.key}.npz"
-            tables.save(path)
-            written.append(path)
-            print(f"{water.name:14s} offset {geometry.offset_m:g} m: {path.name} ({tables.source})", flush=True)
-    return written
+_lock = threading.Lock()
+_memory: dict[str, ScatteringTables] = {}
 
 
-if __name__ == "__main__":  # pragma: no cover
-    ship()
+def user_cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/muls-scanner/scattering`` (``~/.cache`` by default): tables built on this machine."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "muls-scanner" / "scattering"
+
+
+def find_tables(geometry: TransceiverGeometry, water: Water) -> ScatteringTables | None:
+    """The tables of ``geometry`` and ``water`` if they exist already (memory, shipped, user cache), else None."""
+    key = tables_key(geometry, water)
+    with _lock:
+        if key in _memory:
+            return _memory[key]
+    for folder in (SHIPPED_DIR, user_cache_dir()):
+        path = folder / f"{key}.npz"
+        if path.is_file():
+            try:
+                tables = ScatteringTables.load(path)
+            except (OSError, ValueError, KeyError):  # a damaged cache file is built again
+                continue
+            if tables.key == key:
+                with _lock:
+                    _memory[key] = tables
+                return tables
+    return None
+
+
+def scattering_tables(geometry: TransceiverGeometry, water: Water) -> ScatteringTables:
+    """The tables of ``geometry`` and ``water``: found (:func:`find_tables`), or built by the Monte Carlo and kept
+    in the user cache. A water that does not scatter needs no run: its tables are exp(-2 a R)."""
+    found = find_tables(geometry, water)
+    if found is not None:
+        return found
+    if water.scattering_per_m == 0.0:
+        tables = clear_water_tables(geometry, water)
+    else:
+        tables = build_tables(geometry, water)
+        try:
+            tables.save(user_cache_dir() / f"{tables.key}.npz")
+        except OSError:  # an unwritable cache costs a run in the next process, nothing else
+            pass
+    with _lock:
+        _memory[tables.key] = tables
+    return tables

@@ -19,12 +19,13 @@ def coaxial_study(water: str | Water = "turbid_harbor", t_max_ns: float = 200.0,
                   attenuation_model: str | None = None) -> dict:
     """Noise-free water-column power [W] of ``coaxial()`` and ``mul2023()``, both as non-gated receivers.
 
-    The column alone (MULS Eq. 4 convolved with the pulse, no target: ``OpticalModel.column_power_w``) on
+    The column alone (the model's: the Monte Carlo's column under the ``monte_carlo`` rule, else MULS Eq. 4, convolved
+    with the pulse, no target: ``OpticalModel.column_power_w``) on
     a grid of ``step_ns`` up to ``t_max_ns`` after emission; same parameters except the transceiver offset
     (0 vs 130 mm). The coaxial design's window return (Eq. 3), a separate echo at the window, is reported
     as ``coaxial_window_peak_w`` and left out of the curves and the ratio. ``peak_ratio`` = peak coaxial /
     peak non-coaxial column power. ``attenuation_model``: the rule the water uses (None: as configured; the
-    ``muls`` command passes the studies' rule, ``small_angle``).
+    ``muls`` command passes the studies' rule, ``monte_carlo``).
     """
     w = study_water(_water(water), attenuation_model)
     check_positive("t_max_ns", t_max_ns)

@@ -47,7 +47,7 @@ def precision_study(water: str | Water = "pond", ranges_m=(8.5, 10.0, 11.5), sho
     mean minus the truth, ``detected_fraction`` kept shots over all shots, ``saturated_fraction`` clipped
     peaks among the kept ones. ``chosen`` gives the same for the instrument's chosen returns. The CH3 gate is
     that of the paper's experiment in the water unless given [s]. ``attenuation_model``: the rule the
-    water uses (None: as configured; the ``muls`` command passes the studies' rule, ``small_angle``).
+    water uses (None: as configured; the ``muls`` command passes the studies' rule, ``monte_carlo``).
     Returns {"8.5": {"ch1": {...}, "ch2": {...}, "ch3": {...}, "chosen": {...}}, ..., "settings": {...}};
     precision is None below 2 detections.
     """

@@ -27,7 +27,7 @@ def waveform_study(water: str | Water = "pond", range_m: float = 11.5, seed: int
     water: preset name or Water; range_m: panel range [m]; reflectance: Lambertian reflectance [0, 1];
     gate: CH3's gate [s], by default the one of the paper's experiment in that water (pond 100/400 ns,
     pool 150/400 ns, the pond's elsewhere); attenuation_model: the rule the water uses (None: as
-    configured; the ``muls`` command passes the studies' rule, ``small_angle``). Returns ``time_ns``
+    configured; the ``muls`` command passes the studies' rule, ``monte_carlo``). Returns ``time_ns``
     (n_samples,) sample times after emission, ``channels`` and ``noise_free`` {"ch0".."ch3": (n_samples,)
     LSB}, ``returns`` (what the instrument's ranging made of the pulse), ``dropout_cause`` and ``settings``.
     """

@@ -125,7 +125,8 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     # every combination is built (and so checked) before any pass runs
     jobs = [PassJob(combination_name(water, altitude, instrument),
                     combination_config(config, water, altitude, instrument, plan.gate),
-                    PassOptions(water=None if water == SCENE_WATER else water, seed=seed, fidelity=fidelity, max_pulses=max_pulses, progress=False,
+                    PassOptions(water=None if water == SCENE_WATER else water, seed=seed, fidelity=fidelity,
+                                max_pulses=max_pulses, progress=False,
                                 render=render, render_size=STUDY_RENDER_SIZE, write_scene=False, coverage=settings))
             for water, altitude, instrument in combos]
     out = Path(out_dir)
@@ -165,8 +166,8 @@ def study_record(config: SceneConfig, summary: dict, water: str, altitude_m, ins
     """One coverage.json record: the combination, its settings, pass counts and coverage figures."""
     figures = dict(summary["coverage"])
     settings = {key: figures.pop(key) for key in ("cell_m", "min_points", "tolerance_m")}
-    inst = config.instrument
-    settings.update(gate_delay_ns=inst.gate_delay_ns, gate_width_ns=inst.gate_width_ns, fidelity=summary["fidelity"],
+    used = summary["settings"]
+    settings.update(gate_delay_ns=used["gate_delay_ns"], gate_width_ns=used["gate_width_ns"], fidelity=summary["fidelity"],
                     seed=summary["seed"], max_pulses=summary["settings"]["max_pulses"],
                     subrays=summary["settings"]["subrays"])
     return {

@@ -35,6 +35,7 @@ KNOBS: dict[str, tuple[str, object]] = {
     "subrays=1": ("subrays", 1), "subrays=7": ("subrays", 7), "subrays=37": ("subrays", 37),
     "subrays=91": ("subrays", 91), "shadow_rays=off": ("shadow_rays", False), "record_mode=full": ("record_mode", "full"),
     "column_cut=pulse": ("column_cut", "pulse"), "deciding_only=on": ("deciding_only", True),
+    "multiple_scattering=none": ("multiple_scattering", "none"),
 }
 #: Sub-rays of the reference run again at a finer resolution to show the reference has converged (the densest
 #: ring layout, beams.SUBRAY_COUNTS: 8 rings against the reference's 5).
@@ -157,7 +158,8 @@ def level_metrics(run: LevelRun, reference: LevelRun) -> dict:
     vs_ref["waveform_r2"] = fit.r2
     lv = run.level
     return {"pulses_per_s": round(run.pulses_per_s, 1), "subrays": lv.subrays, "shadow_rays": lv.shadow_rays,
-            "record_mode": lv.record_mode, "column_cut": lv.column_cut, "coverage": run.coverage,
+            "record_mode": lv.record_mode, "column_cut": lv.column_cut, "multiple_scattering": lv.multiple_scattering,
+            "coverage": run.coverage,
             "vs_truth": _rounded(accuracy.vs_truth(run.points, run.n_pulses, run.hidden)),
             "vs_reference": _rounded(vs_ref)}
 

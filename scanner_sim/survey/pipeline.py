@@ -97,12 +97,15 @@ def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), sce
 def pass_facts(setup: PassSetup) -> sinks.PassFacts:
     """What made the pass, as its summary and files state it."""
     config, level = setup.config, setup.level
+    far = [ch for ch in setup.model.instrument.channels if ch.gated]
+    gate = (round(far[0].gate_delay_s * 1e9, 3), round(far[0].gate_width_s * 1e9, 3)) if far else (None, None)
     return sinks.PassFacts(
         scene=config.name, water=setup.water_name, seed=setup.seed, fidelity=level.name,
         instrument=setup.model.instrument.name, channels=tuple(ch.name for ch in setup.model.instrument.channels),
         record_mode=level.record_mode, subrays=setup.pattern.count, shadow_rays=level.shadow_rays,
         chunk_pulses=setup.chunk_slots, max_pulses=setup.max_pulses,
-        scene_file=str(config.source_path) if config.source_path else None, altitude_m=config.platform.altitude_m)
+        scene_file=str(config.source_path) if config.source_path else None, altitude_m=config.platform.altitude_m,
+        gate_delay_ns=gate[0], gate_width_ns=gate[1])
 
 
 def trajectory_table(setup: PassSetup) -> dict[str, np.ndarray]:

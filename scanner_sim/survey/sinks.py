@@ -35,7 +35,8 @@ RENDER_MAX_POINTS = 1_500_000
 class PassFacts:
     """What made a pass, as its summary and its files' metadata state it: scene name, water, seed, fidelity level
     and its settings, instrument and channel names, chunk size and pulse limit, the scene file, the altitude
-    (None when the platform holds a depth)."""
+    (None when the platform holds a depth), the far channel's gate [ns] as the pass used it (None: no gated
+    channel)."""
 
     scene: str
     water: str
@@ -50,6 +51,8 @@ class PassFacts:
     max_pulses: int | None
     scene_file: str | None
     altitude_m: float | None
+    gate_delay_ns: float | None = None
+    gate_width_ns: float | None = None
 
     def metadata(self) -> dict:
         """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file."""
@@ -255,6 +258,8 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
             "chunk_pulses": facts.chunk_pulses,
             "max_pulses": facts.max_pulses,
             "scene_file": facts.scene_file,
+            "gate_delay_ns": facts.gate_delay_ns,
+            "gate_width_ns": facts.gate_width_ns,
         },
     }
 

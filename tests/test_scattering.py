@@ -1,0 +1,102 @@
+"""Multiple scattering in the model (muls/scattering.py, muls/montecarlo/tables.py, muls/waveform.py): the Monte
+Carlo's tables, the monte_carlo attenuation rule, the echo's spread in time and the column."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from muls import Water, mul2023, water_preset
+from muls.montecarlo.tables import build_tables, farthest_range_m, find_tables, scattering_tables
+from muls.presets import WATER_PRESETS, coaxial
+from muls.radiometry import attenuation_per_m
+from muls.scattering import SHIPPED_DIR, ScatteringTables, tables_key
+from muls.waveform import OpticalModel, PulseBatch
+
+
+def test_every_preset_ships_its_tables_with_each_instrument_geometry():
+    """A pass in any preset water with any instrument preset finds its tables in the package: none is built on a
+    user's machine, and each carries what made it."""
+    for geometry in (mul2023().geometry, coaxial().geometry):
+        for water in WATER_PRESETS.values():
+            tables = find_tables(geometry, water)
+            assert tables is not None, (water.name, geometry.offset_m)
+            assert (SHIPPED_DIR / f"{tables.key}.npz").is_file()
+            assert "Monte Carlo" in tables.source and tables.ranges_m[-1] >= 10.0
+
+
+def test_the_key_names_every_input_of_the_run_and_nothing_else():
+    geometry, water = mul2023().geometry, water_preset("pond")
+    key = tables_key(geometry, water)
+    assert tables_key(geometry, water.with_models(attenuation_model="k_lidar", backscatter_model="hg")) == key
+    assert tables_key(replace(geometry, fov_full_rad=0.2), water) != key
+    assert tables_key(geometry, replace(water, scattering_per_m=1.23)) != key
+    assert tables_key(geometry, replace(water, group_index=1.34)) != key
+
+
+def test_a_water_that_does_not_scatter_attenuates_by_its_absorption_alone():
+    """Beer's law, without a Monte Carlo run: k = a at every range."""
+    clear = Water("clear", 0.07, 0.0)
+    k = attenuation_per_m(mul2023(), clear, np.array([0.5, 3.0, 40.0]))
+    np.testing.assert_allclose(k, 0.07)
+
+
+def test_tables_round_trip_through_their_file(tmp_path):
+    tables = scattering_tables(mul2023().geometry, water_preset("coastal_ocean"))
+    tables.save(tmp_path / "t.npz")
+    back = ScatteringTables.load(tmp_path / "t.npz")
+    assert back.key == tables.key and back.source == tables.source
+    for name in ("ranges_m", "attenuation_per_m_table", "direct_share", "spread_s", "column"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(tables, name))
+
+
+@pytest.mark.parametrize("name", ["pool", "clean_ocean", "coastal_ocean", "pond", "turbid_harbor"])
+def test_the_monte_carlo_attenuation_lies_between_the_absorption_and_the_beam_attenuation(name):
+    """Every scattered photon lost gives c; none lost gives a: the light a finite receiver keeps lies between, for
+    every range the tables hold."""
+    water = water_preset(name)
+    tables = scattering_tables(mul2023().geometry, water)
+    seen = tables.ranges_m >= 2.25  # the plate is seen (finite-aperture overlap over 0.1)
+    k = tables.attenuation_per_m_table[seen]
+    assert np.all(k >= water.absorption_per_m * 0.99) and np.all(k <= water.attenuation_per_m * 1.01)
+
+
+def test_clear_water_echoes_stay_on_their_path_and_turbid_ones_spread():
+    """In the pool the echo is one pulse within a fraction of a nanosecond of its straight-path delay; in the pond at
+    20 m most of the echo's light has wandered, and it arrives as several echoes spread over tens of nanoseconds,
+    later on average (the multiply scattered path is longer)."""
+    ins = mul2023()
+    pool = OpticalModel.build(ins, water_preset("pool")).echoes(PulseBatch.flat_target(ins, [10.0]))
+    assert pool.delay_s.size == 1
+    straight = 2 * 10.0 / water_preset("pool").speed_m_s
+    assert 0.0 <= pool.delay_s[0] - straight < 0.2e-9
+    pond_water = water_preset("pond")
+    pond = OpticalModel.build(ins, pond_water).echoes(PulseBatch.flat_target(ins, [20.0]))
+    straight = 2 * 20.0 / pond_water.speed_m_s
+    mean = np.sum(pond.energy_j * pond.delay_s) / pond.energy_j.sum()
+    assert pond.delay_s.size >= 4 and pond.delay_s.max() - pond.delay_s.min() > 10e-9 and mean - straight > 5e-9
+    single = OpticalModel.build(ins, pond_water, "none").echoes(PulseBatch.flat_target(ins, [20.0]))
+    assert single.delay_s.size == 1
+    assert single.energy_j.sum() == pytest.approx(pond.energy_j.sum(), rel=1e-12)  # the spread keeps the energy
+
+
+def test_the_monte_carlo_column_lights_the_blind_zone_that_single_scattering_leaves_dark():
+    """Before the beam enters the receiver's view (1.68 m, 15 ns) single scattering sends nothing back; multiply
+    scattered light reaches the offset receiver earlier, and in the pond it dominates the near field."""
+    ins, water = mul2023(), water_preset("pond")
+    t = np.array([8e-9, 12e-9])
+    single = OpticalModel.build(ins, water, "none").column_power_w(t)
+    multiple = OpticalModel.build(ins, water).column_power_w(t)
+    assert np.all(single < 1e-3 * multiple) and np.all(multiple > 0.0)
+
+
+def test_a_run_for_a_custom_water_tabulates_what_the_model_needs():
+    """A water no preset has is tabulated by a run of its own (small here, for speed): every range seen has a
+    finite k, the farthest plate lies where Eq. 6 leaves no echo, and the column is positive near its peak."""
+    water = Water("custom", 0.15, 0.6)
+    tables = build_tables(mul2023().geometry, water, packets=20_000)
+    assert tables.ranges_m[-1] == pytest.approx(max(r for r in tables.ranges_m if r <= farthest_range_m(water)))
+    assert math.isclose(farthest_range_m(water), min(80.0, max(10.0, 40.0 / (2 * water.k_lidar_per_m))))
+    assert np.all(np.isfinite(tables.attenuation_per_m_table))
+    assert tables.column.max() > 0.0 and np.all(tables.spread_s >= 0.0)
