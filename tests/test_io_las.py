@@ -296,6 +296,27 @@ def test_las_extra_bytes_ranges_cover_all_chunks(tmp_path):
         assert s.min[0] == values.min() and s.max[0] == values.max(), name
 
 
+def test_regression_extra_bytes_ranges_skip_the_nan_of_points_without_a_surface(tmp_path):
+    """Regression: a campaign's pass and the same serial pass wrote different LAS headers.
+
+    Root cause: a point ranged on the water column has no surface, so its ``incidence_deg`` is nan; the writer
+    took each chunk's ``min()``/``max()`` (nan when the chunk holds one) and merged them with Python's ``min``,
+    whose answer with a nan depends on the order of its arguments. The range is now that of the known values,
+    in whatever order the chunks come.
+    """
+    chunks = [make_points(50, seed=s) for s in range(3)]
+    chunks[1].incidence_deg[:5] = np.nan
+    whole = PointRecords.concatenate(chunks)
+    expected = (np.nanmin(whole.incidence_deg), np.nanmax(whole.incidence_deg))
+    for order in ([0, 1, 2], [1, 0, 2], [2, 1, 0]):
+        with io.LasWriter(tmp_path / "p.las", offset_m=OFFSET) as las:
+            for i in order:
+                las.write(chunks[i])
+        structs = laspy.read(tmp_path / "p.las").header.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs
+        (s,) = [s for s in structs if bytes(s.name).rstrip(b"\0").decode() == "incidence_deg"]
+        assert (s.min[0], s.max[0]) == pytest.approx(expected, rel=1e-6), order
+
+
 def test_laspy_extra_bytes_range_bug_still_present(tmp_path):
     """Pins the laspy bug that ``_set_extra_bytes_ranges`` works around: this fails once laspy is fixed.
 

@@ -384,7 +384,10 @@ class LasWriter(StreamingWriter):
         for name, (dtype, _) in EXTRA_DIMENSIONS.items():
             values = getattr(r, name).astype(dtype, copy=False)
             pts[name] = values
-            lo, hi = values.min().item(), values.max().item()
+            known = values[~np.isnan(values)] if values.dtype.kind == "f" else values  # nan: no surface
+            if known.size == 0:
+                continue
+            lo, hi = known.min().item(), known.max().item()
             if name in self._extra_range:
                 old_lo, old_hi = self._extra_range[name]
                 lo, hi = min(lo, old_lo), max(hi, old_hi)
