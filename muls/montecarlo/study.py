@@ -133,7 +133,7 @@ def _detection_range(ranges, mc_peak, level):
 
 def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, packets: int = STUDY_PACKETS, seed: int = 0,
                               phase: str = "petzold", geometry: str = "mul2023", detection_shots: int = 200,
-                              check_ranges_m=CHECK_RANGES_M, attenuation_model: str | None = None) -> dict:
+                              check_ranges_m=CHECK_RANGES_M, attenuation_model: str = "small_angle") -> dict:
     """Monte Carlo over MULS per water: column peak, target echo, implied detection range, correction table.
 
     For each water one Monte Carlo run serves flat 0.1 plates at all ``ranges_m``, at ``check_ranges_m``
@@ -144,12 +144,15 @@ def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, pack
     (the far channel's threshold is fixed by its dark noise, so a peak level is what detection needs).
     ``geometry`` per range is the echo without scattering over Eq. 7 (:func:`geometry_factor`), and the
     effective attenuation is taken against it, so that it holds the propagation alone.
-    ``attenuation_model`` (default: each water's own) is the rule of MULS's maximum range, of the
-    correction table and of the column's ``under_echo`` comparison.
+    ``attenuation_model`` (one of :data:`ATTENUATION_RULES`; the Monte Carlo's own tables, every water's default,
+    are not compared with the Monte Carlo) is the rule of MULS's maximum range, of the correction table and of the
+    column's ``under_echo`` comparison.
     Returns {water: {...}, "settings": {...}}.
     """
     if geometry not in ("mul2023", "coaxial"):
         raise ParameterError(f"geometry = {geometry!r}: must be 'mul2023' or 'coaxial'")
+    if attenuation_model not in ATTENUATION_RULES:
+        raise ParameterError(f"attenuation_model = {attenuation_model!r}: must be one of {', '.join(ATTENUATION_RULES)}")
     instrument = instrument_preset(geometry)
     ph = check_phase(phase)
     t_all = time.perf_counter()
@@ -157,9 +160,7 @@ def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, pack
     geo_ranges = sorted({float(r) for r in list(ranges_m) + list(check_ranges_m)})
     geo = dict(zip(geo_ranges, geometry_factor(instrument, geo_ranges, seed=seed)))
     for name in ([waters] if isinstance(waters, str) else list(waters)):
-        w = water_preset(name)
-        if attenuation_model is not None:
-            w = w.with_models(attenuation_model=attenuation_model)
+        w = water_preset(name).with_models(attenuation_model=attenuation_model)
         t0 = time.perf_counter()
         r_det = (maxrange_study([name], shots=detection_shots, seed=seed, attenuation_model=w.attenuation_model)[name]
                  ["total_m"] if detection_shots else None)
