@@ -100,3 +100,22 @@ def test_a_run_for_a_custom_water_tabulates_what_the_model_needs():
     assert math.isclose(farthest_range_m(water), min(80.0, max(10.0, 40.0 / (2 * water.k_lidar_per_m))))
     assert np.all(np.isfinite(tables.attenuation_per_m_table))
     assert tables.column.max() > 0.0 and np.all(tables.spread_s >= 0.0)
+
+
+def test_a_scene_chooses_the_multiple_scattering_and_the_summary_says_which(tmp_path):
+    """``survey.multiple_scattering`` overrides the level's choice; the pass's model and its summary follow it, and
+    without the spread the turbid echoes come back earlier (their light no longer arrives late)."""
+    from scanner_sim.config import load_scene
+    from scanner_sim.survey.pipeline import run_pass
+    from scanner_sim.survey.setup import PassOptions
+
+    options = PassOptions(max_pulses=3000, render=False, progress=False, write_scene=False)
+    errors = {}
+    for choice in ("none", "table"):
+        config = load_scene("cable_survey").with_overrides({"water": "turbid_harbor",
+                                                            "survey.multiple_scattering": choice})
+        summary = run_pass(config, tmp_path / choice, options).summary
+        assert summary["settings"]["multiple_scattering"] == choice
+        assert summary["settings"]["attenuation_model"] == "monte_carlo"
+        errors[choice] = summary["range_error_m"]["median"]
+    assert errors["table"] > errors["none"] + 0.1

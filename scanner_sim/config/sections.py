@@ -16,6 +16,7 @@ from muls.water import (
     GROUP_INDEX_SEAWATER,
     Water,
 )
+from muls.waveform import MULTIPLE_SCATTERING
 from scanner_sim.config.base import (
     Choice,
     Integer,
@@ -293,6 +294,9 @@ class SurveyConfig(StrictModel):
     """Energy across the beam: uniform disc or Gaussian (1/e^2 at the edge)."""
     shadow_rays: bool | None = None
     """Visibility rays from each hit to the receiver, overriding the fidelity level's choice."""
+    multiple_scattering: Choice(*MULTIPLE_SCATTERING) | None = None
+    """The echo's spread in time and the Monte Carlo's column (``table``) or neither (``none``), overriding the
+    fidelity level's choice (muls.waveform.MULTIPLE_SCATTERING)."""
     start_s: NonNegative = 0.0
     """Start of the pass on the trajectory [s]."""
     duration_s: Positive | None = None
@@ -304,10 +308,13 @@ class SurveyConfig(StrictModel):
 
     @property
     def level(self) -> FidelityLevel:
-        """The fidelity level with this survey's ``subrays`` and ``shadow_rays`` overrides applied."""
+        """The fidelity level with this survey's ``subrays``, ``shadow_rays`` and ``multiple_scattering`` overrides
+        applied."""
         level = FIDELITY_LEVELS[self.fidelity]
         return replace(level, subrays=level.subrays if self.subrays is None else self.subrays,
-                       shadow_rays=level.shadow_rays if self.shadow_rays is None else self.shadow_rays)
+                       shadow_rays=level.shadow_rays if self.shadow_rays is None else self.shadow_rays,
+                       multiple_scattering=(level.multiple_scattering if self.multiple_scattering is None
+                                            else self.multiple_scattering))
 
 
 class OutputConfig(StrictModel):

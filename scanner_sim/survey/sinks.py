@@ -47,6 +47,8 @@ class PassFacts:
     record_mode: str
     subrays: int
     shadow_rays: bool
+    attenuation_model: str
+    multiple_scattering: str
     chunk_pulses: int
     max_pulses: int | None
     scene_file: str | None
@@ -255,6 +257,8 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
             "record_mode": facts.record_mode,
             "subrays": facts.subrays,
             "shadow_rays": facts.shadow_rays,
+            "attenuation_model": facts.attenuation_model,
+            "multiple_scattering": facts.multiple_scattering,
             "chunk_pulses": facts.chunk_pulses,
             "max_pulses": facts.max_pulses,
             "scene_file": facts.scene_file,
