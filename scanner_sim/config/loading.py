@@ -173,7 +173,11 @@ def parse_yaml_text(text: str, path: Path) -> dict:
             where = f" at offset {exc.position:,}"
         problem = getattr(exc, "problem", None) or (str(exc).splitlines() or ["unreadable"])[0]
         problem = " ".join(str(problem).split())
-        if isinstance(exc, _Refused):
+        if "nesting depth" in problem:
+            # PyYAML (6.0.4 here) has a nesting limit of its own (1,000), which its scanner may reach before the parser
+            # hands us the 33rd level: the user hears the project's limit either way.
+            problem = f"nested deeper than {MAX_DEPTH} levels"
+        if isinstance(exc, _Refused) or problem == f"nested deeper than {MAX_DEPTH} levels":
             raise ConfigError(f"{path}:{where}: {problem}") from None
         raise ConfigError(f"{path}: YAML syntax error{where}: {problem}") from None
     if data is None:
