@@ -37,9 +37,9 @@ from .overlap import TransceiverGeometry
 from .water import Water
 
 #: Version of the tables' content: a change to how they are built makes a new key (old files are not read).
-TABLE_FORMAT = 1
-#: Quantile nodes of the scattered part of an echo.
-SPREAD_NODES = 4
+TABLE_FORMAT = 2
+#: Quantile nodes of the scattered part of an echo (even: the model pairs them where the spread is narrow).
+SPREAD_NODES = 8
 #: Tables shipped with the package (the presets, with the instruments' geometries: python3 -m muls.montecarlo.shipped_tables).
 SHIPPED_DIR = Path(__file__).resolve().parent / "data" / "scattering"
 
