@@ -112,8 +112,8 @@ def test_regression_balanced_keeps_the_reference_range_bias_at_grazing_incidence
     in coastal water by 10 cm at 89 degrees and 13 cm at 89.5 against the reference. ``balanced`` now cuts the
     column where each sub-ray stops (fidelity.column_cuts) and stays within 5 cm of the reference, whose own
     bias moves less than 1 cm from 91 to 217 sub-rays. What is left is the sampling of the stretched footprint,
-    not the cut: with the Monte Carlo's echo spread the reference ranges the plate 11.3 cm short at 89 degrees,
-    ``balanced`` 15.7 cm, and the reference itself at 19 sub-rays 15.7 cm, at 37 sub-rays 11.5 cm (0.9 cm apart
+    not the cut: with the Monte Carlo's echo spread the reference ranges the plate 11.4 cm short at 89 degrees,
+    ``balanced`` 15.2 cm, and the reference itself at 19 sub-rays 15.2 cm, at 37 sub-rays 11.4 cm (1.1 cm apart
     at 89.5). ``fast``'s 7 sub-rays sample it coarser still: docs/fidelity.md gives its bias there."""
     from dataclasses import replace
 
@@ -162,8 +162,8 @@ def test_a_weak_echo_on_a_strong_column_is_ranged_early_by_the_documented_amount
 def test_multiply_scattered_light_ranges_a_turbid_echo_late_by_about_its_mean_delay(depth_m):
     """With the Monte Carlo's echo spread (multiple scattering ``table``) the peak of a turbid echo moves late by
     about the mean delay of its light behind the straight path, which the tables give independently of the
-    ranging ((1 - direct share) x the mean of the spread's nodes, as a range): 11.2 cm at 3 m and 13.1 cm at 4 m
-    in the turbid harbour; the ranging moves 11.3 and 13.9 cm. Without the spread it would not move, applied
+    ranging ((1 - direct share) x the mean of the spread's nodes, as a range): 11.2 cm at 3 m and 14.0 cm at 4 m
+    in the turbid harbour; the ranging moves 11.3 and 15.1 cm. Without the spread it would not move, applied
     twice it would move twice as far."""
     straight, _ = _plate_points("turbid_harbor", depth_m, "none")
     spread, setup = _plate_points("turbid_harbor", depth_m, "table")
