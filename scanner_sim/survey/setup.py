@@ -21,6 +21,7 @@ from muls.runtime import configure_process
 from muls.simulate import simulate
 from muls.waveform import OpticalModel, PulseBatch
 from scanner_sim.config import SceneConfig
+from scanner_sim.config.unit_slips import warn_unit_slips
 from scanner_sim.fidelity import FidelityLevel
 from scanner_sim.metrics.coverage import CoverageSettings, Footprint, nominal_footprint
 from scanner_sim.motion.scanner import Scanner
@@ -183,8 +184,10 @@ def checked_trajectory(config: SceneConfig, scene: Scene | None) -> Trajectory:
     """The trajectory of ``config`` over its built ``scene``, after the set-up checks: the pass's size, estimated
     before anything pass-sized is allocated (:func:`~scanner_sim.survey.budget.check_pass_budget`), and the built
     track against the water surface, the seabed and the objects
-    (:func:`~scanner_sim.motion.track_checks.build_trajectory`)."""
+    (:func:`~scanner_sim.motion.track_checks.build_trajectory`); values likely in another unit are warned about
+    (:func:`~scanner_sim.config.unit_slips.warn_unit_slips`)."""
     check_pass_budget(config)
+    warn_unit_slips(config)
     return build_trajectory(config, scene)
 
 
