@@ -179,7 +179,7 @@ def test_combination_names_are_unique_and_readable():
 
 #: Largest covered-fraction inversion accepted as a tie (0.1 % of the reached area). Where two combinations
 #: both map all but a few cells, those cells (single pulses on steep, saturating facets, out_of_tolerance)
-#: decide: the seed-to-seed spread of the same combination is 0.06 % (docs/coverage.md, lawnmower at 3 m).
+#: decide: the same combination varies with the seed by one cell, 0.007 % (docs/coverage.md, lawnmower at 3 m).
 TIE = 0.001
 SURVEY_SCENES = ("cable_survey", "mine_field", "seabed_lawnmower")
 ALTITUDES_M = (3.0, 5.0, 8.0, 12.0)
@@ -213,7 +213,8 @@ def test_coverage_falls_with_turbidity_and_altitude_and_multichannel_wins(scene,
         assert all(lo <= hi + TIE for hi, lo in zip(turbid, turbid[1:])), turbid
         assert turbid[-1] < turbid[0] - 0.3, turbid
     # Detected: a cell with a point, within the tolerance or not. Multiply scattered light ranges a turbid echo
-    # long (22 cm at 5 m, docs/coverage.md), past the tolerance, whichever instrument detects it.
+    # long (first returns +0.39 m under the track at 6 m slant range, docs/coverage.md), past the tolerance,
+    # whichever instrument detects it.
     detected = lambda w, i, a: frac(w, i, a) + cov[(w, i, a)]["gaps_m2"]["out_of_tolerance"] / \
         cov[(w, i, a)]["reached_area_m2"]  # noqa: E731
     for (w, i, a), r in cov.items():
