@@ -5,11 +5,13 @@ A second run into a folder being written is refused with one line. In every case
 output folder is left as it was.
 
 Each test runs ``scanner-sim run`` in a subprocess: pool_panel at the fast fidelity with many pulses, so that
-the pass is still writing its chunks when it is interrupted.
+the pass is still writing its chunks when it is interrupted. The Monte Carlo's commands (``muls multiscatter``,
+``muls mobley1993``) with a billion packets answer the same signals within seconds.
 """
 
 import json
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -157,3 +159,58 @@ def test_full_disk_is_one_line_and_leaves_no_partial_file(tmp_path):
         _no_leftovers(out)
     finally:
         subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+
+
+#: muls commands whose Monte Carlo runs far longer than any test, and the same with a few packets (which starts the
+#: command, loads its kernels and runs to the end).
+LONG_MONTE_CARLO = {"multiscatter": ["multiscatter", "--water", "pond", "--range-m", "5", "--no-plot", "--packets"],
+                    "mobley1993": ["mobley1993", "--no-plot", "--photons"]}
+#: How soon after the signal the command must have ended [s]: a run is traced in parts of about half a second
+#: (muls.montecarlo.run.PART_S); the rest is margin for a loaded machine.
+ANSWER_S = 5.0
+
+
+def _cpu_s(pid: int) -> float:
+    """CPU seconds the process has used, all threads (/proc/PID/stat: utime and stime)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+@pytest.mark.parametrize("command", list(LONG_MONTE_CARLO))
+@pytest.mark.parametrize("sig, code, word", [(signal.SIGINT, 130, "interrupted (Ctrl-C)"),
+                                             (signal.SIGTERM, 143, "terminated (SIGTERM)")])
+def test_monte_carlo_answers_ctrl_c_and_sigterm_within_seconds(command, sig, code, word, tmp_path):
+    """``muls multiscatter --packets 1e9`` (and multiscatter-study, validate-pass --packets, mobley1993 --photons)
+    ran for minutes and ignored Ctrl-C and SIGTERM. Root cause: the whole run was one call of a compiled numba
+    kernel, and Python runs its signal handlers only between bytecodes, so the handler waited for the kernel to
+    return. Runs are now traced in parts of about half a second, each batch's packets in the same order, and the
+    signal takes effect between two parts."""
+    argv = [sys.executable, "-m", "muls.cli", *LONG_MONTE_CARLO[command]]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    short = subprocess.run([*argv, "40"], capture_output=True, text=True, env=_env(), cwd=tmp_path,
+                           timeout=START_TIMEOUT_S)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert short.returncode == 0, short.stderr
+    start_cpu_s = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)  # a whole short command
+    proc = subprocess.Popen([*argv, "1000000000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=_env(), cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while _cpu_s(proc.pid) < start_cpu_s + 3.0:  # past its start: in the Monte Carlo's kernels
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+            time.sleep(0.2)
+        proc.send_signal(sig)
+        sent = time.monotonic()
+        try:
+            _, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"muls {command} was still running 30 s after the signal")
+        answered_s = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == code, err
+    lines = _stderr_lines(err)
+    assert len(lines) == 1 and word in lines[0] and "Traceback" not in err, err
+    assert answered_s < ANSWER_S, f"ended {answered_s:.1f} s after the signal"

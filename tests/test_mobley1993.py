@@ -243,6 +243,20 @@ def test_seed_fixes_the_result_whatever_the_thread_count():
     assert not np.array_equal(one.per_batch, other.per_batch)
 
 
+def test_seed_fixes_the_result_whatever_the_parts(monkeypatch):
+    """A run is traced in parts so that a signal can end it (muls.montecarlo.run.in_parts): one packet a part
+    gives the same tallies to the bit as the run in one part."""
+    import muls.montecarlo.run as run
+
+    args = ("mobley1993_particle", 0.9, [1.0, 5.0])
+    monkeypatch.setattr(run, "FIRST_PART_PACKETS", 10**9)
+    whole = run_slab(*args, packets=4_000, seed=9)
+    monkeypatch.setattr(run, "FIRST_PART_PACKETS", 1)
+    monkeypatch.setattr(run, "PART_S", 0.0)
+    parts = run_slab(*args, packets=4_000, seed=9)
+    assert np.array_equal(whole.per_batch, parts.per_batch) and whole.energy == parts.energy
+
+
 def test_bad_settings_are_rejected_with_their_name():
     for kwargs, key in (({"albedo": 1.5}, "albedo"), ({"depths_m": [5.0, 1.0]}, "depths_m"),
                         ({"depths_m": [0.0, 1.0]}, "depths_m"), ({"sun_zenith_deg": 90.0}, "sun_zenith_deg"),

@@ -314,6 +314,23 @@ def test_seed_fixes_the_result_whatever_the_thread_count():
     assert not np.array_equal(one.column, other.column)
 
 
+def test_seed_fixes_the_result_whatever_the_parts(monkeypatch):
+    """A run is traced in parts so that a signal can end it (muls.montecarlo.run.in_parts): one packet a part
+    gives the same tallies to the bit as the run in one part."""
+    import muls.montecarlo.run as run
+
+    args = (mul2023(), water_preset("coastal_ocean"), TargetPlanes((4.0, 8.0), 0.1))
+    monkeypatch.setattr(run, "FIRST_PART_PACKETS", 10**9)
+    whole = run_monte_carlo(*args, packets=4_000, seed=9)
+    monkeypatch.setattr(run, "FIRST_PART_PACKETS", 1)
+    monkeypatch.setattr(run, "PART_S", 0.0)
+    parts = run_monte_carlo(*args, packets=4_000, seed=9)
+    for name in ("column", "column_first", "target_le", "target_direct", "scattered_return", "scattered_beam",
+                 "scattered_receiver", "counted"):
+        assert np.array_equal(getattr(whole, name), getattr(parts, name)), name
+    assert whole.energy == parts.energy
+
+
 def test_bad_settings_are_rejected_with_their_name():
     with pytest.raises(ValueError, match="ranges_m"):
         TargetPlanes((5.0, 3.0))

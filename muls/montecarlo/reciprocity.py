@@ -71,11 +71,12 @@ def grid_cell(k, x, y, z, origin, e1, e2, edges, n_phi):
 
 
 @kernel(parallel=True)
-def trace_receiver(seed_key, first_packet, n_packets, geo, water, scene, sample_theta, times, field):
+def trace_receiver(seed_key, first_packet, n_packets, geo, water, scene, sample_theta, times, field, part):
     """Trace receiver packets (unit weight each) to the planes; tally the scattered ones' first arrivals.
 
     field (B, K, cells, G): sum of packet weights over the cell's area [1/m^2] by arrival time from the
-    grid start of plane k; the caller scales by the etendue per packet.
+    grid start of plane k; the caller scales by the etendue per packet. part: (start, stop), the packets of each
+    batch's share this call traces (:func:`muls.montecarlo.run.in_parts`).
     """
     n, e1, e2, depth, origin, edges, grid_start, n_phi, _ = scene
     n_batches = field.shape[0]
@@ -86,7 +87,7 @@ def trace_receiver(seed_key, first_packet, n_packets, geo, water, scene, sample_
     t_end = grid_start[n_planes - 1] + n_g * gdt
     sin2 = fov_tan * fov_tan / (1.0 + fov_tan * fov_tan)
     for batch in numba.prange(n_batches):
-        lo, hi = batch_packets(batch, first_packet, n_packets, n_batches)
+        lo, hi = batch_packets(batch, first_packet, n_packets, n_batches, part)
         for pid in range(lo, hi):
             state = packet_stream(seed_key, 1, pid)
             state, u1 = uniform(state)

@@ -34,6 +34,12 @@ BATCHES = 20
 #: is smooth, and its error is then well below the column's.
 RECEIVER_SHARE = 4
 MAX_TILT_RAD = math.radians(60.0)
+#: A run is traced in parts lasting about this long [s]: a compiled kernel cannot be interrupted, so Ctrl-C and
+#: SIGTERM take effect between two parts. Each batch traces its packets in the same order whatever the parts, so
+#: the result is the same to the bit.
+PART_S = 0.5
+#: Packets per batch in a run's first part; each next part is sized from the last one's pace, at most 4 times it.
+FIRST_PART_PACKETS = 64
 
 #: Energy budget keys, in the order of the kernels' columns (muls.montecarlo.transport.EMITTED ...).
 ENERGY_KEYS = ("emitted", "absorbed_by_water", "escaped_behind_instrument", "escaped_time_window",
@@ -146,6 +152,19 @@ def var_of_mean(per_batch: np.ndarray) -> np.ndarray:
     return per_batch.var(axis=0, ddof=1) / per_batch.shape[0]
 
 
+def in_parts(trace, per_batch: int) -> None:
+    """``trace(part)`` over the offsets [0, ``per_batch``) into every batch's share, in parts (start, stop) each
+    sized to last about :data:`PART_S` at the pace of the one before: a signal ends the run between two parts."""
+    start, size = 0, FIRST_PART_PACKETS
+    while start < per_batch:
+        stop = min(per_batch, start + size)
+        t0 = time.perf_counter()
+        trace((start, stop))
+        seconds = time.perf_counter() - t0
+        size = max(1, min(4 * size, int(PART_S * (stop - start) / seconds) if seconds > 0.0 else 4 * size))
+        start = stop
+
+
 def seed_key(seed: int) -> np.uint64:
     """The 64-bit key of the packets' counter-based streams for ``seed`` (an integer >= 0)."""
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
@@ -227,10 +246,12 @@ def run_monte_carlo(instrument: Instrument, water: Water, targets: TargetPlanes 
     energy = np.zeros((batches, len(ENERGY_KEYS)))
     field_r = np.zeros((batches, K, cells, n_g))
     t0 = time.perf_counter()
-    transport.trace_beam(key, first_packet, packets, geo, wat, scene, tables, times,
-                         (column, column1, target, target_direct, hits, counted, energy), transport.split_stack(batches))
+    stack = transport.split_stack(batches)
+    in_parts(lambda part: transport.trace_beam(key, first_packet, packets, geo, wat, scene, tables, times, (
+        column, column1, target, target_direct, hits, counted, energy), stack, part), packets // batches)
     if K:
-        trace_receiver(key, first_packet, receiver_packets, geo, wat, scene, phase.sample_theta_rad, times, field_r)
+        in_parts(lambda part: trace_receiver(key, first_packet, receiver_packets, geo, wat, scene,
+                                             phase.sample_theta_rad, times, field_r, part), receiver_packets // batches)
     seconds = time.perf_counter() - t0
 
     per_beam = packets // batches

@@ -88,10 +88,13 @@ def aperture_point(state, px, py, pz, ap_x, ap_r, fov_tan):
 
 
 @kernel(inline="always")
-def batch_packets(batch, first_packet, n_packets, n_batches):
-    """The packet numbers [lo, hi) that batch ``batch`` of ``n_batches`` traces, in order: a batch's share is fixed
-    by the counts alone, so a seed fixes the result whatever the thread count."""
-    return first_packet + batch * n_packets // n_batches, first_packet + (batch + 1) * n_packets // n_batches
+def batch_packets(batch, first_packet, n_packets, n_batches, part):
+    """The packet numbers [lo, hi) that batch ``batch`` of ``n_batches`` traces, in order, within ``part`` = (start,
+    stop), offsets into the batch's share: a batch's share is fixed by the counts alone, so a seed fixes the result
+    whatever the thread count, and a run traced part after part adds its packets in the same order as one call."""
+    lo = first_packet + batch * n_packets // n_batches
+    hi = first_packet + (batch + 1) * n_packets // n_batches
+    return min(hi, lo + part[0]), min(hi, lo + part[1])
 
 
 @kernel(inline="always")

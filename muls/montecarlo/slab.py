@@ -49,7 +49,7 @@ import numpy as np
 from ..errors import ParameterError, check_fraction, check_non_negative, check_positive
 from ..phase import PhaseFunction, check_phase, cumulative_at, value_at
 from ..runtime import kernel
-from .run import BATCHES, seed_key, var_of_mean
+from .run import BATCHES, in_parts, seed_key, var_of_mean
 from .sampling import angle, batch_packets, free_path, packet_stream, turn, uniform
 
 #: Crossings closer to horizontal than this cosine count as 2 / MU_CUT in the scalar irradiances.
@@ -101,7 +101,7 @@ def _cross(tallies, batch, depths, z, dz, step, w, a):
 
 @kernel(parallel=True)
 def trace_slab(seed_key, stream, n_packets, mu_w, a, b, n_water, depths, bottom_m, roulette, max_orders, phase, tallies,
-               energy):
+               energy, part):
     """Trace ``n_packets`` packets of the refracted sun in ``tallies.shape[0]`` batches (one thread per batch).
 
     mu_w: cosine of the refracted sun's angle from the nadir; a, b [1/m]; n_water: refractive index of the
@@ -109,7 +109,8 @@ def trace_slab(seed_key, stream, n_packets, mu_w, a, b, n_water, depths, bottom_
     [m]; roulette: the threshold over exp(-c z / mu_w); max_orders: the most scatterings a packet undergoes
     (-1: no limit); phase = (sampling table, ln p table, ln theta of its first point, 1 / its step).
     tallies (B, 5, K): sums over each batch's packets of the rows ED .. LU (weights, not yet divided by the
-    packets); energy (B, 6): the budget columns TRANSMITTED .. STOPPED.
+    packets); energy (B, 6): the budget columns TRANSMITTED .. STOPPED. part: (start, stop), the packets of each
+    batch's share this call traces (:func:`muls.montecarlo.run.in_parts`).
     """
     n_batches = tallies.shape[0]
     n_k = depths.shape[0]
@@ -118,7 +119,7 @@ def trace_slab(seed_key, stream, n_packets, mu_w, a, b, n_water, depths, bottom_
     cap = cumulative_at(sample, CONE_RAD) / (2.0 * math.pi * (1.0 - math.cos(CONE_RAD)))
     sin_w = math.sqrt(max(0.0, 1.0 - mu_w * mu_w))
     for batch in numba.prange(n_batches):
-        lo, hi = batch_packets(batch, 0, n_packets, n_batches)
+        lo, hi = batch_packets(batch, 0, n_packets, n_batches, part)
         for pid in range(lo, hi):
             state = packet_stream(seed_key, stream, pid)
             z, dx, dy, dz = 0.0, sin_w, 0.0, mu_w
@@ -244,9 +245,11 @@ def run_slab(phase: str | PhaseFunction, albedo: float, depths_m, attenuation_pe
     ln_p, ln_theta0, inv_step = phase.log_table
     tallies, energy = empty_tallies(batches, depths.size)
     t0 = time.perf_counter()
-    trace_slab(seed_key(seed), int(stream), packets, mu_w, (1.0 - albedo) * c, albedo * c, float(water_index),
-               depths, bottom, float(roulette), -1 if max_orders is None else int(max_orders),
-               (phase.sample_theta_rad, ln_p, ln_theta0, inv_step), tallies, energy)
+    in_parts(lambda part: trace_slab(seed_key(seed), int(stream), packets, mu_w, (1.0 - albedo) * c, albedo * c,
+                                     float(water_index), depths, bottom, float(roulette),
+                                     -1 if max_orders is None else int(max_orders),
+                                     (phase.sample_theta_rad, ln_p, ln_theta0, inv_step), tallies, energy, part),
+             packets // batches)
     seconds = time.perf_counter() - t0
 
     scale = mu_s * transmitted / (packets // batches)  # a packet stands for the transmitted E_perp cos T

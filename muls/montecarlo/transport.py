@@ -236,7 +236,7 @@ def launch_ghosts(state, batch, x, y, z, dx, dy, dz, w, t, nxt, n_scat, geo, wat
 
 
 @kernel(parallel=True)
-def trace_beam(seed_key, first_packet, n_packets, geo, water, scene, phase, times, tallies, stack):
+def trace_beam(seed_key, first_packet, n_packets, geo, water, scene, phase, times, tallies, stack, part):
     """Trace ``n_packets`` beam packets in ``tallies[0].shape[0]`` batches (one thread per batch, packet order).
 
     tallies = (column, column1, target, target_direct, hits, counted, energy), per batch (sums of packet
@@ -245,7 +245,8 @@ def trace_beam(seed_key, first_packet, n_packets, geo, water, scene, phase, time
     only; target (B, K, T), target_direct (B, K, T): unscattered-return estimate at the hits of plane k,
     all outbound orders and unscattered beam only; hits (B, K, cells, G): (rho/pi) w of the hits binned on
     the receiver grid and in time from the grid start of plane k; counted (B, T): packets that cross the
-    aperture within the field of view; energy (B, 6). stack: see :func:`split_stack`.
+    aperture within the field of view; energy (B, 6). stack: see :func:`split_stack`. part: (start, stop), the
+    packets of each batch's share this call traces (:func:`muls.montecarlo.run.in_parts`).
     """
     column, counted, energy = tallies[0], tallies[5], tallies[6]
     n, e1, e2, depth = scene[0], scene[1], scene[2], scene[3]
@@ -258,7 +259,7 @@ def trace_beam(seed_key, first_packet, n_packets, geo, water, scene, phase, time
     a, b, c, speed = water[0], water[1], water[2], water[3]
     dt, n_t, t_end = times[0], int(times[1]), times[4]
     for batch in numba.prange(n_batches):
-        lo, hi = batch_packets(batch, first_packet, n_packets, n_batches)
+        lo, hi = batch_packets(batch, first_packet, n_packets, n_batches, part)
         for pid in range(lo, hi):
             state = packet_stream(seed_key, 0, pid)
             state, u1 = uniform(state)
