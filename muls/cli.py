@@ -62,6 +62,17 @@ def _count(option: str, value: int) -> int:
     return value
 
 
+def _packets(option: str, value: int, factor: int = 1) -> int:
+    """A count of Monte Carlo packets, a run tracing up to ``factor`` times it: at most what its 64-bit packet
+    numbers allow (:func:`muls.montecarlo.run.max_packets`)."""
+    from .montecarlo.run import max_packets
+
+    limit = max_packets() // factor
+    if _count(option, value) > limit:
+        raise ValueError(f"{option} = {value}: at most {limit:,} (the Monte Carlo numbers its packets in 64 bits)")
+    return value
+
+
 def _gate_s(args) -> tuple[float | None, float | None]:
     delay = None if args.gate_delay_ns is None else args.gate_delay_ns * 1e-9
     width = None if args.gate_width_ns is None else _positive("--gate-width-ns", args.gate_width_ns) * 1e-9
@@ -272,7 +283,7 @@ MULTISCATTER_KEYS = ("time_ns", "mc_w", "mc_rel_err", "muls_w", "mc_column_w", "
 
 def _cmd_multiscatter(args):
     full = montecarlo.multiscatter_study(_water_name(args.water), _positive("--range-m", args.range_m),
-                                         geometry=_geometry(args.geometry), packets=_count("--packets", args.packets),
+                                         geometry=_geometry(args.geometry), packets=_packets("--packets", args.packets),
                                          seed=args.seed, reflectance=args.reflectance,
                                          attenuation_model=_attenuation(args.attenuation))
     d = full["details"]
@@ -303,7 +314,7 @@ def _cmd_multiscatter(args):
 
 def _cmd_multiscatter_study(args):
     waters = [_water_name(w) for w in args.waters]
-    result = montecarlo.multiscatter_waters_study(waters, packets=_count("--packets", args.packets), seed=args.seed,
+    result = montecarlo.multiscatter_waters_study(waters, packets=_packets("--packets", args.packets), seed=args.seed,
                                                   geometry=_geometry(args.geometry),
                                                   attenuation_model=_attenuation(args.attenuation))
     s = result["settings"]
@@ -345,7 +356,8 @@ def _cmd_multiscatter_study(args):
 
 
 def _cmd_mobley1993(args):
-    result = montecarlo.mobley1993_benchmark(photons=args.photons, seed=args.seed)
+    photons = _packets("--photons", args.photons, max(montecarlo.mobley1993.PHOTON_FACTOR.values()))
+    result = montecarlo.mobley1993_benchmark(photons=photons, seed=args.seed)
     records = result["problems"]
     lines = [f"Mobley et al. (1993) problems 1 and 2 (sun at 60 deg in a black sky, level surface, n 1.34, infinitely "
              f"deep): Monte Carlo beside Table 5, {result['photons']:,} photons per run at albedo 0.9 "
@@ -371,7 +383,7 @@ def _cmd_mobley1993(args):
 def _cmd_validate_pass(args):
     from .montecarlo.validate import validate_pass, within_acceptance
 
-    full = validate_pass(tuple(_water_name(w) for w in args.waters), packets=_count("--packets", args.packets),
+    full = validate_pass(tuple(_water_name(w) for w in args.waters), packets=_packets("--packets", args.packets),
                          seed=args.seed)
     lines = [f"the pass's waveform model (monte_carlo attenuation, finite aperture, multiple scattering from the tables) "
              f"over a Monte Carlo run of its own ({full['packets']:,} packets, seed {full['seed']}, {full['seconds']:.0f} "

@@ -261,7 +261,7 @@ def test_bad_settings_are_rejected_with_their_name():
     for kwargs, key in (({"albedo": 1.5}, "albedo"), ({"depths_m": [5.0, 1.0]}, "depths_m"),
                         ({"depths_m": [0.0, 1.0]}, "depths_m"), ({"sun_zenith_deg": 90.0}, "sun_zenith_deg"),
                         ({"max_orders": -1}, "max_orders"), ({"bottom_m": 2.0}, "bottom_m"),
-                        ({"packets": 0}, "packets")):
+                        ({"packets": 0}, "packets"), ({"packets": 10**20}, "packets")):
         args = {"phase": "rayleigh", "albedo": 0.5, "depths_m": [1.0, 5.0], **kwargs}
         with pytest.raises(ValueError, match=key):
             run_slab(**args)

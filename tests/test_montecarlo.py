@@ -331,6 +331,12 @@ def test_seed_fixes_the_result_whatever_the_parts(monkeypatch):
     assert whole.energy == parts.energy
 
 
+def test_packets_beyond_64_bit_numbers_are_refused_with_their_name():
+    """Packet numbers are 64-bit in the kernels: 10**20 packets ended in numba's TypingError (an internal error)."""
+    with pytest.raises(ValueError, match=r"packets = 100000000000000000000: at most .* 2\*\*63"):
+        run_monte_carlo(mul2023(), water_preset("pool"), TargetPlanes((3.0,)), packets=10**20)
+
+
 def test_bad_settings_are_rejected_with_their_name():
     with pytest.raises(ValueError, match="ranges_m"):
         TargetPlanes((5.0, 3.0))

@@ -40,6 +40,9 @@ MAX_TILT_RAD = math.radians(60.0)
 PART_S = 0.5
 #: Packets per batch in a run's first part; each next part is sized from the last one's pace, at most 4 times it.
 FIRST_PART_PACKETS = 64
+#: The kernels number packets in 64-bit integers, and a batch's share as batch x packets: packets x batches (plus
+#: the first packet's number) must stay below 2**63.
+MAX_PACKET_NUMBER = 2**63 - 1
 
 #: Energy budget keys, in the order of the kernels' columns (muls.montecarlo.transport.EMITTED ...).
 ENERGY_KEYS = ("emitted", "absorbed_by_water", "escaped_behind_instrument", "escaped_time_window",
@@ -152,6 +155,23 @@ def var_of_mean(per_batch: np.ndarray) -> np.ndarray:
     return per_batch.var(axis=0, ddof=1) / per_batch.shape[0]
 
 
+def max_packets(batches: int = BATCHES, first_packet: int = 0) -> int:
+    """The most packets a run in ``batches`` batches may trace (:data:`MAX_PACKET_NUMBER`), a multiple of
+    ``batches`` (a run rounds its packets up to one)."""
+    return (MAX_PACKET_NUMBER - first_packet) // batches // batches * batches
+
+
+def check_packets(key: str, packets, batches: int = BATCHES, first_packet: int = 0) -> int:
+    """``packets`` as an int, or a :class:`ParameterError` naming ``key`` when it is not an integer from 1 to
+    :func:`max_packets`."""
+    if isinstance(packets, bool) or int(packets) != packets or packets < 1:
+        raise ParameterError(f"{key} = {packets!r}: must be an integer >= 1")
+    if packets > max_packets(batches, first_packet):
+        raise ParameterError(f"{key} = {packets!r}: at most {max_packets(batches, first_packet):,} (the Monte Carlo "
+                             f"numbers its packets in 64 bits, {batches} batches x packets < 2**63)")
+    return int(packets)
+
+
 def in_parts(trace, per_batch: int) -> None:
     """``trace(part)`` over the offsets [0, ``per_batch``) into every batch's share, in parts (start, stop) each
     sized to last about :data:`PART_S` at the pace of the one before: a signal ends the run between two parts."""
@@ -193,8 +213,8 @@ def run_monte_carlo(instrument: Instrument, water: Water, targets: TargetPlanes 
         raise ParameterError(f"batches = {batches!r}: must be an integer >= 2")
     batches = int(batches)
     for key, v in (("packets", packets), ("receiver_packets", receiver_packets)):
-        if v is not None and (isinstance(v, bool) or int(v) != v or v < 1):
-            raise ParameterError(f"{key} = {v!r}: must be an integer >= 1")
+        if v is not None:
+            check_packets(key, v, batches, first_packet)
     packets = -(-int(packets) // batches) * batches
     if receiver_packets is None:
         receiver_packets = max(batches, packets // RECEIVER_SHARE)

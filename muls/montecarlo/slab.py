@@ -49,7 +49,7 @@ import numpy as np
 from ..errors import ParameterError, check_fraction, check_non_negative, check_positive
 from ..phase import PhaseFunction, check_phase, cumulative_at, value_at
 from ..runtime import kernel
-from .run import BATCHES, in_parts, seed_key, var_of_mean
+from .run import BATCHES, check_packets, in_parts, seed_key, var_of_mean
 from .sampling import angle, batch_packets, free_path, packet_stream, turn, uniform
 
 #: Crossings closer to horizontal than this cosine count as 2 / MU_CUT in the scalar irradiances.
@@ -226,10 +226,10 @@ def run_slab(phase: str | PhaseFunction, albedo: float, depths_m, attenuation_pe
     depths = np.atleast_1d(np.asarray(depths_m, float))
     if depths.size == 0 or not np.all(np.isfinite(depths)) or depths[0] <= 0.0 or np.any(np.diff(depths) <= 0.0):
         raise ParameterError(f"depths_m = {depths.tolist()!r}: must be finite, > 0 and strictly ascending [m]")
-    for key, v in (("packets", packets), ("batches", batches)):
-        if isinstance(v, bool) or int(v) != v or v < (2 if key == "batches" else 1):
-            raise ParameterError(f"{key} = {v!r}: must be an integer >= {2 if key == 'batches' else 1}")
+    if isinstance(batches, bool) or int(batches) != batches or batches < 2:
+        raise ParameterError(f"batches = {batches!r}: must be an integer >= 2")
     batches = int(batches)
+    check_packets("packets", packets, batches)
     packets = -(-int(packets) // batches) * batches
     c = float(attenuation_per_m)
     bottom = depths[-1] + BOTTOM_MARGIN_TAU / c if bottom_m is None else float(bottom_m)
