@@ -42,6 +42,7 @@ from .command import (
 )
 from .presets import WATER_PRESETS
 from .runtime import configure_process
+from .studies.common import check_pulse_memory
 
 
 def _water_name(name: str) -> str:
@@ -59,6 +60,13 @@ def _positive(option: str, value: float) -> float:
 def _count(option: str, value: int) -> int:
     if value < 1:
         raise ValueError(f"{option} {value!r}: must be an integer >= 1")
+    return value
+
+
+def _shots(option: str, value: int, per_shot: int, what: str, unit: str = "shots", mode: str = "windowed") -> int:
+    """A count of pulses, ``per_shot`` of them in one simulate call each (``what`` they are, e.g. "3 distances"):
+    refused before allocating when that call needs more memory than the command may plan on."""
+    check_pulse_memory(option, _count(option, value), per_shot, f"{what}{value:,} {unit}", unit, mode)
     return value
 
 
@@ -119,7 +127,10 @@ def _cmd_waveform(args):
 
 def _cmd_maxrange(args):
     waters = [_water_name(w) for w in args.waters]
-    result = studies.maxrange_study(waters, shots=_count("--shots", args.shots), seed=args.seed,
+    from .studies.maxrange import MAX_BATCH_RANGES
+
+    shots = _shots("--shots", args.shots, MAX_BATCH_RANGES, f"up to {MAX_BATCH_RANGES} ranges at once x ")
+    result = studies.maxrange_study(waters, shots=shots, seed=args.seed,
                                     reflectance=args.reflectance, attenuation_model=_attenuation(args.attenuation))
     s = result["settings"]
     lines = [f"maximum detectable range [m]: reflectance {s['reflectance']:g}, >= {s['detection_fraction']:.0%} "
@@ -148,7 +159,8 @@ def _cmd_maxrange(args):
 def _cmd_precision(args):
     delay, width = _gate_s(args)
     ranges = [_positive("--ranges-m", r) for r in args.ranges_m]
-    result = studies.precision_study(_water_name(args.water), ranges, shots=_count("--shots", args.shots),
+    shots = _shots("--shots", args.shots, len(ranges), f"{len(ranges)} ranges x ")
+    result = studies.precision_study(_water_name(args.water), ranges, shots=shots,
                                      seed=args.seed, reflectance=args.reflectance, gate_delay_s=delay,
                                      gate_width_s=width, attenuation_model=_attenuation(args.attenuation))
     s = result["settings"]
@@ -196,7 +208,8 @@ def _cmd_experiment(args):
     from .experiments import experiment_preset
 
     exp = experiment_preset(_experiment_name(args.experiment), _attenuation(args.attenuation))
-    full = studies.experiment_study(exp, shots=_count("--shots", args.shots), seed=args.seed,
+    shots = _shots("--shots", args.shots, len(exp.distances_m), f"{len(exp.distances_m)} distances x ")
+    full = studies.experiment_study(exp, shots=shots, seed=args.seed,
                                     ranging=_ranging(args.ranging), waveforms=not args.no_plot)
     s = full["settings"]
     lines = [f"experiment {s['experiment']}: panel {s['reflectance']:g} at {', '.join(f'{d:g}' for d in s['distances_m'])} m"
@@ -256,8 +269,8 @@ def _cmd_coaxial(args):
 
 
 def _cmd_bench(args):
-    result = studies.bench_study(pulses=_count("--pulses", args.pulses),
-                                 full_pulses=_count("--full-pulses", args.full_pulses),
+    result = studies.bench_study(pulses=_shots("--pulses", args.pulses, 1, "", "windowed pulses"),
+                                 full_pulses=_shots("--full-pulses", args.full_pulses, 1, "", "full records", "full"),
                                  repeats=_count("--repeats", args.repeats))
     m = result["machine"]
     lines = [f"simulate (waveform + digitise + ranging), {result['settings']['water']}, mul2023, "

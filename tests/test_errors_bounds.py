@@ -1,11 +1,79 @@
 """Reliability, bounded before it starts: every count and size a user gives is checked against what the machine can
 do before anything is allocated, and refused with exit 2 and one line naming the option, its value and its limit
 (docs/errors.md, "Command-line arguments").
+
+Each case runs the command in a subprocess with its address space capped (RLIMIT_AS), so that code without the
+check fails fast and harmlessly (a MemoryError, or VTK's abort) instead of filling the machine's memory.
 """
+
+import os
+import re
+import resource
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
 from muls.cli import main as muls_main
+
+REPO = Path(__file__).resolve().parents[1]
+#: The address space of each subprocess [bytes]: a command starts in well under this.
+CAP_BYTES = 6 * 2**30
+#: What a refusal ends with: the limit on this machine, in the option's own terms.
+LIMIT = r"; (at most [\d,]+ [a-z ()]+|cells of at least [\d.e-]+ m) on this machine$"
+#: The memory figures of a refusal (muls.memory.check_memory).
+MEMORY = (r" would need about [\d,.]+ [GM]B of memory, more than the [\d,.]+ [GM]B it may use "
+          r"\(80% of the [\d,.]+ [GM]B available\)")
+
+
+def _run(module: str, *argv: str, cwd: Path) -> subprocess.CompletedProcess:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    env.pop("MULS_TRACEBACK", None)
+    return subprocess.run([sys.executable, "-m", module, *argv], capture_output=True, text=True, env=env, cwd=cwd,
+                          timeout=300, preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (CAP_BYTES, CAP_BYTES)))
+
+
+def _lines(stderr: str) -> list[str]:
+    """stderr without the set-up's warnings (pool_panel's gate) and the first-run notice."""
+    return [line for line in stderr.strip().splitlines() if ": warning: " not in line and not line.startswith("first run:")]
+
+
+MEMORY_CASES = {
+    "experiment --shots": ("muls.cli", "muls experiment", ["experiment", "pond", "--shots", "1000000000", "--no-plot"],
+                           "--shots = 1000000000: 3 distances x 1,000,000,000 shots"),
+    "maxrange --shots": ("muls.cli", "muls maxrange", ["maxrange", "--shots", "1000000000", "--no-plot"],
+                         "--shots = 1000000000: up to 36 ranges at once x 1,000,000,000 shots"),
+    "precision --shots": ("muls.cli", "muls precision", ["precision", "--shots", "1000000000", "--no-plot"],
+                          "--shots = 1000000000: 3 ranges x 1,000,000,000 shots"),
+    "bench --pulses": ("muls.cli", "muls bench", ["bench", "--pulses", "1000000000"],
+                       "--pulses = 1000000000: 1,000,000,000 windowed pulses"),
+    "bench --full-pulses": ("muls.cli", "muls bench", ["bench", "--full-pulses", "100000000"],
+                            "--full-pulses = 100000000: 100,000,000 full records"),
+    "tradeoff --pulses": ("scanner_sim.cli", "scanner-sim tradeoff", ["tradeoff", "pool_panel", "--pulses", "1000000000"],
+                          "--pulses = 1000000000: 14 runs keeping the points of 1,000,000,000 pulses and the records of 500"),
+    "coverage --cell-m": ("scanner_sim.cli", "scanner-sim coverage", ["coverage", "--cell-m", "0.0001", "--workers", "0"],
+                          "--cell-m = 0.0001: coverage over 42,000,000,000 cells of the 30 x 14 m seabed, 1 pass at once,"),
+    "bench-rays --pulses": ("scanner_sim.cli", "scanner-sim bench-rays", ["bench-rays", "--pulses", "100000000"],
+                            "--pulses = 100000000: a chunk of 100,000,000 pulses x 19 sub-rays"),
+}
+
+
+@pytest.mark.parametrize("case", list(MEMORY_CASES))
+def test_counts_beyond_the_memory_are_refused_before_allocating_not_out_of_memory_naming_chunk_pulses(case, tmp_path):
+    """``--shots 1e9`` (muls experiment, maxrange, precision), ``muls bench --pulses``, ``scanner-sim tradeoff
+    --pulses 1e9`` (a static scene), ``coverage --cell-m 0.0001`` and ``bench-rays --pulses`` ended with exit 1 and
+    "out of memory; use smaller chunks (survey.chunk_pulses)", even in muls. Root cause: each option was checked
+    only as a number >= 1 or > 0, and what it sizes (one simulate call of every shot, every run's points, a
+    coverage tally per cell, one chunk of rays) was allocated whole; the MemoryError then met run_guarded's generic
+    advice, which names a scene key neither command was given."""
+    module, prog, argv, what = MEMORY_CASES[case]
+    proc = _run(module, *argv, cwd=tmp_path)
+    lines = _lines(proc.stderr)
+    assert proc.returncode == 2 and len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert lines[0].startswith(f"{prog}: error: {what}"), lines[0]
+    assert re.search(MEMORY + LIMIT, lines[0]), lines[0]
 
 
 @pytest.mark.parametrize("argv, option, limit", [

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from ..errors import ParameterError, check_positive
+from ..memory import check_memory
 from ..peaks import Peaks
 from ..presets import POND_GATE_S, POOL_GATE_S, water_preset
 from ..water import Water
@@ -35,6 +36,10 @@ FINE_STEP_M = 0.1
 #: this detection fraction anywhere (nothing beyond can pass the 90 % criterion).
 COARSE_CHUNK = 10
 COARSE_STOP_FRACTION = 0.1
+#: Bytes a study's simulate call holds per pulse, by record mode: the growth of peak RSS between 10,000- and
+#: 80,000-shot runs on the 2-core machine (muls experiment pond and pool, precision, maxrange in turbid_harbor,
+#: bench: 1.3 to 1.9 kB a windowed pulse, 8.8 kB a full record), rounded up.
+PULSE_BYTES = {"windowed": 3_000, "full": 12_000}
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -105,6 +110,16 @@ def _shots(key: str, shots) -> int:
     if isinstance(shots, bool) or int(shots) != shots or shots < 1:
         raise ParameterError(f"{key} = {shots!r}: must be an integer >= 1")
     return int(shots)
+
+
+def check_pulse_memory(key: str, value: int, per_value: int, what: str, unit: str, mode: str = "windowed",
+                       available_bytes: int | None = None) -> None:
+    """Refuse, before allocating, ``key`` = ``value`` ``unit`` (shots, pulses) when one simulate call of ``value``
+    x ``per_value`` pulses (``what``, e.g. "3 distances x 1,000 shots") would need more memory than a command
+    may plan on (:func:`muls.memory.check_memory`, :data:`PULSE_BYTES`)."""
+    per = per_value * PULSE_BYTES[mode]
+    check_memory(key, value, value * per, what, lambda budget: f"at most {int(budget // per):,} {unit} on this machine",
+                 available_bytes)
 
 
 def _gate(water: Water, gate_delay_s, gate_width_s) -> tuple[float, float]:

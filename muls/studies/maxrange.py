@@ -73,6 +73,9 @@ def _mul_fractions(water: Water, ranges_m, shots, reflectance, seed, first_id) -
 
 
 GROUP_CHANNELS = {"single": ("ch1",), "near": ("ch1", "ch2"), "far": ("ch3",), "total": ("ch1", "ch2", "ch3")}
+#: The most ranges one simulate call of the scan holds (x shots pulses): a coarse chunk, or the fine steps above
+#: the four groups' edges, simulated together.
+MAX_BATCH_RANGES = max(COARSE_CHUNK, len(GROUP_CHANNELS) * (round(COARSE_STEP_M / FINE_STEP_M) - 1))
 
 
 def _limit(water: Water, single: OpticalModel, group: str, edge_m, reflectance: float) -> dict | None:

@@ -81,8 +81,13 @@ def _add_bench_rays(sub):
 
 
 def _cmd_bench_rays(args) -> int:
+    from muls.memory import check_memory
     from scanner_sim.perf.raybench import bench_rays
+    from scanner_sim.survey.budget import CHUNK_BYTES_PER_SUBRAY
 
+    per = args.subrays * CHUNK_BYTES_PER_SUBRAY  # one chunk of --pulses pulses, as a pass holds it (195 B measured)
+    check_memory("--pulses", args.pulses, args.pulses * per, f"a chunk of {args.pulses:,} pulses x {args.subrays} sub-rays",
+                 lambda budget: f"at most {int(budget // per):,} pulses on this machine")
     result = bench_rays(args.scene, args.pulses, args.subrays, args.repeat)
     if args.json:
         print(json.dumps(result))

@@ -105,9 +105,11 @@ def _cmd_tradeoff(args) -> int:
     from pathlib import Path
 
     from scanner_sim.config import load_scene
-    from scanner_sim.studies.tradeoff import markdown_table, tradeoff, write_tradeoff
+    from scanner_sim.studies.tradeoff import check_tradeoff_memory, markdown_table, tradeoff, write_tradeoff
 
     config = load_scene(args.scene)
+    check_tradeoff_memory(config, args.levels, args.knobs, args.pulses, args.waveform_pulses, not args.no_convergence,
+                          keys=("--pulses", "--waveform-pulses"))
     out = Path(args.out or Path(config.output_dir) / "tradeoff")
     progress = None if args.json else (lambda name: print(f"running {name}", file=sys.stderr, flush=True))
     result = tradeoff(config, tuple(args.levels), tuple(args.knobs), args.pulses, args.waveform_pulses, progress,
@@ -159,6 +161,7 @@ def _cmd_coverage(args) -> int:
     from scanner_sim.studies.coverage_study import StudyPlan, run_study
 
     config = load_scene(args.scene)
+    _check_cell_memory(args, config)
     plan = StudyPlan(tuple(args.waters), tuple(args.altitudes_m) if args.altitudes_m else (None,),
                      tuple(args.instruments), args.gate)
     settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m)
@@ -171,6 +174,31 @@ def _cmd_coverage(args) -> int:
         print(f"{len(study['records'])} passes in {study['wall_s']:.0f} s")
     print(out / "coverage.json")
     return 0
+
+
+def _check_cell_memory(args, config) -> None:
+    """Refuse a --cell-m whose coverage cells over the scene's seabed, in every pass running at once, would need more
+    memory than the study may plan on (budget.COVERAGE_BYTES_PER_CELL a cell, its map rendered included)."""
+    import math
+
+    from muls.memory import check_memory
+    from scanner_sim.survey.budget import COVERAGE_BYTES_PER_CELL
+
+    if config.seabed is None:  # the study refuses the scene itself
+        return
+    size = config.seabed.size_m
+    cells = math.prod(math.ceil(s / args.cell_m) for s in size)
+    workers = _workers(args)
+    at_once = 1 if args.scheduler or workers == 0 else workers
+
+    def smallest(budget: float) -> str:
+        cell = math.sqrt(math.prod(size) * COVERAGE_BYTES_PER_CELL * at_once / budget)
+        step = 10.0 ** (math.floor(math.log10(cell)) - 1)  # rounded up to two digits
+        return f"cells of at least {math.ceil(cell / step) * step:.2g} m on this machine"
+
+    check_memory("--cell-m", args.cell_m, cells * COVERAGE_BYTES_PER_CELL * at_once,
+                 f"coverage over {cells:,} cells of the {size[0]:g} x {size[1]:g} m seabed, {at_once} "
+                 f"pass{'es' if at_once > 1 else ''} at once,", smallest)
 
 
 # -- campaign -----------------------------------------------------------------------------------------------

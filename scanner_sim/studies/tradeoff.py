@@ -49,6 +49,13 @@ DEFAULT_PULSES = 30000
 DEFAULT_REPEAT = 3
 DEFAULT_WAVEFORM_PULSES = 500
 WARM_UP_PULSES = 200
+#: Bytes a run keeps per pulse until the metrics are taken (every run is kept): its points (77 bytes each, about
+#: one a pulse), their hidden flags, its slot numbers and the copies made matching them. Measured: 237 bytes (peak
+#: RSS of pool_panel's tradeoff between 400,000 and 2,000,000 pulses, 2 runs), rounded up for more returns a pulse.
+KEPT_BYTES_PER_PULSE = 400
+#: Bytes of a pulse's whole records, kept by each run for the waveforms' R^2: 8.2 kB at the reference level
+#: (cable_survey), rounded up with the working memory of the simulate call that makes them.
+RECORD_BYTES_PER_PULSE = 12_000
 
 
 @dataclass(frozen=True)
@@ -164,6 +171,37 @@ def level_metrics(run: LevelRun, reference: LevelRun) -> dict:
             "vs_reference": _rounded(vs_ref)}
 
 
+def run_plan(levels, knobs, convergence: bool) -> list[tuple[str, FidelityLevel]]:
+    """The runs of a tradeoff, in order: the reference, the other ``levels``, each knob, and with ``convergence``
+    the reference at :data:`CONVERGENCE_SUBRAYS` sub-rays."""
+    plan = [(name, FIDELITY_LEVELS[name]) for name in dict.fromkeys([REFERENCE, *levels])]
+    plan += [(name, knob_level(name)) for name in knobs]
+    if convergence:
+        finer = f"reference, {CONVERGENCE_SUBRAYS} sub-rays"
+        plan.append((finer, replace(FIDELITY_LEVELS[REFERENCE], name=finer, subrays=CONVERGENCE_SUBRAYS)))
+    return plan
+
+
+def check_tradeoff_memory(config: SceneConfig, levels, knobs, pulses: int, waveform_pulses: int, convergence: bool,
+                          keys=("pulses", "waveform_pulses"), available_bytes: int | None = None) -> None:
+    """Refuse, before any run, ``pulses`` or ``waveform_pulses`` (named by ``keys``, the larger share's) when the
+    runs would keep more than a command may plan on (:func:`muls.memory.check_memory`): each run keeps
+    :data:`KEPT_BYTES_PER_PULSE` a pulse the pass fires and :data:`RECORD_BYTES_PER_PULSE` a waveform pulse."""
+    from muls.memory import check_memory
+    from scanner_sim.survey.budget import estimate_pass
+
+    runs = len(run_plan(levels, knobs, convergence))
+    fired = estimate_pass(config.with_overrides({"survey.max_pulses": pulses})).pulses
+    records = min(waveform_pulses, fired)
+    points_b, records_b = runs * fired * KEPT_BYTES_PER_PULSE, runs * records * RECORD_BYTES_PER_PULSE
+    key, value, per, rest, unit = ((keys[0], pulses, runs * KEPT_BYTES_PER_PULSE, records_b, "pulses")
+                                   if points_b >= records_b else
+                                   (keys[1], waveform_pulses, runs * RECORD_BYTES_PER_PULSE, points_b, "waveform pulses"))
+    check_memory(key, value, points_b + records_b, f"{runs} runs keeping the points of {fired:,} pulses and the records "
+                 f"of {records:,}", lambda budget: f"at most {max(0, int((budget - rest) // per)):,} {unit} on this "
+                 "machine", available_bytes)
+
+
 def tradeoff(config: SceneConfig, levels=tuple(FIDELITY_LEVELS), knobs=tuple(KNOBS), pulses: int = DEFAULT_PULSES,
              waveform_pulses: int = DEFAULT_WAVEFORM_PULSES, progress=None, convergence: bool = True,
              repeat: int = DEFAULT_REPEAT) -> dict:
@@ -173,11 +211,8 @@ def tradeoff(config: SceneConfig, levels=tuple(FIDELITY_LEVELS), knobs=tuple(KNO
     reference (``reference_convergence``). ``progress``: called with each run's name as it starts. ``repeat``:
     timed passes per run, the fastest kept (:func:`best_speed`)."""
     base = PassSetup.build(config, PassOptions(max_pulses=pulses), build_scene(config))
-    plan = [(name, FIDELITY_LEVELS[name]) for name in dict.fromkeys([REFERENCE, *levels])]
-    plan += [(name, knob_level(name)) for name in knobs]
+    plan = run_plan(levels, knobs, convergence)
     finer = f"reference, {CONVERGENCE_SUBRAYS} sub-rays"
-    if convergence:
-        plan.append((finer, replace(FIDELITY_LEVELS[REFERENCE], name=finer, subrays=CONVERGENCE_SUBRAYS)))
     runs = {}
     for name, level in plan:
         if progress:
