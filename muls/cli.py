@@ -40,7 +40,7 @@ from .command import (
     seed,
     write_atomically,
 )
-from .presets import WATER_PRESETS
+from .presets import WATER_PRESETS, water_preset
 from .runtime import configure_process
 from .studies.common import check_pulse_memory
 
@@ -295,7 +295,9 @@ MULTISCATTER_KEYS = ("time_ns", "mc_w", "mc_rel_err", "muls_w", "mc_column_w", "
 
 
 def _cmd_multiscatter(args):
-    full = montecarlo.multiscatter_study(_water_name(args.water), _positive("--range-m", args.range_m),
+    water = _water_name(args.water)
+    range_m = montecarlo.study.check_range_m("--range-m", water_preset(water), args.range_m)
+    full = montecarlo.multiscatter_study(water, range_m,
                                          geometry=_geometry(args.geometry), packets=_packets("--packets", args.packets),
                                          seed=args.seed, reflectance=args.reflectance,
                                          attenuation_model=_attenuation(args.attenuation))

@@ -28,6 +28,10 @@ PETZOLD_BACKSCATTER_RATIO = 0.0183
 GROUP_INDEX_SEAWATER = 1.364
 GROUP_INDEX_FRESHWATER = 1.357
 
+#: Two-way attenuation exponent 2 k r beyond which no echo can return (e^-40 = 4e-18 of the light): the set-up's
+#: warning of a seabed beyond any echo, and the farthest plate ``muls multiscatter`` traces.
+MAX_ATTENUATION_EXPONENT = 40.0
+
 #: Attenuation rules (docs/design.md#attenuation). ``monte_carlo`` (the default): the two-way transmission of the
 #: Monte Carlo reference for this water and receiver, tabulated against range (muls.scattering); ``small_angle``:
 #: forward scattering kept by the receiver's field of view, from the small-angle approximation (muls.smallangle);

@@ -76,6 +76,17 @@ def test_counts_beyond_the_memory_are_refused_before_allocating_not_out_of_memor
     assert re.search(MEMORY + LIMIT, lines[0]), lines[0]
 
 
+def test_multiscatter_plate_beyond_any_echo_is_refused_not_out_of_memory(tmp_path):
+    """``muls multiscatter --range-m 1e6`` ended with exit 1 and the survey.chunk_pulses advice. Root cause: the
+    run's histograms span the echo's time, 2 r / c_w, at 0.5 ns a bin (20 batches, several tallies), and no range
+    was refused, though no light comes back from beyond 2 a r = 40 (absorption alone)."""
+    proc = _run("muls.cli", "multiscatter", "--water", "pond", "--range-m", "1e6", "--no-plot", cwd=tmp_path)
+    lines = _lines(proc.stderr)
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0] == ("muls multiscatter: error: --range-m = 1000000.0: no light comes back from so far in pond: "
+                        "absorption alone leaves e^-440,000 of it (none beyond e^-40); at most 90.9 m in this water")
+
+
 @pytest.mark.parametrize("argv, option, limit", [
     (["multiscatter", "--water", "pond", "--range-m", "5", "--packets", str(10**20), "--no-plot"], "--packets",
      "461,168,601,842,738,780"),

@@ -14,7 +14,7 @@ from ..phase import check_phase
 from ..presets import instrument_preset, water_preset
 from ..radiometry import lambertian_weight, target_factor
 from ..studies import maxrange_study
-from ..water import Water
+from ..water import MAX_ATTENUATION_EXPONENT, Water
 from ..waveform import OpticalModel
 from .correction import MultipleScatteringCorrection, same_phase
 from .power import effective_attenuation_per_m, geometry_factor, mc_power_w, muls_power_w, two_way_transmission
@@ -23,6 +23,24 @@ from .run import TargetPlanes, run_monte_carlo
 #: Beam packets of ``muls multiscatter`` by default: the pond at 10 m then has every bin within 100 times
 #: of the column's and of the echo's peak below 5 % relative error (docs/multiple-scattering.md).
 DEFAULT_PACKETS = 2_000_000
+
+
+def max_range_m(water: Water) -> float:
+    """The farthest plate [m] whose echo a run can see: every packet that returns from range r travelled at least
+    2 r and kept at most exp(-2 a r) of its weight, so beyond 2 a r = MAX_ATTENUATION_EXPONENT (e^-40) none does.
+    (The run's histograms grow with the range: a plate 10^6 m away needed more memory than any machine has.)"""
+    return MAX_ATTENUATION_EXPONENT / (2.0 * water.absorption_per_m) if water.absorption_per_m > 0.0 else math.inf
+
+
+def check_range_m(key: str, water: Water, range_m: float) -> float:
+    """``range_m``, or a :class:`ParameterError` naming ``key`` when it is not > 0 or lies beyond
+    :func:`max_range_m`."""
+    check_positive(key, range_m)
+    if range_m > max_range_m(water):
+        raise ParameterError(f"{key} = {range_m!r}: no light comes back from so far in {water.name}: absorption alone "
+                             f"leaves e^-{2.0 * water.absorption_per_m * range_m:,.0f} of it (none beyond "
+                             f"e^-{MAX_ATTENUATION_EXPONENT:g}); at most {max_range_m(water):,.1f} m in this water")
+    return float(range_m)
 
 
 def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geometry: str = "mul2023",
@@ -40,7 +58,7 @@ def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geome
     w = water if isinstance(water, Water) else water_preset(water)
     if attenuation_model is not None:
         w = w.with_models(attenuation_model=attenuation_model)
-    check_positive("range_m", range_m)
+    check_range_m("range_m", w, range_m)
     if geometry not in ("mul2023", "coaxial"):
         raise ParameterError(f"geometry = {geometry!r}: must be 'mul2023' or 'coaxial'")
     instrument = instrument_preset(geometry)

@@ -10,6 +10,7 @@ import warnings
 
 import numpy as np
 
+from muls.water import MAX_ATTENUATION_EXPONENT
 from scanner_sim.config.errors import ConfigError, SetupWarning, config_value
 from scanner_sim.motion.trajectory import PATH_STEP_M, Trajectory, trajectory_of
 
@@ -26,8 +27,6 @@ def build_trajectory(config, scene=None) -> Trajectory:
 
 #: Faster than survey vehicles go [m/s]; a faster speed is likely in km/h or knots (warned about).
 MAX_PLAUSIBLE_SPEED_M_S = 10.0
-#: Two-way attenuation exponent 2 k r beyond which no echo can return (e^-40 = 4e-18 of the light).
-MAX_ATTENUATION_EXPONENT = 40.0
 #: Largest number of track samples tested against one object's mesh.
 MAX_CONTAINS_SAMPLES = 20_000
 
