@@ -13,9 +13,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from muls.cli import main as muls_main
+from scanner_sim import io
+from scanner_sim.render import viz
+from scanner_sim.survey.point_records import PointRecords
 
 REPO = Path(__file__).resolve().parents[1]
 #: The address space of each subprocess [bytes]: a command starts in well under this.
@@ -85,6 +89,29 @@ def test_multiscatter_plate_beyond_any_echo_is_refused_not_out_of_memory(tmp_pat
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
     assert lines[0] == ("muls multiscatter: error: --range-m = 1000000.0: no light comes back from so far in pond: "
                         "absorption alone leaves e^-440,000 of it (none beyond e^-40); at most 90.9 m in this water")
+
+
+def test_window_size_beyond_what_vtk_can_render_is_refused_not_aborted(tmp_path):
+    """``scanner-sim view --window-size 50000 50000`` aborted in C++ (std::bad_alloc, SIGABRT, no line of ours).
+    Root cause: only a side below 16 px was refused; VTK allocated the 2.5e9-pixel framebuffer itself (about 100
+    bytes a pixel with the screenshot), and a C++ exception ends the process. A side beyond 16384 px (what GPU
+    drivers commonly render) or a picture beyond the memory is now refused before VTK starts."""
+    las = tmp_path / "points.las"  # a few points: VTK's picture is all the memory the old code asked for
+    n = 8
+    fields = {name: np.ones((n,) if col.width is None else (n, col.width), col.dtype)
+              for name, col in PointRecords.columns().items()}
+    fields["xyz"] = np.column_stack([np.arange(n), np.arange(n) % 3, np.zeros(n)]).astype(float)
+    io.write_las(las, PointRecords(**fields), offset_m=np.zeros(3))
+    proc = _run("scanner_sim.cli", "view", str(las), "--screenshot", str(tmp_path / "v.png"), "--window-size",
+                "50000", "50000", cwd=tmp_path)
+    assert proc.returncode == 2 and _lines(proc.stderr) == [
+        "scanner-sim view: error: --window-size = 50000 50000: at most 16384 px a side (the largest framebuffer OpenGL "
+        "drivers commonly render)"], proc.stderr
+    with pytest.raises(ValueError) as refused:  # a side VTK renders, a picture too large for the machine's memory
+        viz.check_window_size("--window-size", (16384, 16384), available_bytes=10**10)
+    assert str(refused.value) == (
+        "--window-size = 16384 16384: a 16,384 x 16,384 px picture would need about 26.8 GB of memory, more than the "
+        "8.0 GB it may use (80% of the 10.0 GB available); at most 80,000,000 pixels (width x height) on this machine")
 
 
 @pytest.mark.parametrize("argv, option, limit", [

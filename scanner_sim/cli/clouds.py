@@ -45,6 +45,7 @@ def _cmd_view(args) -> int:
     from scanner_sim.io import read_las, read_scene_ply
     from scanner_sim.render import viz
 
+    viz.check_window_size("--window-size", args.window_size)
     las = Path(args.las)
     if not las.is_file():
         raise ValueError(f"POINTS.las = {str(las)!r}: no such file; expected a LAS file such as points.las")

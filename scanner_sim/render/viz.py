@@ -46,6 +46,7 @@ __all__ = [
     "COVERAGE_COLOURS",
     "SCALAR_COLOUR_MAPS",
     "WATER_COLOURS",
+    "check_window_size",
     "class_table",
     "plot_coverage_map",
     "plot_coverage_vs_altitude",
@@ -54,6 +55,31 @@ __all__ = [
     "render_point_cloud",
     "show_point_cloud",
 ]
+
+#: Largest side of a point-cloud picture or window [px]: the largest framebuffer side GPU OpenGL drivers commonly
+#: render (GL_MAX_RENDERBUFFER_SIZE and the viewport are 16384 on most; Mesa's llvmpipe renders more).
+MAX_WINDOW_SIDE_PX = 16384
+#: Bytes VTK and the screenshot hold per pixel: 88 measured (peak RSS of scanner-sim view between 2000 x 2000 and
+#: 4000 x 4000, off-screen), rounded up. Past the memory VTK aborts (std::bad_alloc) and takes the process with it.
+WINDOW_BYTES_PER_PIXEL = 100
+
+
+def check_window_size(key: str, window_size: Sequence[int], available_bytes: int | None = None) -> None:
+    """Refuse, before VTK allocates it, a (width, height) [px] with a side beyond :data:`MAX_WINDOW_SIDE_PX` or a
+    picture needing more memory than a command may plan on (:func:`muls.memory.check_memory`): a ValueError
+    naming ``key``."""
+    from muls.memory import check_memory
+
+    w, h = (int(v) for v in window_size)
+    shown = f"{w} {h}"
+    if max(w, h) > MAX_WINDOW_SIDE_PX:
+        raise ValueError(f"{key} = {shown}: at most {MAX_WINDOW_SIDE_PX} px a side (the largest framebuffer OpenGL "
+                         "drivers commonly render)")
+    per = WINDOW_BYTES_PER_PIXEL
+    check_memory(key, shown, w * h * per, f"a {w:,} x {h:,} px picture",
+                 lambda budget: f"at most {int(budget // per):,} pixels (width x height) on this machine",
+                 available_bytes)
+
 
 #: Label name -> RGB colour (0..255).
 CLASS_COLOURS: dict[str, tuple[int, int, int]] = {
@@ -329,6 +355,7 @@ def _point_cloud_plotter(
         raise ValueError("truth_vertices and truth_faces: give both or neither")
     if len(window_size) != 2 or min(window_size) < 16:
         raise ValueError(f"window_size: {window_size!r} is not allowed; expected (width, height) >= 16 pixels")
+    check_window_size("window_size", window_size)
     if max_points < 1:
         raise ValueError(f"max_points: {max_points!r} is not allowed; expected >= 1")
     if not point_size > 0:
