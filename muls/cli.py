@@ -304,11 +304,12 @@ def _cmd_multiscatter(args):
     d = full["details"]
     tg = full["target"]
     rules = d["attenuation_rules_per_m"]
+    mc_err = (f"+-{d['mc_target_energy_err_j'] / tg['mc_energy_j']:.1%}" if tg["mc_energy_j"] > 0
+              else "no light seen")
     lines = [f"multiple scattering: {d['water']}, {d['geometry']}, plate at {d['range_m']:g} m (reflectance "
              f"{d['reflectance']:g}), {d['phase']} phase function, {full['packets']:,} packets, seed {d['seed']} "
              f"({full['seconds']:.1f} s)",
-             f"target echo energy: Monte Carlo {tg['mc_energy_j']:.4g} J "
-             f"(+-{d['mc_target_energy_err_j'] / tg['mc_energy_j']:.1%}), MULS {tg['muls_energy_j']:.4g} J, "
+             f"target echo energy: Monte Carlo {tg['mc_energy_j']:.4g} J ({mc_err}), MULS {tg['muls_energy_j']:.4g} J, "
              f"ratio {_fmt(tg['ratio'], 4)}",
              f"effective attenuation of the echo: {_fmt(full['effective_attenuation_per_m'], 4)} /m (MULS k_lidar "
              f"{rules['muls_k_lidar']:.4f}, c {rules['muls_c']:.4f}, kd {rules['muls_kd']:.4f}; the water uses "

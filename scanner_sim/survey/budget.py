@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from muls.memory import MEMORY_SHARE, available_memory_bytes, gb
 from scanner_sim.config.errors import ConfigError, config_value
 from scanner_sim.motion.track_checks import track_length_m, track_span_s
 from scanner_sim.motion.trajectory import PATH_STEP_M
@@ -29,35 +30,11 @@ TRAJECTORY_BYTES_PER_ROW = 600
 WAVEFORM_BYTES_PER_PULSE = 8
 COVERAGE_CELL_M = 0.25
 COVERAGE_BYTES_PER_CELL = 100
-#: Share of the memory available when the pass is set up that it may plan to use.
-MEMORY_SHARE = 0.8
 #: Most pulses one pass may fire: about 100 GB of points and dropouts and a day of simulation. A longer
 #: survey runs as several passes (survey.start_s, survey.duration_s).
 MAX_PASS_PULSES = 1_000_000_000
 #: Most legs a track may have: a point's LAS point_source_id numbers its leg in 16 bits.
 MAX_LEGS = 65_535
-
-def available_memory_bytes() -> int | None:
-    """Memory a new allocation can take [bytes]: ``MemAvailable`` of /proc/meminfo, less under a cgroup (v2
-    or v1) limit; None where neither is known."""
-    found = []
-    try:
-        with open("/proc/meminfo") as fh:
-            found += [int(line.split()[1]) * 1024 for line in fh if line.startswith("MemAvailable:")]
-    except (OSError, ValueError, IndexError):
-        pass
-    for limit_file, usage_file in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
-                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
-                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
-        try:
-            with open(limit_file) as lf, open(usage_file) as uf:
-                limit, usage = int(lf.read().split()[0]), int(uf.read().split()[0])
-        except (OSError, ValueError, IndexError):  # absent, or "max" (no limit)
-            continue
-        if limit < 1 << 60:
-            found.append(max(0, limit - usage))
-    return min(found) if found else None
-
 
 @dataclass(frozen=True)
 class PassEstimate:
@@ -116,10 +93,6 @@ def estimate_pass(config) -> PassEstimate:
                         {k: (int(b), what) for k, (b, what) in memory.items()})
 
 
-def _gb(n_bytes: float) -> str:
-    return f"{n_bytes / 1e9:,.1f} GB" if n_bytes >= 1e8 else f"{n_bytes / 1e6:,.0f} MB"
-
-
 def check_pass_budget(config, available_bytes: int | None = None) -> PassEstimate:
     """Refuse, before anything pass-sized is allocated, a pass that fires no pulse, more than
     :data:`MAX_PASS_PULSES`, has more than :data:`MAX_LEGS` legs, or would need more than :data:`MEMORY_SHARE`
@@ -145,7 +118,7 @@ def check_pass_budget(config, available_bytes: int | None = None) -> PassEstimat
     available = available_memory_bytes() if available_bytes is None else available_bytes
     if available is not None and est.memory_bytes > MEMORY_SHARE * available:
         key, (n_bytes, what) = max(est.memory.items(), key=lambda kv: kv[1][0])
-        raise ConfigError(f"{key} = {config_value(config, key)}: the pass would need about {_gb(est.memory_bytes)} of "
-                          f"memory ({what}: {_gb(n_bytes)}), more than the {_gb(MEMORY_SHARE * available)} it may "
-                          f"use ({MEMORY_SHARE:.0%} of the {_gb(available)} available)")
+        raise ConfigError(f"{key} = {config_value(config, key)}: the pass would need about {gb(est.memory_bytes)} of "
+                          f"memory ({what}: {gb(n_bytes)}), more than the {gb(MEMORY_SHARE * available)} it may "
+                          f"use ({MEMORY_SHARE:.0%} of the {gb(available)} available)")
     return est
