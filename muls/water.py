@@ -41,9 +41,9 @@ ATTENUATION_MODELS = ("monte_carlo", "k_lidar", "c", "kd", "small_angle")
 RANGE_DEPENDENT_MODELS = ("monte_carlo", "small_angle")
 
 #: Backscatter rules (docs/design.md#backscatter): ``measured`` (the default) takes beta(180 deg) measured in the water
-#: where the preset has it, else ``hg``'s; ``hg``: b p(pi) of Henyey-Greenstein with MULS's g; ``petzold``: b p(pi) of
-#: Petzold's average particle phase function, the phase function of the Monte Carlo reference and the small-angle
-#: rule (twice the Henyey-Greenstein value); ``eq5``: MULS Eq. 5 read literally.
+#: where the preset has it, else ``petzold``'s; ``petzold``: b p(pi) of Petzold's average particle phase function, the
+#: phase function of the Monte Carlo reference, its tables and the small-angle rule (twice the Henyey-Greenstein
+#: value); ``hg``: b p(pi) of Henyey-Greenstein with MULS's g; ``eq5``: MULS Eq. 5 read literally.
 BACKSCATTER_MODELS = ("measured", "petzold", "hg", "eq5")
 
 
@@ -146,7 +146,9 @@ class Water:
         b = self.scattering_per_m
         if self.backscatter_model == "measured" and self.beta_pi_measured_per_m_sr is not None:
             return self.beta_pi_measured_per_m_sr
-        if self.backscatter_model == "petzold":
+        if self.backscatter_model in ("measured", "petzold"):
+            # Without a measurement, the phase function every other part of the model uses: the Monte Carlo's
+            # column then needs no rescaling, and the column and the echo share one phase function.
             return b * petzold().value_at_pi_per_sr
         if self.backscatter_model == "eq5":
             # MULS Eq. 5 read literally: HG value at pi over the HG backward fraction.

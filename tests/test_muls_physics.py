@@ -77,10 +77,11 @@ def test_backscatter_options():
     assert harbor.beta_pi_per_m_sr == pytest.approx(0.0031 * b)
     assert harbor.with_models(backscatter_model="hg").beta_pi_per_m_sr == pytest.approx(1.634e-3 * b, rel=1e-3)
     assert harbor.with_models(backscatter_model="eq5").beta_pi_per_m_sr == pytest.approx(0.0962 * b, rel=2e-3)
-    # The pond has no measured beta(pi): "measured" falls back to Henyey-Greenstein. Petzold's average particle phase
-    # function (the Monte Carlo's) has p(pi) = 0.00318 per sr (docs/multiple-scattering.md).
+    # The pond has no measured beta(pi): "measured" falls back to Petzold's average particle phase function, the Monte
+    # Carlo's, with p(pi) = 0.00318 per sr (docs/multiple-scattering.md), twice Henyey-Greenstein's.
     pond = water_preset("pond")
-    assert pond.beta_pi_per_m_sr == pond.with_models(backscatter_model="hg").beta_pi_per_m_sr
+    assert pond.beta_pi_per_m_sr == pytest.approx(0.00318 * pond.scattering_per_m, rel=2e-3)
+    assert pond.beta_pi_per_m_sr == pond.with_models(backscatter_model="petzold").beta_pi_per_m_sr
     assert harbor.with_models(backscatter_model="petzold").beta_pi_per_m_sr == pytest.approx(0.00318 * b, rel=2e-3)
 
 

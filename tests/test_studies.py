@@ -194,11 +194,14 @@ def test_maxrange_study_orders_waters_and_channels():
 
 
 def test_maxrange_study_one_water_small():
-    """The pond: the gated CH3 reaches beyond the near channels (in the turbid harbor the Monte Carlo's column clips
-    CH3 wherever its gate opens before an echo it could see: no far-field range at all)."""
-    r = studies.maxrange_study(["pond"], shots=20, seed=0)
-    t = r["pond"]
-    assert MAXRANGE_KEYS <= set(t) and set(r) == {"pond", "settings"}
+    """Coastal water: the gated CH3 reaches beyond the near channels. In the pond and the turbid harbour the Monte
+    Carlo's column (with Petzold's backscatter in the pond, which has no measured beta(pi)) clips CH3 wherever its
+    gate opens before an echo it could see: no far-field range at all, the total is the near field's."""
+    r = studies.maxrange_study(["coastal_ocean", "pond"], shots=20, seed=0)
+    assert r["pond"]["far_field_m"] is None and r["pond"]["total_m"] == r["pond"]["near_field_m"]
+    t = r["coastal_ocean"]
+    assert MAXRANGE_KEYS <= set(t) and set(r) == {"coastal_ocean", "pond", "settings"}
+    assert t["far_field_m"] > t["near_field_m"]
     # The edge is resolved to the fine step: the next fine range fails the 90 % criterion.
     curves = t["curves"]
     ranges = np.array(curves["range_m"])
