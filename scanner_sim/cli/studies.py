@@ -95,6 +95,8 @@ def _add_tradeoff(sub):
                    help="timed passes of each run, round-robin, the fastest kept (default: %(default)s)")
     p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /tradeoff)")
     p.add_argument("--json", action="store_true", help="print tradeoff.json instead of the table")
+    p.add_argument("--failure-rows", action="store_true",
+                   help="print the levels' rows of the failure-scene table of docs/fidelity.md instead of the table")
     p.add_argument("--no-render", action="store_true", help="no chart")
     p.add_argument("--no-convergence", action="store_true",
                    help="skip the reference run at 217 sub-rays that shows the reference has converged")
@@ -105,7 +107,13 @@ def _cmd_tradeoff(args) -> int:
     from pathlib import Path
 
     from scanner_sim.config import load_scene
-    from scanner_sim.studies.tradeoff import check_tradeoff_memory, markdown_table, tradeoff, write_tradeoff
+    from scanner_sim.studies.tradeoff import (
+        check_tradeoff_memory,
+        failure_table_rows,
+        markdown_table,
+        tradeoff,
+        write_tradeoff,
+    )
 
     config = load_scene(args.scene)
     check_tradeoff_memory(config, args.levels, args.knobs, args.pulses, args.waveform_pulses, not args.no_convergence,
@@ -115,7 +123,12 @@ def _cmd_tradeoff(args) -> int:
     result = tradeoff(config, tuple(args.levels), tuple(args.knobs), args.pulses, args.waveform_pulses, progress,
                       convergence=not args.no_convergence, repeat=args.repeat)
     path = write_tradeoff(result, out, render=not args.no_render)
-    print(json.dumps(result) if args.json else markdown_table(result) + str(path))
+    if args.json:
+        print(json.dumps(result))
+    elif args.failure_rows:
+        print(failure_table_rows(result), end="")
+    else:
+        print(markdown_table(result) + str(path))
     return 0
 
 

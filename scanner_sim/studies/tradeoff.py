@@ -263,6 +263,34 @@ def markdown_table(result: dict) -> str:
     return "\n".join(rows) + "\n"
 
 
+#: Columns of docs/fidelity.md's failure-scene table after the scene and the level: (section, key, format).
+FAILURE_ROW = [(None, "pulses_per_s", "{:,.0f}"), ("vs_truth", "points_per_pulse", "{:.3f}"),
+               ("vs_truth", "median_abs_range_error_m", "{:.3f}"), ("vs_truth", "p95_abs_range_error_m", "{:.3f}"),
+               ("vs_truth", "false_alarms_per_pulse", "{:.4f}"), ("vs_truth", "hidden_points_per_pulse", "{:.4f}"),
+               ("vs_reference", "missing_per_pulse", "{:.4f}"), ("vs_reference", "extra_per_pulse", "{:.4f}"),
+               ("vs_reference", "p95_position_diff_m", "{:.4f}"), ("vs_reference", "class_agreement", "{:.4f}"),
+               ("vs_reference", "coverage_diff", "{:+.4f}"), ("vs_reference", "waveform_r2", "{:.5f}")]
+
+
+def failure_table_rows(result: dict) -> str:
+    """The rows of docs/fidelity.md's failure-scene table: one per level, then the reference at the convergence
+    sub-rays when the result has it. The reference's own row leaves its comparisons with itself out (a dash);
+    ``auto``'s speed carries its ratio to ``balanced``'s in the same run."""
+    entries = list(result["levels"].items())
+    converged = result.get("reference_convergence")
+    if converged:
+        entries.append((f"reference at {converged['subrays']}", converged))
+    balanced = result["levels"].get("balanced")
+    rows = []
+    for name, entry in entries:
+        cells = ["–" if name == REFERENCE and section == "vs_reference" else _cell(entry, section, key, fmt)
+                 for section, key, fmt in FAILURE_ROW]
+        if name == "auto" and balanced:
+            cells[0] += f" (×{entry['pulses_per_s'] / balanced['pulses_per_s']:.2f})"
+        rows.append(f"| {result['scene']} | {name} | " + " | ".join(cells) + " |")
+    return "\n".join(rows) + "\n"
+
+
 def write_tradeoff(result: dict, out_dir: str | Path, render: bool = True) -> Path:
     """tradeoff.json, tradeoff.md and (``render``) tradeoff.png in ``out_dir``, each written atomically; returns
     the path of tradeoff.json."""
