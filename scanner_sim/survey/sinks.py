@@ -36,7 +36,7 @@ class PassFacts:
     """What made a pass, as its summary and its files' metadata state it: scene name, water, seed, fidelity level
     and its settings, instrument and channel names, chunk size and pulse limit, the scene file, the altitude
     (None when the platform holds a depth), the far channel's gate [ns] as the pass used it (None: no gated
-    channel)."""
+    channel), and the provenance block (:func:`scanner_sim.survey.provenance.pass_provenance`)."""
 
     scene: str
     water: str
@@ -55,11 +55,14 @@ class PassFacts:
     altitude_m: float | None
     gate_delay_ns: float | None = None
     gate_width_ns: float | None = None
+    provenance: dict | None = None
 
     def metadata(self) -> dict:
-        """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file."""
+        """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file, and the
+        pass's provenance (:mod:`scanner_sim.survey.provenance`)."""
         return {"scene": self.scene, "water": self.water, "instrument": self.instrument, "fidelity": self.fidelity,
-                "seed": self.seed, "muls_scanner_version": __version__, "scene_file": self.scene_file}
+                "seed": self.seed, "muls_scanner_version": __version__, "scene_file": self.scene_file,
+                "provenance": self.provenance}
 
     @property
     def label(self) -> str:
@@ -265,6 +268,7 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
             "gate_delay_ns": facts.gate_delay_ns,
             "gate_width_ns": facts.gate_width_ns,
         },
+        "provenance": facts.provenance,
     }
 
 
