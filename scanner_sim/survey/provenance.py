@@ -3,7 +3,8 @@ it fired, every value given on top of the scene file, the software and output-fo
 of the pass's inputs that a campaign's re-run compares (:func:`inputs_fingerprint`).
 
 summary.json holds the block under ``provenance``, and every point cloud's ``muls-scanner`` metadata VLR under
-``pass_metadata.provenance``: the same JSON, with no clock time in it, so a seed still fixes the files' bytes.
+``pass_metadata.provenance`` (:func:`point_cloud_provenance`: the block without what changes no point). Neither
+holds a clock time, so a seed still fixes the files' bytes.
 """
 
 from __future__ import annotations
@@ -18,6 +19,10 @@ from scanner_sim.config.geometry import MeshObject
 from scanner_sim.fidelity import FidelityLevel
 from scanner_sim.io.summary import jsonable
 from scanner_sim.version import __version__
+
+#: Scene keys that change no bit of a pass's points (a seed fixes a pass whatever its chunk size): the point
+#: clouds' provenance leaves them out, so that their bytes stay the same.
+POINT_NEUTRAL_KEYS = ("survey.chunk_pulses",)
 
 #: Version of the layout of a pass's files (names, summary.json's keys, the LAS dimensions and metadata): a pass
 #: written under another version is run again by a campaign.
@@ -57,11 +62,20 @@ def pass_provenance(config: SceneConfig, water: Water, instrument, level: Fideli
         "output_format_version": OUTPUT_FORMAT_VERSION,
         "inputs_fingerprint": fingerprint,
         "scene_file": str(config.source_path) if config.source_path else None,
-        "overrides": jsonable(config.overrides),
+        "overrides": jsonable(dict(sorted(config.overrides.items()))),
         "water": water_provenance(config, water),
         "instrument": jsonable(instrument),
         "fidelity": jsonable(level),
     }
+
+
+def point_cloud_provenance(block: dict) -> dict:
+    """The provenance a point cloud carries: the pass's ``block`` without its inputs fingerprint (which also covers
+    files other than the cloud, such as the renders) and without the values given that change no point
+    (:data:`POINT_NEUTRAL_KEYS`), so that a seed's cloud has the same bytes whatever the chunk size or the other
+    files asked for."""
+    overrides = {k: v for k, v in block["overrides"].items() if k not in POINT_NEUTRAL_KEYS}
+    return {**{k: v for k, v in block.items() if k != "inputs_fingerprint"}, "overrides": overrides}
 
 
 def _file_sha256(path: Path) -> str:
@@ -82,7 +96,7 @@ def inputs_fingerprint(config: SceneConfig, options, level: FidelityLevel) -> st
     inputs = {
         "output_format_version": OUTPUT_FORMAT_VERSION,
         "scene": config.model_dump(mode="json"),
-        "overrides": jsonable(config.overrides),
+        "overrides": jsonable(dict(sorted(config.overrides.items()))),
         "meshes": [_file_sha256(o.resolved_path) for o in config.objects if isinstance(o, MeshObject)],
         "water": jsonable(config.water_model()),
         "instrument": jsonable(config.instrument_model()),
