@@ -40,6 +40,10 @@ ATTENUATION_MODELS = ("monte_carlo", "k_lidar", "c", "kd", "small_angle")
 #: The rules that depend on the range and the receiver (muls.radiometry.attenuation_per_m evaluates them).
 RANGE_DEPENDENT_MODELS = ("monte_carlo", "small_angle")
 
+#: The particle phase function of every water's scattering in the model: the Monte Carlo's tables
+#: (muls.montecarlo.tables) and the small-angle rule (muls.smallangle) integrate Petzold's average (muls.phase).
+PHASE_FUNCTION = "petzold"
+
 #: Backscatter rules (docs/design.md#backscatter): ``measured`` (the default) takes beta(180 deg) measured in the water
 #: where the preset has it, else ``petzold``'s; ``petzold``: b p(pi) of Petzold's average particle phase function, the
 #: phase function of the Monte Carlo reference, its tables and the small-angle rule (twice the Henyey-Greenstein
@@ -141,16 +145,25 @@ class Water:
         return self.kd_estimate_per_m
 
     @property
-    def beta_pi_per_m_sr(self) -> float:
-        """Volume scattering function at 180 degrees [1/(m sr)], per ``backscatter_model``."""
-        b = self.scattering_per_m
-        if self.backscatter_model == "measured" and self.beta_pi_measured_per_m_sr is not None:
-            return self.beta_pi_measured_per_m_sr
-        if self.backscatter_model in ("measured", "petzold"):
+    def beta_pi_source(self) -> str:
+        """Where :attr:`beta_pi_per_m_sr` comes from under ``backscatter_model``: ``measured`` (this water's
+        measurement), ``petzold`` (Petzold's average particle phase function at pi), ``henyey_greenstein``
+        (g = 0.924 at pi) or ``eq5`` (MULS Eq. 5 read literally)."""
+        if self.backscatter_model == "measured":
             # Without a measurement, the phase function every other part of the model uses: the Monte Carlo's
             # column then needs no rescaling, and the column and the echo share one phase function.
+            return "measured" if self.beta_pi_measured_per_m_sr is not None else PHASE_FUNCTION
+        return {"petzold": PHASE_FUNCTION, "hg": "henyey_greenstein", "eq5": "eq5"}[self.backscatter_model]
+
+    @property
+    def beta_pi_per_m_sr(self) -> float:
+        """Volume scattering function at 180 degrees [1/(m sr)], per ``backscatter_model`` (:attr:`beta_pi_source`)."""
+        b, source = self.scattering_per_m, self.beta_pi_source
+        if source == "measured":
+            return self.beta_pi_measured_per_m_sr
+        if source == PHASE_FUNCTION:
             return b * petzold().value_at_pi_per_sr
-        if self.backscatter_model == "eq5":
+        if source == "eq5":
             # MULS Eq. 5 read literally: HG value at pi over the HG backward fraction.
             return b * henyey_greenstein(-1.0) / hg_backward_fraction()
         return b * henyey_greenstein(-1.0)  # b * p_HG(pi), g = 0.924

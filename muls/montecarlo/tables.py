@@ -16,7 +16,7 @@ import numpy as np
 from ..overlap import TransceiverGeometry
 from ..phase import check_phase
 from ..scattering import SHIPPED_DIR, SPREAD_NODES, ScatteringTables, clear_water_tables, tables_key
-from ..water import Water
+from ..water import PHASE_FUNCTION, Water
 from .run import TargetPlanes, run_monte_carlo
 
 #: Plate ranges of a table's run [m]: every 0.25 m through the near field, where the finite aperture starts to see
@@ -29,7 +29,7 @@ TABLE_RANGES_M = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5, 2.75, 3
 TABLE_PACKETS = 400_000
 TABLE_SEED = 20231
 #: Phase function of a table's run: Petzold's average particle phase function, as every water's (docs).
-TABLE_PHASE = "petzold"
+TABLE_PHASE = PHASE_FUNCTION
 #: Histogram bin of a table's run [s].
 TABLE_TIME_STEP_S = 0.25e-9
 #: The farthest plate lies where Eq. 6's two-way attenuation reaches e^-FARTHEST_ATTENUATION (no echo returns

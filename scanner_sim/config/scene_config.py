@@ -42,10 +42,12 @@ class SceneConfig(StrictModel):
     output: OutputConfig = OutputConfig()
     _source_path: Path | None = PrivateAttr(None)
     _base_dir: Path | None = PrivateAttr(None)
+    _overrides: dict[str, Any] = PrivateAttr(default_factory=dict)
 
     def model_post_init(self, context: Any) -> None:
         context = context or {}
         self._source_path, self._base_dir = context.get("source_path"), context.get("base_dir")
+        self._overrides = dict(context.get("overrides") or {})
 
     @model_validator(mode="before")
     @classmethod
@@ -75,6 +77,12 @@ class SceneConfig(StrictModel):
         return self._source_path
 
     @property
+    def overrides(self) -> dict[str, Any]:
+        """Every value given on top of the scene file by dotted key (``--set``, a run's options, a campaign's sweep,
+        :meth:`with_overrides` in the Python API), in the order given; a key given twice holds its last value."""
+        return dict(self._overrides)
+
+    @property
     def output_dir(self) -> str:
         return self.output.dir or f"out/{self.name}"
 
@@ -86,10 +94,13 @@ class SceneConfig(StrictModel):
         """The :class:`muls.instrument.Instrument` of this scene (gate and other overrides applied)."""
         return self.instrument.to_instrument(self.water_model())
 
-    def with_overrides(self, overrides: Mapping[str, object]) -> "SceneConfig":
+    def with_overrides(self, overrides: Mapping[str, object], *, given: bool = True) -> "SceneConfig":
         """This scene with values replaced by dotted key (``{"survey.seed": 3, "water": "turbid_harbor",
         "platform.altitude_m": 4}``), validated again as a whole the way a file is: a bad value or an unknown
-        key raises the one-line :class:`ConfigError` naming it. Source path and mesh folder are kept."""
+        key raises the one-line :class:`ConfigError` naming it. Source path and mesh folder are kept.
+
+        ``given``: the values are the user's, listed in :attr:`overrides` (a pass's provenance names them);
+        False for values a pass derives itself (the operator's gate rule)."""
         data = self.model_dump(exclude_unset=True)
         for key, value in overrides.items():
             *sections, last = key.split(".")
@@ -103,13 +114,17 @@ class SceneConfig(StrictModel):
                                       f"override {where!r} whole")
                 node = node[name]
             node[last] = value
-        return parse_scene(data, base_dir=self._base_dir, source_path=self._source_path)
+        given_now = {**self._overrides, **overrides} if given else self._overrides
+        return parse_scene(data, base_dir=self._base_dir, source_path=self._source_path, overrides=given_now)
 
 
-def parse_scene(data: Mapping, base_dir: Path | None = None, source_path: Path | None = None) -> SceneConfig:
+def parse_scene(data: Mapping, base_dir: Path | None = None, source_path: Path | None = None,
+                overrides: Mapping[str, Any] | None = None) -> SceneConfig:
     """Validate a scene mapping. Mesh files are resolved against ``base_dir`` (default: the working
-    directory) and must exist. Raises :class:`ConfigError` (one line)."""
-    return build(SceneConfig, data, context={"base_dir": base_dir, "source_path": source_path})
+    directory) and must exist; ``overrides``: the values given on top of it by dotted key
+    (:attr:`SceneConfig.overrides`). Raises :class:`ConfigError` (one line)."""
+    return build(SceneConfig, data, context={"base_dir": base_dir, "source_path": source_path,
+                                             "overrides": overrides})
 
 
 def scene_json_schema() -> dict:

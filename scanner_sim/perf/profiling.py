@@ -69,7 +69,7 @@ def stage_profile(scene_name: str = "cable_survey", fidelity: str = "balanced", 
         setup = PassSetup.build(config, options)
         chunks = (setup.simulate_chunk(slots) for slots in setup.slot_chunks())
         with tempfile.TemporaryDirectory(prefix="muls-profile-") as out, LasSink(
-                f"{out}/points.las", setup.scene.local_origin, pass_facts(setup).metadata()) as las:
+                f"{out}/points.las", setup.scene.local_origin, pass_facts(setup, options).metadata()) as las:
             profile = cProfile.Profile(time.process_time)
             profile.enable()
             stream_pass(setup, chunks, [las], options)

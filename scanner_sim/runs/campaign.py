@@ -35,13 +35,15 @@ from scanner_sim.runs.jobs import PassOutcome, run_jobs, run_pass_segmented
 from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassJob
 from scanner_sim.survey.setup import PassOptions
 
-__all__ = ["AXIS_ALIASES", "CHART_FIGURES", "Campaign", "CampaignConfig", "load_campaign", "parse_campaign",
+__all__ = ["AXIS_ALIASES", "CHART_FIGURES", "OPTION_KEYS", "Campaign", "CampaignConfig", "load_campaign", "parse_campaign",
            "run_campaign", "run_pass_segmented"]
 
 FORMAT_VERSION = 1
 #: Sweep axes that are not dotted scene keys, and the key each one sets.
 AXIS_ALIASES = {"water": "water", "instrument": "instrument.preset", "fidelity": "survey.fidelity",
                 "seed": "survey.seed"}
+#: Options that set a scene key, and the key each one sets.
+OPTION_KEYS = {"max_pulses": "survey.max_pulses", "chunk_pulses": "survey.chunk_pulses"}
 #: Figures a chart can draw: name -> (the campaign table's column, scale, axis label).
 CHART_FIGURES = {
     "covered_fraction": ("coverage.covered_fraction", 100.0, "covered fraction of the reached area [%]"),
@@ -133,6 +135,19 @@ class CampaignConfig(StrictModel):
     """Default: each numeric axis along x, one line per combination of the other axes."""
 
     @model_validator(mode="after")
+    def _sweep_and_options_apart(self):
+        """An option and an axis may not set one key (or the section holding it): the option would silently
+        replace every swept value."""
+        swept = {AXIS_ALIASES.get(axis, axis): axis for axis in self.sweep}
+        for option, key in OPTION_KEYS.items():
+            value = getattr(self.options, option)
+            for swept_key, axis in swept.items():
+                if value is not None and (key == swept_key or key.startswith(f"{swept_key}.")):
+                    raise invalid(f"sets {key!r}, which the sweep's axis {axis!r} sweeps; give it in one place",
+                                  key=f"options.{option}", value=value)
+        return self
+
+    @model_validator(mode="after")
     def _charts_name_axes(self):
         for i, chart in enumerate(self.charts or ()):
             for where, axis in [("x", chart.x)] + [(f"lines[{j}]", a) for j, a in enumerate(chart.lines)]:
@@ -168,8 +183,7 @@ def parse_campaign(data: Any, base_dir: Path | None = None, name: str = "campaig
         scene_path = base_dir / scene_path
     base = load_scene(scene_path if scene_path.suffix in (".yaml", ".yml") else config.scene)
     opts = config.options
-    fixed = {key: value for key, value in (("survey.max_pulses", opts.max_pulses),
-                                           ("survey.chunk_pulses", opts.chunk_pulses)) if value is not None}
+    fixed = {key: getattr(opts, option) for option, key in OPTION_KEYS.items() if getattr(opts, option) is not None}
     options = PassOptions(progress=False, render=opts.render, waveforms=opts.waveforms,
                           coverage=CoverageSettings(opts.cell_m, opts.min_points, opts.tolerance_m))
     axes = list(config.sweep)

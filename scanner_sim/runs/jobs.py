@@ -18,6 +18,7 @@ from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassFiles, PassJob, compute_pass, submit_pass
 from scanner_sim.survey.pipeline import PassResult
+from scanner_sim.survey.provenance import inputs_fingerprint
 from scanner_sim.survey.setup import PassOptions, PassPlan
 
 #: Keys of summary.json that time the pass: they differ from run to run.
@@ -50,38 +51,27 @@ def write_pass(folder: Path, files: PassFiles) -> dict:
     return json.loads(files.files["summary.json"])
 
 
-def fingerprint(summary: dict) -> dict:
-    """What a summary says about the inputs of its pass: scene, water, seed, fidelity, instrument, pulses
-    and coverage settings."""
-    settings, coverage = summary.get("settings") or {}, summary.get("coverage") or {}
-    return {"scene": summary.get("scene"), "water": summary.get("water"), "seed": summary.get("seed"),
-            "fidelity": summary.get("fidelity"), "instrument": settings.get("instrument"),
-            "max_pulses": settings.get("max_pulses"),
-            **{key: coverage.get(key) for key in ("cell_m", "min_points", "tolerance_m")}}
-
-
-def job_fingerprint(job: PassJob) -> dict:
-    """:func:`fingerprint` of the summary ``job`` would write."""
-    config, plan = job.config.with_overrides(job.options.scene_overrides()), PassPlan.of(job.config, job.options)
-    settings = job.options.coverage
-    coverage = ({"cell_m": settings.cell_m, "min_points": settings.min_points, "tolerance_m": settings.tolerance_m}
-                if plan.measures_coverage else dict.fromkeys(("cell_m", "min_points", "tolerance_m")))
-    return {"scene": config.name, "water": config.water.preset or config.water_model().name,
-            "seed": config.survey.seed, "fidelity": plan.level.name,
-            "instrument": config.instrument_model().name, "max_pulses": config.survey.max_pulses, **coverage}
+def job_fingerprint(job: PassJob) -> str:
+    """The inputs fingerprint (:func:`~scanner_sim.survey.provenance.inputs_fingerprint`) of the pass ``job`` would
+    write: of its whole scene (every sweep value and option applied), mesh files, resolved water and instrument,
+    fidelity level, output options and the output format's version."""
+    config = job.config.with_overrides(job.options.scene_overrides())
+    return inputs_fingerprint(config, job.options, PassPlan.of(config, job.options).level)
 
 
 def completed_summary(folder: Path, job: PassJob) -> dict | None:
     """The summary of ``job``'s pass if ``folder`` holds it complete, else None.
 
-    Complete: summary.json (written last, after every other file) parses and names the same scene, water,
-    seed, fidelity, instrument, pulse limit and coverage settings, and every file of the pass's plan
-    (:class:`~scanner_sim.survey.setup.PassPlan`) is there (a pass run before without renders is run again with them)."""
+    Complete: summary.json (written last, after every other file) parses, its ``provenance.inputs_fingerprint``
+    is ``job``'s (:func:`job_fingerprint`: a changed scene value, water, instrument, option or output format makes
+    another), and every file of the pass's plan (:class:`~scanner_sim.survey.setup.PassPlan`) is there (a pass run
+    before without renders is run again with them)."""
     try:
         summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    if not isinstance(summary, dict) or fingerprint(summary) != job_fingerprint(job):
+    provenance = summary.get("provenance") if isinstance(summary, dict) else None
+    if not isinstance(provenance, dict) or provenance.get("inputs_fingerprint") != job_fingerprint(job):
         return None
     if not all((folder / name).is_file() for name in PassPlan.of(job.config, job.options).files):
         return None

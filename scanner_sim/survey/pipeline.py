@@ -24,7 +24,7 @@ from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.render import viz
-from scanner_sim.survey import sinks
+from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup
 from scanner_sim.world.scene import Scene
@@ -88,15 +88,16 @@ def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), sce
     memory = sinks.MemorySink()
     stats, coverage, wall_s = stream_pass(setup, pass_chunks(setup, options), [memory], options)
     dropouts = memory.dropouts()
-    summary = sinks.pass_summary(pass_facts(setup), stats, stats.points, dropouts.counts_by_cause(), wall_s, setup_s)
+    summary = sinks.pass_summary(pass_facts(setup, options), stats, stats.points, dropouts.counts_by_cause(), wall_s, setup_s)
     if coverage is not None:
         summary["coverage"] = coverage.figures()
     return PassResult(summary, None, memory.points(), dropouts, trajectory_table(setup))
 
 
-def pass_facts(setup: PassSetup) -> sinks.PassFacts:
-    """What made the pass, as its summary and files state it."""
+def pass_facts(setup: PassSetup, options: PassOptions) -> sinks.PassFacts:
+    """What made the pass, as its summary and files state it, its provenance with them (``options``: the pass's)."""
     config, level = setup.config, setup.level
+    fingerprint = provenance.inputs_fingerprint(setup.given, options, level)
     far = [ch for ch in setup.model.instrument.channels if ch.gated]
     gate = (round(far[0].gate_delay_s * 1e9, 3), round(far[0].gate_width_s * 1e9, 3)) if far else (None, None)
     return sinks.PassFacts(
@@ -106,7 +107,8 @@ def pass_facts(setup: PassSetup) -> sinks.PassFacts:
         attenuation_model=setup.model.water.attenuation_model, multiple_scattering=setup.model.multiple_scattering,
         chunk_pulses=setup.chunk_slots, max_pulses=setup.max_pulses,
         scene_file=str(config.source_path) if config.source_path else None, altitude_m=config.platform.altitude_m,
-        gate_delay_ns=gate[0], gate_width_ns=gate[1])
+        gate_delay_ns=gate[0], gate_width_ns=gate[1],
+        provenance=provenance.pass_provenance(config, setup.model.water, setup.model.instrument, level, fingerprint))
 
 
 def trajectory_table(setup: PassSetup) -> dict[str, np.ndarray]:
@@ -212,7 +214,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     for, dropouts, coverage grid, trajectory, scene, waveforms, pictures), summary.json last; returns the summary.
     ``earlier_wall_s``: seconds already spent simulating the chunks elsewhere (a pass split in segments), added to
     ``wall_s``."""
-    facts, files, output = pass_facts(setup), setup.plan.files, setup.config.output
+    facts, files, output = pass_facts(setup, options), setup.plan.files, setup.config.output
     render = "render.png" in files
     with ExitStack() as stack:
         clouds = [stack.enter_context(sink) for sink in

@@ -177,7 +177,7 @@ def gated(config: SceneConfig, water, target: CastScene, trajectory: Trajectory,
     if gate is None:
         return config
     return config.with_overrides({"instrument.gate_delay_ns": round(gate[0] * 1e9, 3),
-                                  "instrument.gate_width_ns": round(gate[1] * 1e9, 3)})
+                                  "instrument.gate_width_ns": round(gate[1] * 1e9, 3)}, given=False)
 
 
 def checked_trajectory(config: SceneConfig, scene: Scene | None) -> Trajectory:
@@ -196,7 +196,8 @@ class PassSetup:
     """What a pass builds once, and its stages: the scene (every override applied) and what the rays are cast
     into, the trajectory, the scanner, the instrument in its water, the plan, and the stages the chunk loop calls
     (``rays``: hits of a chunk's pulses; ``handoff``: their muls input; ``physics``: records and ranging); the
-    pass's slot range and the water's name."""
+    pass's slot range, the water's name, and the scene as given (``given``: every override applied, before the pass
+    derived its gate; what the pass's inputs fingerprint covers)."""
 
     config: SceneConfig
     plan: PassPlan
@@ -211,6 +212,7 @@ class PassSetup:
     first_slot: int
     end_slot: int
     water_name: str
+    given: SceneConfig
 
     @classmethod
     def build(cls, config: SceneConfig, options: PassOptions = PassOptions(), scene: Scene | None = None,
@@ -218,7 +220,7 @@ class PassSetup:
         """``scene``: the already built :class:`Scene` of ``config`` to reuse, if any; ``level``: run at this
         fidelity level instead of the scene's (the trade-off study's knobs)."""
         configure_process()
-        config = config.with_overrides(options.scene_overrides())
+        config = given = config.with_overrides(options.scene_overrides())
         survey = config.survey
         water = config.water_model()
         scene = build_scene(config) if scene is None else scene
@@ -232,7 +234,7 @@ class PassSetup:
         plan = PassPlan.of(config, options, level)
         model = OpticalModel.build(config.instrument.to_instrument(water), water, plan.level.multiple_scattering)
         return cls(config, plan, target, trajectory, scanner, *_stages(config, target, model, plan.level),
-                   first_slot, end_slot, config.water.preset or water.name)
+                   first_slot, end_slot, config.water.preset or water.name, given)
 
     def at_level(self, level: FidelityLevel) -> PassSetup:
         """This pass at fidelity ``level``: its plan, sub-ray pattern and stages chosen again (the built scene,

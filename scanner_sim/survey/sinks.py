@@ -21,6 +21,7 @@ from scanner_sim import io
 from scanner_sim.metrics.coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
 from scanner_sim.render import viz
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
+from scanner_sim.survey.provenance import point_cloud_provenance
 from scanner_sim.version import __version__
 
 #: Resolution and extent of the streaming |range error| histogram behind the summary's quantiles [m].
@@ -35,8 +36,8 @@ RENDER_MAX_POINTS = 1_500_000
 class PassFacts:
     """What made a pass, as its summary and its files' metadata state it: scene name, water, seed, fidelity level
     and its settings, instrument and channel names, chunk size and pulse limit, the scene file, the altitude
-    (None when the platform holds a depth), the far channel's gate [ns] as the pass used it (None: no gated
-    channel)."""
+    (None when the platform holds a depth), the provenance block (:func:`scanner_sim.survey.provenance.pass_provenance`),
+    and the far channel's gate [ns] as the pass used it (None: no gated channel)."""
 
     scene: str
     water: str
@@ -53,13 +54,16 @@ class PassFacts:
     max_pulses: int | None
     scene_file: str | None
     altitude_m: float | None
+    provenance: dict
     gate_delay_ns: float | None = None
     gate_width_ns: float | None = None
 
     def metadata(self) -> dict:
-        """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file."""
+        """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file, and the
+        pass's provenance as point clouds carry it (:func:`~scanner_sim.survey.provenance.point_cloud_provenance`)."""
         return {"scene": self.scene, "water": self.water, "instrument": self.instrument, "fidelity": self.fidelity,
-                "seed": self.seed, "muls_scanner_version": __version__, "scene_file": self.scene_file}
+                "seed": self.seed, "muls_scanner_version": __version__, "scene_file": self.scene_file,
+                "provenance": point_cloud_provenance(self.provenance)}
 
     @property
     def label(self) -> str:
@@ -265,6 +269,7 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
             "gate_delay_ns": facts.gate_delay_ns,
             "gate_width_ns": facts.gate_width_ns,
         },
+        "provenance": facts.provenance,
     }
 
 
