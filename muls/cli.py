@@ -1,4 +1,4 @@
-"""``muls``: the MULS studies from the command line (waveform, maxrange, precision, coaxial, bench), and the
+"""``muls``: the MULS studies from the command line (waveform, maxrange, precision, coaxial, bench, edge-bias), and the
 multiple-scattering Monte Carlo beside MULS (multiscatter, multiscatter-study) and against a published benchmark
 (mobley1993).
 

@@ -80,7 +80,8 @@ def test_blind_zone_edge_echo_spread_is_held_from_the_nearest_seen_range(water):
     """Root cause: the Monte Carlo's tables cannot see a plate inside the blind zone (overlap under 1e-3, up to
     1.75 m), and leave its direct share 1 and its spread 0 as placeholders; the spread was interpolated between that
     placeholder at 1.75 m and the first seen plate at 2.0 m, so an echo's multiple-scattering delay faded to nothing
-    across the edge (at 1.80 m 20 % of it: 2.0 instead of 10.6 cm late in the turbid harbour) though the water
+    across the edge (at 1.80 m 0.4 instead of 10.3 cm late in the turbid harbour, which left the plate 22.6 cm short
+    instead of 12.4 cm) though the water
     scatters as much there. The spread is now held from the nearest seen range, as the attenuation is. Checked on
     the table's own rows and on the ranged echo: without the column's cut the noise-free echo at 1.80 m is ranged
     late by the first seen plate's mean delay behind the straight path."""
