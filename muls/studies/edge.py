@@ -53,6 +53,8 @@ def edge_bias_study(waters=None, ranges_m=EDGE_RANGES_M, shots: int = 200, seed:
     "noise_free_m", "echo_alone_m", "column_deficit_m", "overlap"}}, "settings": {...}}.
     """
     names = sorted(WATER_PRESETS) if waters is None else list(waters)
+    if not names:
+        raise ParameterError("waters = []: give at least one water preset")
     for name in names:
         if name not in WATER_PRESETS:
             raise ParameterError(f"waters = {name!r}: must be one of {', '.join(sorted(WATER_PRESETS))}")
@@ -82,10 +84,9 @@ def edge_bias_study(waters=None, ranges_m=EDGE_RANGES_M, shots: int = 200, seed:
                        overlap=_num(overlap[i], 5))
             rows[f"{range_m:.2f}"] = row
         out[name] = rows
-    out["settings"] = {"waters": names, "attenuation_model": study_water(names[0], attenuation_model).attenuation_model
-                       if names else None, "instrument": instrument.name, "ranges_m": r.tolist(), "shots": shots,
-                       "seed": int(seed), "reflectance": float(reflectance), "gate_delay_ns": EDGE_GATE_S[0] * 1e9,
-                       "gate_width_ns": EDGE_GATE_S[1] * 1e9}
+    out["settings"] = {"waters": names, "attenuation_model": water.attenuation_model, "instrument": instrument.name,
+                       "ranges_m": r.tolist(), "shots": shots, "seed": int(seed), "reflectance": float(reflectance),
+                       "gate_delay_ns": EDGE_GATE_S[0] * 1e9, "gate_width_ns": EDGE_GATE_S[1] * 1e9}
     return out
 
 
