@@ -75,7 +75,7 @@ class ScatteringTables:
         """(K,) bool: the plate ranges whose echo the Monte Carlo saw; elsewhere (the blind zone and its edge, overlap
         under :data:`muls.montecarlo.tables.SEEN_OVERLAP`) the run measured nothing, and the builder leaves the
         transmission's error 0 (a seen plate's is > 0), the direct share 1 and the spread 0."""
-        return self.transmission_rel_err > 0.0
+        return (self.transmission_rel_err > 0.0) | (self.direct_share < 1.0) | np.any(self.spread_s > 0.0, axis=1)
 
     def spread_at(self, range_m) -> tuple[np.ndarray, np.ndarray]:
         """(direct share (n,), node delays (n, SPREAD_NODES) [s]) of echoes at ``range_m`` (n,) [m]: interpolated
