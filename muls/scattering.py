@@ -70,13 +70,22 @@ class ScatteringTables:
         r = np.maximum(np.asarray(range_m, float), 1e-6)
         return np.interp(np.log(r), np.log(self.ranges_m), self.attenuation_per_m_table)
 
+    @property
+    def seen(self) -> np.ndarray:
+        """(K,) bool: the plate ranges whose echo the Monte Carlo saw; elsewhere (the blind zone and its edge, overlap
+        under :data:`muls.montecarlo.tables.SEEN_OVERLAP`) the run measured nothing, and the builder leaves the
+        transmission's error 0 (a seen plate's is > 0), the direct share 1 and the spread 0."""
+        return (self.transmission_rel_err > 0.0) | (self.direct_share < 1.0) | np.any(self.spread_s > 0.0, axis=1)
+
     def spread_at(self, range_m) -> tuple[np.ndarray, np.ndarray]:
         """(direct share (n,), node delays (n, SPREAD_NODES) [s]) of echoes at ``range_m`` (n,) [m]: interpolated
-        linearly in range, held outside the grid."""
+        linearly in range over the ranges the Monte Carlo saw (:attr:`seen`), held outside them, as the attenuation
+        is filled: an unseen plate's placeholder (no spread) is not a measurement to interpolate towards."""
         r = np.asarray(range_m, float)
-        share = np.interp(r, self.ranges_m, self.direct_share)
-        delays = np.stack([np.interp(r, self.ranges_m, self.spread_s[:, q]) for q in range(self.spread_s.shape[1])],
-                          axis=-1)
+        seen = self.seen if np.any(self.seen) else np.ones(self.ranges_m.shape, bool)
+        ranges, spread = self.ranges_m[seen], self.spread_s[seen]
+        share = np.interp(r, ranges, self.direct_share[seen])
+        delays = np.stack([np.interp(r, ranges, spread[:, q]) for q in range(spread.shape[1])], axis=-1)
         return share, delays
 
     def column_response(self, t_s) -> np.ndarray:

@@ -65,6 +65,15 @@ def test_bench_json_small(capsys):
     assert {"windowed_pulses_per_s", "full_record_pulses_per_s", "machine"} <= set(r)
 
 
+def test_edge_bias_json_small(capsys):
+    code, out, err = _run(capsys, "edge-bias", "--waters", "pool", "--ranges-m", "1.65", "2.0", "--shots", "5", "--json")
+    assert code == 0, err
+    r = json.loads(out)
+    assert set(r) == {"pool", "settings"}
+    assert r["pool"]["1.65"]["chosen"]["detected_fraction"] == 0.0  # inside the blind zone
+    assert {"ch1", "ch2", "ch3", "chosen", "noise_free_m", "echo_alone_m", "column_deficit_m"} <= set(r["pool"]["2.00"])
+
+
 @pytest.mark.parametrize("argv, option", [
     (["waveform", "--water", "mud"], "--water"),
     (["precision", "--water", "swamp", "--shots", "5"], "--water"),
@@ -76,6 +85,9 @@ def test_bench_json_small(capsys):
     (["waveform", "--range-m", "ten"], "--range-m"),
     (["waveform", "--gate-width-ns", "0"], "--gate-width-ns"),
     (["bench", "--pulses", "0"], "--pulses"),
+    (["edge-bias", "--waters", "pool", "lake"], "--water"),
+    (["edge-bias", "--shots", "0"], "--shots"),
+    (["edge-bias", "--reflectance", "1.5"], "--reflectance"),
     (["frobnicate"], "invalid choice"),
 ])
 def test_bad_arguments_give_one_line_and_exit_2(capsys, argv, option):

@@ -8,6 +8,7 @@
 - :func:`experiment_study`: the paper's pond and pool tests predicted per distance and channel (Table 2,
   Figures 7, 8, 10 and 11);
 - :func:`budget_study`: the photon budget of every study point, and where a reported range exceeds it;
+- :func:`edge_bias_study`: the range bias of a plate at the blind-zone edge in every water, and its cause;
 - :func:`bench_study`: pulses per second of :func:`muls.simulate.simulate` on this machine.
 
 Every study goes through the instrument's own digitiser and ranging (:func:`muls.simulate.simulate`);
@@ -31,6 +32,7 @@ from .common import (
                      far_gate_delay_s,
                      range_tolerance_m,
 )
+from .edge import EDGE_RANGES_M, edge_bias_study
 from .experiment import experiment_study
 from .maxrange import maxrange_study
 from .precision import precision_study
@@ -41,6 +43,7 @@ __all__ = [
     "COARSE_STEP_M",
     "DETECTION_FRACTION",
     "DETECTION_TOLERANCE_BINS",
+    "EDGE_RANGES_M",
     "FINE_STEP_M",
     "MAXRANGE_WATERS",
     "detections",
@@ -54,4 +57,5 @@ __all__ = [
     "coaxial_study",
     "bench_study",
     "budget_study",
+    "edge_bias_study",
 ]
