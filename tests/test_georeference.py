@@ -119,7 +119,8 @@ def _hits(pulse_index, range_m, object_id):
     return Hits(pulse_index=np.asarray(pulse_index, np.int64), subray_index=np.zeros(n, np.int32),
                 range_m=np.asarray(range_m, float), point=np.zeros((n, 3)), normal=np.tile([0.0, 0.0, 1.0], (n, 1)),
                 incidence_rad=0 * f, reflectance=0.1 * f, label=np.full(n, LABELS["panel"], np.int16),
-                object_id=np.asarray(object_id, np.int32), receiver_weight=f, weight=f, echo_range_m=f,
+                object_id=np.asarray(object_id, np.int32), surface_id=np.asarray(object_id, np.int32), receiver_weight=f,
+                weight=f, echo_range_m=f,
                 n_pulses=2, n_subrays=1)
 
 
@@ -134,7 +135,7 @@ def test_a_false_alarm_takes_no_hit_of_another_pulse(hits):
     ranging = Ranging(returns, np.array([1], np.uint8), np.array([1], np.uint8), returns,
                       np.array([-1, 2], np.int8), np.zeros(2))
     sight = LinesOfSight(origin_m=np.zeros((2, 3)), direction=np.tile([0.0, 0.0, -1.0], (2, 1)),
-                         true_range_m=np.full(2, np.nan), first_object=np.full(2, -1), scan_angle_deg=np.zeros(2),
+                         true_range_m=np.full(2, np.nan), first_surface=np.full(2, -1), scan_angle_deg=np.zeros(2),
                          time_s=np.array([0.0, 2e-4]), slot=np.array([10, 11]), leg=np.ones(2, np.uint16))
     points = georeference(ranging, hits, sight)
     assert len(points) == 1 and points.pulse_index[0] == 10
@@ -145,7 +146,7 @@ def test_a_false_alarm_takes_no_hit_of_another_pulse(hits):
 
 def test_truth_without_navigation_noise_is_what_a_cast_along_each_line_finds():
     """Without navigation noise the truth comes from the beam cast's axis sub-ray instead of a cast of its own:
-    the same ranges and objects as casting along each estimated line (here across the step's edge)."""
+    the same ranges and surfaces as casting along each estimated line (here across the step's edge)."""
     setup = PassSetup.build(_step_scene(pulses=3000), PassOptions(progress=False))
     assert not setup.trajectory.has_navigation_noise
     slots = next(setup.slot_chunks())
@@ -154,5 +155,5 @@ def test_truth_without_navigation_noise_is_what_a_cast_along_each_line_finds():
                                              sight.direction.astype(np.float32))
     assert ray.size == slots.size  # every line meets a panel
     assert np.array_equal(sight.true_range_m[ray], dist.astype(float))
-    assert np.array_equal(sight.first_object[ray], setup.scene.face_object[tri])
-    assert len(np.unique(sight.first_object)) == 2  # both panels seen
+    assert np.array_equal(sight.first_surface[ray], setup.scene.face_surface[tri])
+    assert len(np.unique(sight.first_surface)) == 2  # both panels seen

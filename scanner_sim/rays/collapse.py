@@ -121,6 +121,7 @@ def _copy_row(rows, r, angles, out, o):
     """Row r of ``rows`` into row o of ``out``, incidence out in radians."""
     out.pulse_index[o], out.subray_index[o], out.range_m[o] = rows.pulse_index[r], rows.subray_index[r], rows.range_m[r]
     out.reflectance[o], out.label[o], out.object_id[o] = rows.reflectance[r], rows.label[r], rows.object_id[r]
+    out.surface_id[o] = rows.surface_id[r]
     out.incidence_rad[o] = rows.incidence_rad[r] if angles else math.acos(rows.incidence_rad[r])
     for a in range(3):
         out.point[o, a] = rows.point[r, a]
