@@ -80,9 +80,12 @@ def knob_level(name: str) -> FidelityLevel:
 
 
 #: [m] Occluders this close to a point's truth surface do not hide it: the point is placed on the surface along its
-#: estimated line of sight, which navigation noise (5 cm sigma in the shipped scenes) moves over the relief. A truth
-#: this close to the first surface along the line lies on it.
+#: estimated line of sight, which navigation noise (5 cm sigma in the shipped scenes) moves over the relief.
 HIDDEN_MARGIN_M = 0.1
+
+#: [m] A point's truth this close to the first surface along its line was taken from that surface
+#: (survey.georeference): two float32 casts of one line differ by micrometres.
+ON_FIRST_SURFACE_M = 1e-3
 
 
 def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
@@ -90,7 +93,7 @@ def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     of the receiver aperture at the pulse's true pose.
 
     The surface point is where the truth puts it, ``true_range_m`` along the point's estimated line of sight. Only
-    points whose truth is the first surface along that line (within :data:`HIDDEN_MARGIN_M`) are judged: a return
+    points whose truth is the first surface along that line (within :data:`ON_FIRST_SURFACE_M`) are judged: a return
     off that surface (behind an edge, on the other level of a step) has its truth on the plane of the facet it
     ranged, extended past the surface the line meets, where visibility means nothing. Noise points are never
     hidden."""
@@ -106,7 +109,7 @@ def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     ray, _, dist = setup.target.caster.first_hits(local.astype(np.float32), direction.astype(np.float32))
     first_range = np.full(times.size, np.nan)
     first_range[ray] = dist
-    judged = np.abs(first_range - points.true_range_m[known]) <= HIDDEN_MARGIN_M
+    judged = np.abs(first_range - points.true_range_m[known]) <= ON_FIRST_SURFACE_M
     surface = origin + points.true_range_m[known, None].astype(np.float64) * direction
     to_rx = rx_origin - surface
     length = np.linalg.norm(to_rx, axis=1)
