@@ -34,8 +34,8 @@ def _hits(pulse, range_m, object_id, n_pulses):
     return Hits(pulse_index=np.asarray(pulse, np.int64), subray_index=sub, range_m=np.asarray(range_m, float),
                 point=np.zeros((n, 3)), normal=np.tile([0.0, 0.0, 1.0], (n, 1)), incidence_rad=0 * f,
                 reflectance=0.1 * f, label=np.ones(n, np.int16), object_id=np.asarray(object_id, np.int32),
-                receiver_weight=f, weight=f / M, echo_range_m=np.asarray(range_m, float), n_pulses=n_pulses,
-                n_subrays=M)
+                surface_id=np.asarray(object_id, np.int32), receiver_weight=f, weight=f / M,
+                echo_range_m=np.asarray(range_m, float), n_pulses=n_pulses, n_subrays=M)
 
 
 def test_a_pulse_is_simple_only_when_all_its_sub_rays_meet_one_object_within_the_spread():

@@ -112,7 +112,7 @@ def kernel_inputs(scene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pa
     layout = kernels.SubrayLayout(np.ascontiguousarray(pattern.xy), pattern.weight, 0.5 * geometry.beam_diameter_m,
                                   math.tan(0.5 * geometry.beam_divergence_full_rad))
     faces = kernels.SceneFaces(scene.face_normal, scene.face_reflectance, scene.face_label, scene.face_object,
-                               scene.local_origin, shadow_offset_m(scene.local_extent_m))
+                               scene.face_surface, scene.local_origin, shadow_offset_m(scene.local_extent_m))
     return rays, layout, faces, kernels.ReceiverView.of(geometry)
 
 

@@ -1,10 +1,10 @@
-"""Simple footprints as two echoes: where all of a pulse's sub-rays hit one object within
+"""Simple footprints as two echoes: where all of a pulse's sub-rays hit one smooth surface within
 :data:`~scanner_sim.rays.echoes.ECHO_BIN_M` of echo range (a twentieth of the 10 ns pulse's 1.1 m, under half of
 one 1 ns sample), its echo, the pulse shape summed over the sub-ray echoes, is the pulse spread by a distribution
 of delay far narrower than the pulse. The two-point Gauss quadrature of that distribution (its energy, mean,
 variance and skewness) gives the same echo to the fourth order in the spread over the pulse width: two echoes where
 ``balanced`` has 19. Each keeps the footprint's energy share and beam share; the axis hit stays as cast, with no
-energy, for the pulse's truth and coverage footprint. Every other pulse (an edge, two objects, a footprint
+energy, for the pulse's truth and coverage footprint. Every other pulse (an edge, two surfaces, a footprint
 stretched over range at grazing incidence) keeps its sub-rays. Used by the ``auto`` level (:mod:`scanner_sim.rays.auto`).
 
 The echo of each sub-ray is what :mod:`scanner_sim.rays.echoes` says it is, the same formulas the pass's hand-off
@@ -23,34 +23,34 @@ from scanner_sim.rays.hits import Hits, empty_columns, head
 
 
 def simple_pulses(hits: Hits) -> np.ndarray:
-    """(n_pulses,) bool: every sub-ray of the pulse hit, all on one object, their echo ranges within
+    """(n_pulses,) bool: every sub-ray of the pulse hit, all on one surface (``surface_id``), their echo ranges within
     :data:`~scanner_sim.rays.echoes.ECHO_BIN_M` (``hits`` in scan order, pulse-major): the test
     :func:`collapse_simple` applies."""
-    return _simple_flags(hits.pulse_index, hits.echo_range_m, hits.object_id, hits.n_pulses, hits.n_subrays)
+    return _simple_flags(hits.pulse_index, hits.echo_range_m, hits.surface_id, hits.n_pulses, hits.n_subrays)
 
 
 @kernel(nogil=True)
-def _simple_flags(pulse, echo_range, object_id, n_pulses, m):
+def _simple_flags(pulse, echo_range, surface_id, n_pulses, m):
     out = np.zeros(n_pulses, np.bool_)
     start = 0
     while start < pulse.shape[0]:
         stop = start + 1
         while stop < pulse.shape[0] and pulse[stop] == pulse[start]:
             stop += 1
-        out[pulse[start]] = _is_simple(start, stop, m, echo_range, object_id)
+        out[pulse[start]] = _is_simple(start, stop, m, echo_range, surface_id)
         start = stop
     return out
 
 
 @kernel(inline="always")
-def _is_simple(start, stop, m, echo_range, object_id):
-    """Whether one pulse's rows start .. stop - 1 are all ``m`` sub-rays, on one object, their echo ranges
+def _is_simple(start, stop, m, echo_range, surface_id):
+    """Whether one pulse's rows start .. stop - 1 are all ``m`` sub-rays, on one surface, their echo ranges
     within :data:`~scanner_sim.rays.echoes.ECHO_BIN_M`."""
     if stop - start != m:
         return False
     lo, hi = np.inf, -np.inf
     for r in range(start, stop):
-        if object_id[r] != object_id[start]:
+        if surface_id[r] != surface_id[start]:
             return False
         lo, hi = min(lo, echo_range[r]), max(hi, echo_range[r])
     return hi - lo < ECHO_BIN_M
@@ -98,7 +98,7 @@ def pulse_figures(start, stop, m, rows, angles, energy, tau, nodes, share):
     when the pulse is not simple (:func:`simple_pulses`' test) and 0 when no light comes back; for a lit simple
     pulse its two echoes' delays ``nodes`` (as echo ranges [m]) and energy ``share`` (:func:`two_point_rule`).
     ``energy``, ``tau``: (m,) scratch."""
-    if not _is_simple(start, stop, m, rows.echo_range_m, rows.object_id):
+    if not _is_simple(start, stop, m, rows.echo_range_m, rows.surface_id):
         return -1.0, 0.0, 0.0, 0.0
     total, w_sum, rho_sum, r_sum = 0.0, 0.0, 0.0, 0.0
     for k in range(m):
@@ -121,6 +121,7 @@ def _copy_row(rows, r, angles, out, o):
     """Row r of ``rows`` into row o of ``out``, incidence out in radians."""
     out.pulse_index[o], out.subray_index[o], out.range_m[o] = rows.pulse_index[r], rows.subray_index[r], rows.range_m[r]
     out.reflectance[o], out.label[o], out.object_id[o] = rows.reflectance[r], rows.label[r], rows.object_id[r]
+    out.surface_id[o] = rows.surface_id[r]
     out.incidence_rad[o] = rows.incidence_rad[r] if angles else math.acos(rows.incidence_rad[r])
     for a in range(3):
         out.point[o, a] = rows.point[r, a]

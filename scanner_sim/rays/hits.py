@@ -32,6 +32,8 @@ HIT_FIELDS: tuple[HitField, ...] = (
     HitField("reflectance", np.float64, 1, "Lambertian reflectance at 532 nm"),
     HitField("label", np.int16, 1, "class code (world.materials.LABELS)"),
     HitField("object_id", np.int32, 1, "index into Scene.objects"),
+    HitField("surface_id", np.int32, 1, "the smooth surface of the triangle hit (Scene.face_surface): the "
+                                        "surface a return's truth is judged on (survey.georeference)"),
     HitField("receiver_weight", np.float64, 1, "the share of the receiver's aperture that sees the hit (its field of "
                                                "view, its lit side, a clear line to it), in [0, 1]"),
     HitField("weight", np.float64, 1, "the sub-ray's share of the pulse energy (a pulse's shares sum to 1)"),

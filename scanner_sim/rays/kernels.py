@@ -41,13 +41,14 @@ class SubrayLayout(NamedTuple):
 
 
 class SceneFaces(NamedTuple):
-    """Per-face attributes of the scene (normal (f, 3) local frame, reflectance, label, object), its local
-    origin (3,) [m] and the step off a surface for shadow rays ``eps`` [m]."""
+    """Per-face attributes of the scene (normal (f, 3) local frame, reflectance, label, object, smooth surface),
+    its local origin (3,) [m] and the step off a surface for shadow rays ``eps`` [m]."""
 
     normal: np.ndarray
     reflectance: np.ndarray
     label: np.ndarray
     object_id: np.ndarray
+    surface_id: np.ndarray
     local_origin: np.ndarray
     eps: float
 
@@ -137,6 +138,7 @@ def hit_block(prim, tfar, ray0, base, rays, layout, faces, view, rows, shadows):
         rows.reflectance[i] = faces.reflectance[f]
         rows.label[i] = faces.label[f]
         rows.object_id[i] = faces.object_id[f]
+        rows.surface_id[i] = faces.surface_id[f]
         rows.weight[i] = weights[j]
         x, y = xy[j, 0], xy[j, 1]
         ax = x * u[p, 0] + y * v[p, 0]

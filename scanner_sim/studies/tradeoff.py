@@ -83,15 +83,20 @@ def knob_level(name: str) -> FidelityLevel:
 #: estimated line of sight, which navigation noise (5 cm sigma in the shipped scenes) moves over the relief.
 HIDDEN_MARGIN_M = 0.1
 
+#: [m] A point's truth this close to the first surface along its line was taken from that surface
+#: (survey.georeference): two float32 casts of one line differ by micrometres.
+ON_FIRST_SURFACE_M = 1e-3
+
 
 def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     """(n,) bool: the surface a point ranged has something more than :data:`HIDDEN_MARGIN_M` from it and in front
     of the receiver aperture at the pulse's true pose.
 
     The surface point is where the truth puts it, ``true_range_m`` along the point's estimated line of sight. Only
-    points whose ranged object is the first one along that line are judged: a return behind an edge has its truth
-    on the plane of the facet it ranged, extended under the nearer surface, where visibility means nothing. Noise
-    points are never hidden."""
+    points whose truth is the first surface along that line (within :data:`ON_FIRST_SURFACE_M`) are judged: a return
+    off that surface (behind an edge, on the other level of a step) has its truth on the plane of the facet it
+    ranged, extended past the surface the line meets, where visibility means nothing. Noise points are never
+    hidden."""
     known = np.isfinite(points.true_range_m) & (points.object_id >= 0)
     out = np.zeros(len(points), bool)
     if not known.any():
@@ -101,10 +106,10 @@ def hidden_from_receiver(setup: PassSetup, points: PointRecords) -> np.ndarray:
     origin, direction = setup.scanner.beam_rays(setup.trajectory.estimate_of(truth))
     _, _, _, rx_origin, _ = setup.scanner.world_rays(truth)
     local = origin - setup.scene.local_origin
-    ray, tri, _ = setup.target.caster.first_hits(local.astype(np.float32), direction.astype(np.float32))
-    first_object = np.full(times.size, -1)
-    first_object[ray] = setup.scene.face_object[tri]
-    judged = first_object == points.object_id[known]
+    ray, _, dist = setup.target.caster.first_hits(local.astype(np.float32), direction.astype(np.float32))
+    first_range = np.full(times.size, np.nan)
+    first_range[ray] = dist
+    judged = np.abs(first_range - points.true_range_m[known]) <= ON_FIRST_SURFACE_M
     surface = origin + points.true_range_m[known, None].astype(np.float64) * direction
     to_rx = rx_origin - surface
     length = np.linalg.norm(to_rx, axis=1)

@@ -27,7 +27,8 @@ class LinesOfSight(NamedTuple):
     """Each pulse's beam where navigation puts it, and the truth along it (one row per pulse of a chunk).
 
     origin_m (n, 3), direction (n, 3) unit: the estimated beam in the world frame; true_range_m (n,): range to
-    the first truth surface along it (nan where it meets none) and first_object (n,) int its object (-1: none);
+    the first truth surface along it (nan where it meets none) and first_surface (n,) int that surface
+    (``Scene.face_surface`` of the triangle met; -1: none);
     scan_angle_deg (n,); time_s (n,) [s from the pass start]; slot (n,) int64: the pulse's number in the pass;
     leg (n,) uint16: the survey leg, 1-based.
     """
@@ -35,7 +36,7 @@ class LinesOfSight(NamedTuple):
     origin_m: np.ndarray
     direction: np.ndarray
     true_range_m: np.ndarray
-    first_object: np.ndarray
+    first_surface: np.ndarray
     scan_angle_deg: np.ndarray
     time_s: np.ndarray
     slot: np.ndarray
@@ -74,9 +75,11 @@ def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight) -> PointReco
     return per hit, in hit order); a return no echo explains gets :data:`NOISE_CLASS`, object -1 and
     incidence nan. true_range_m is where the surface the instrument ranged lies along the point's own line of
     sight, and range_error_m the point's signed distance from it along that line: ranging error, merged echoes
-    and navigation noise all show in it. That surface is the first truth surface along the line when it
-    belongs to the ranged object; otherwise (a second return behind an edge) the plane of the ranged hit's
-    facet, so a second return is judged against the second surface. A noise return takes the first surface;
+    and navigation noise all show in it. The surface is the ranged hit's own (``Hits.surface_id``, its triangle's
+    smooth surface), not its object's: a step inside one mesh is two surfaces, as it is as two objects. The truth
+    is the first truth surface along the line when that is the ranged surface; otherwise (a return behind an
+    edge, or on the upper surface of a step whose lower one the line meets first) the plane of the ranged hit's
+    facet, so each return is judged against the surface it came from. A noise return takes the first surface;
     where neither applies (a facet within :data:`GRAZING_COS` of edge-on, a line that meets nothing), the
     ranged hit's own range, else nan: never another pulse's hit.
     """
@@ -93,7 +96,7 @@ def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight) -> PointReco
         return out
 
     true_range = sight.true_range_m[pulse].astype(np.float64)
-    other = have & (sight.first_object[pulse] != of_hit(hits.object_id, NO_OBJECT))  # ranged behind the first
+    other = have & (sight.first_surface[pulse] != of_hit(hits.surface_id, -1))  # ranged off the first surface
     true_range[other] = ranged_surface_range(sight.origin_m[pulse][other], sight.direction[pulse][other],
                                              hits.point[j[other]], hits.normal[j[other]])
     unseen = np.isnan(true_range)

@@ -318,14 +318,14 @@ class PassSetup:
             origin, direction = self.scanner.beam_rays(self.trajectory.estimate_of(poses))
         else:
             origin, direction = true_beam
-        true_range, first_object = np.full(slots.size, np.nan), np.full(slots.size, -1)
+        true_range, first_surface = np.full(slots.size, np.nan), np.full(slots.size, -1)
         if noisy:
             ray, tri, dist = self.target.caster.first_hits((origin - self.scene.local_origin).astype(np.float32),
                                                            direction.astype(np.float32))
-            true_range[ray], first_object[ray] = dist, self.scene.face_object[tri]
+            true_range[ray], first_surface[ray] = dist, self.scene.face_surface[tri]
         else:
             axis = hits.subray_index == 0
             true_range[hits.pulse_index[axis]] = hits.range_m[axis]
-            first_object[hits.pulse_index[axis]] = hits.object_id[axis]
-        return LinesOfSight(origin, direction, true_range, first_object,
+            first_surface[hits.pulse_index[axis]] = hits.surface_id[axis]
+        return LinesOfSight(origin, direction, true_range, first_surface,
                             np.degrees(self.scanner.scan_angle_rad(times)), times, slots, self.trajectory.leg(times))

@@ -1,7 +1,7 @@
 """Scenes: object generators and the combined mesh the rays see.
 
-A :class:`Scene` is one triangle mesh (world coordinates, float64) with per-triangle object id, class label
-and reflectance, the seabed's height field for fast height queries, and a local origin: the mesh is shifted
+A :class:`Scene` is one triangle mesh (world coordinates, float64) with per-triangle object id, smooth surface,
+class label and reflectance, the seabed's height field for fast height queries, and a local origin: the mesh is shifted
 by ``local_origin`` before it reaches Embree in float32, and rays are shifted the same way, so a scene in
 UTM coordinates ranges as accurately as one at the origin (docs/design.md#frames).
 """
@@ -58,12 +58,14 @@ class Part:
     label: int
     reflectance: float
     centreline: np.ndarray | None = None
+    one_surface: bool = False  # one smooth surface whatever its creases (the seabed's height field)
 
 
 class Scene:
     """The combined triangle mesh with per-triangle attributes.
 
-    vertices (n_v, 3) float64 world [m]; faces (n_f, 3) int64; face_object (n_f,) int32; face_label (n_f,)
+    vertices (n_v, 3) float64 world [m]; faces (n_f, 3) int64; face_object (n_f,) int32; face_surface (n_f,)
+    int32 (:func:`smooth_surfaces`: which smooth surface of the scene the face belongs to); face_label (n_f,)
     int16 (LAS code); face_reflectance (n_f,) float64; face_normal (n_f, 3) float64 unit (right-hand winding);
     local_origin (3,) float64 world [m]; heightfield: the seabed's, or None; objects: list of SceneObject.
     """
@@ -86,6 +88,7 @@ class Scene:
         keep = area2 > DEGENERATE_AREA * scale[part] ** 2  # degenerate triangles go: Embree and normals need area
         self.faces, part, self.face_normal = faces[keep], part[keep], normal[keep]
         self.face_object = part
+        self.face_surface = smooth_surfaces(self.faces, self.face_normal, np.array([p.one_surface for p in parts])[part])
         self.face_label = np.array([p.label for p in parts], np.int16)[part]
         self.face_reflectance = np.array([p.reflectance for p in parts], float)[part]
         ends = np.cumsum(np.bincount(part, minlength=len(parts)))
@@ -112,6 +115,35 @@ class Scene:
 
 #: A triangle with twice its area below this times the square of its mesh's size is degenerate.
 DEGENERATE_AREA = 1e-14
+
+#: [deg] Two faces that share an edge belong to one smooth surface when their normals differ by less than this
+#: (:func:`smooth_surfaces`). The tessellations of curved surfaces the scenes build stay one surface (the 8-sided
+#: tether 45 deg, the 12-sided cable 30 deg, the 32-section mines 11.25 deg, the rocks under 52 deg), while a
+#: step's riser, a box's edge or a cylinder's rim (90 deg) part two surfaces. An assumption (docs/assumptions.md).
+SURFACE_CREASE_DEG = 60.0
+
+
+def smooth_surfaces(faces: np.ndarray, normal: np.ndarray, one_surface: np.ndarray) -> np.ndarray:
+    """(n_f,) int32: the smooth surface of each face (n_f, 3) int of unit ``normal`` (n_f, 3), numbered from 0: the
+    faces joined, edge by shared edge, where the two normals differ by less than :data:`SURFACE_CREASE_DEG`, or
+    whatever they differ by where ``one_surface`` (n_f,) bool holds for the faces (a height field: one value of z
+    over each x, y, with neither riser nor overhang however rough, is one surface).
+
+    Faces join only across an edge they share by vertex index (the generators and the mesh loader, which merges
+    duplicate vertices, give them so), so two objects never share a surface. The normals are compared as wound:
+    where a mesh's winding flips between two faces they stay two surfaces, which only makes the truth take the
+    ranged face's own plane (survey.georeference), never another surface's."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = faces.shape[0]
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)  # (3 n_f, 2): face k's edges at 3k..3k+2
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    same = np.all(edges[order[1:]] == edges[order[:-1]], axis=1)  # consecutive copies of one edge
+    a, b = order[:-1][same] // 3, order[1:][same] // 3
+    smooth = one_surface[a] | (np.einsum("ij,ij->i", normal[a], normal[b]) > math.cos(math.radians(SURFACE_CREASE_DEG)))
+    graph = coo_matrix((np.ones(np.count_nonzero(smooth), np.int8), (a[smooth], b[smooth])), shape=(n, n))
+    return connected_components(graph, directed=False)[1].astype(np.int32)
 
 
 def _mesh_scale(v: np.ndarray) -> float:
@@ -287,7 +319,7 @@ def build_scene(config) -> Scene:
                                   sb.relief.wavelength_m, sb.relief.hurst, sb.ripples.amplitude_m,
                                   sb.ripples.wavelength_m, sb.ripples.crest_deg, sb.ripples.sinuosity, rng)
         v, f = hf.mesh()
-        parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb)))
+        parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True))
         rk = sb.rocks
         if rk.count:
             rocks = rock_meshes(hf, rk.count, (rk.radius_min_m, rk.radius_max_m), rng)
