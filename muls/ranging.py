@@ -13,12 +13,10 @@ import numpy as np
 from .detection import Records
 from .peaks import Peaks, find_peaks
 from .runtime import kernel
-from .waveform import Echoes, OpticalModel, PulseBatch, optical_power
+from .waveform import Echoes, OpticalModel, PulseBatch, column_value, optical_power, uncut_column_value
 
 DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
 NO_DROPOUT = -1
-#: Times over an echo, from its start to the end of its pulse, at which a channel's clipping by the column is judged.
-ECHO_SPAN_POINTS = 9
 
 
 @dataclass(frozen=True)
@@ -96,14 +94,20 @@ def best_of_clusters(new, saturated, score):
     return out[:m]
 
 
-def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped, echoes: Echoes) -> np.ndarray:
-    """Cause of each pulse without a return (index into DROPOUT_CAUSES), NO_DROPOUT otherwise.
+def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped, echoes: Echoes,
+                   phase_s) -> np.ndarray:
+    """Cause of each pulse without a return (index into DROPOUT_CAUSES), NO_DROPOUT otherwise; ``phase_s`` (n,) the
+    pulses' sampling phases [s] (:attr:`Records.phase_s`).
 
-    Judged on the noise-free signal of the strongest echo: ``blind_zone`` if no light reaches the receiver,
-    ``saturated`` if clipped returns were dropped, ``masked_by_backscatter`` if in a channel open at its peak the
-    echo alone would clear the threshold over dark noise but the column hides it (its shot noise at the peak, or
-    its clipping anywhere over the echo, :data:`ECHO_SPAN_POINTS` times from its start to its end), ``outside_gate``
-    if only a gated channel could see it and its gate is shut then, else ``below_threshold``.
+    One rule per cause, the first that holds (docs/outputs.md tables them): ``no_hit`` no echo begins within the
+    record; ``blind_zone`` none that does carries light; ``saturated`` a clipped return was dropped; then, over the
+    samples of the strongest echo (from its start to the end of its pulse, :func:`echo_span_times`) and at the
+    sample where the echoes alone are highest (the echo's peak): ``masked_by_backscatter`` if in a channel open at
+    the peak the echo alone clears the threshold over dark noise (k sigma) and the column hides it there: the
+    residual over the processor's baseline (the open-water column and background) is at most k times the noise
+    with the baseline's shot noise, or the column alone or the column with the echo clips the channel at an open
+    sample of the span; ``outside_gate`` if no open channel would see the echo alone but a channel shut at its peak
+    would; ``below_threshold`` otherwise.
     """
     ins = model.instrument
     dig = ins.digitizer
@@ -122,46 +126,77 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     sat[np.asarray(saturated_dropped, np.int64)] = True
     cause[missing & lit & sat] = DROPOUT_CAUSES.index("saturated")
     todo = np.nonzero(missing & lit & ~sat)[0]
-    if todo.size:
-        strongest = np.full(batch.n_pulses, -1, np.int64)
-        masked_energy = np.where(delay < record_end, energy, -1.0)
-        order = np.lexsort((masked_energy, pulse_of))
-        strongest[pulse_of[order]] = order  # last (largest energy) per pulse wins
-        t_star = delay[strongest[todo]] + ins.pulse.peak_delay_s
-        chans = model.channels
-        total = _powers(t_star, todo, model.column, model.cuts(batch), echoes, ins.pulse.duration_s)
-        base = batch.background_w[todo] + model.column_power_w(t_star)
-        echo = np.maximum(total - model.column_power_w(t_star, batch.column_cut_m[todo].min(axis=1))
-                          - batch.background_w[todo], 0.0)
-        k = ins.processing.threshold_sigma
-        # The column (and background) over the echo, from its start to its end: where it clips, no peak shows.
-        span = delay[strongest[todo]][:, None] + ins.pulse.duration_s * np.linspace(0.0, 1.0, ECHO_SPAN_POINTS)
-        span_base = batch.background_w[todo][:, None] + model.column_power_w(span.ravel()).reshape(span.shape)
-        masked = np.zeros(todo.size, bool)
-        gated_out = np.zeros(todo.size, bool)
-        for c in range(1, len(ins.channels) + 1):
-            in_gate = (chans.gate_open_s[c] <= t_star) & (t_star < chans.gate_close_s[c])
-            amp = chans.lsb_per_w[c] * echo
-            dark = math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
-            noise = np.sqrt(dark**2 + chans.shot_lsb2_per_w[c] * base)
-            open_over = (chans.gate_open_s[c] <= span) & (span < chans.gate_close_s[c])
-            clipped = np.any(open_over & (chans.dark_mean_lsb[c] + chans.lsb_per_w[c] * span_base >= dig.max_code),
-                             axis=1)
-            visible_alone = amp > k * dark
-            masked |= in_gate & visible_alone & ((amp <= k * noise) | clipped)
-            gated_out |= ~in_gate & visible_alone
-        cause[todo] = np.where(masked, DROPOUT_CAUSES.index("masked_by_backscatter"),
-                               np.where(gated_out, DROPOUT_CAUSES.index("outside_gate"),
-                                        DROPOUT_CAUSES.index("below_threshold")))
+    if todo.size == 0:
+        return cause
+    # The strongest echo within the record, the earliest of equals.
+    strongest = np.full(batch.n_pulses, -1, np.int64)
+    ranked = np.lexsort((-np.arange(delay.size), np.where(delay < record_end, energy, -1.0), pulse_of))
+    strongest[pulse_of[ranked]] = ranked  # the last of each pulse's run wins
+    times = echo_span_times(delay[strongest[todo]], ins.pulse.duration_s, dig, phase_s[todo])
+    echo_w, column_w, baseline_w = _span_powers(times, todo, model.column, model.cuts(batch), echoes,
+                                                ins.pulse.duration_s)
+    valid = ~np.isnan(times)
+    peak = np.argmax(np.where(valid, echo_w, -np.inf), axis=1)[:, None]  # the echo's peak sample
+    t_peak = np.take_along_axis(times, peak, axis=1)[:, 0]
+    echo_peak = np.take_along_axis(echo_w, peak, axis=1)[:, 0]
+    # The residual the peak search measures: the record (column cut by the target, echo, background) over the
+    # processor's baseline (the open-water column and background).
+    resid_peak = echo_peak + np.take_along_axis(column_w - baseline_w, peak, axis=1)[:, 0]
+    base_peak = np.take_along_axis(baseline_w, peak, axis=1)[:, 0]
+    chans = model.channels
+    k = ins.processing.threshold_sigma
+    masked = np.zeros(todo.size, bool)
+    seen_open = np.zeros(todo.size, bool)
+    seen_shut = np.zeros(todo.size, bool)
+    for c in range(1, len(ins.channels) + 1):
+        open_at_peak = (chans.gate_open_s[c] <= t_peak) & (t_peak < chans.gate_close_s[c])
+        open_over = valid & (chans.gate_open_s[c] <= times) & (times < chans.gate_close_s[c])
+        dark = math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
+        sigma = np.sqrt(dark**2 + chans.shot_lsb2_per_w[c] * base_peak)
+        visible_alone = chans.lsb_per_w[c] * echo_peak > k * dark  # MULS Eqs. 12-13 in LSB
+        under_column = chans.lsb_per_w[c] * resid_peak <= k * sigma
+        top_w = (dig.max_code - chans.dark_mean_lsb[c]) / chans.lsb_per_w[c]  # the power that clips the channel
+        clipped = np.any(open_over & ((baseline_w >= top_w) | (column_w + echo_w >= top_w)), axis=1)
+        masked |= open_at_peak & visible_alone & (under_column | clipped)
+        seen_open |= open_at_peak & visible_alone
+        seen_shut |= ~open_at_peak & visible_alone
+    cause[todo] = np.where(masked, DROPOUT_CAUSES.index("masked_by_backscatter"),
+                           np.where(seen_shut & ~seen_open, DROPOUT_CAUSES.index("outside_gate"),
+                                    DROPOUT_CAUSES.index("below_threshold")))
     return cause
 
 
+def echo_span_times(start_s, duration_s: float, digitizer, phase_s) -> np.ndarray:
+    """(n, m) the sample times [s] of each pulse's record from ``start_s`` (n,) to ``start_s + duration_s``
+    (sample k at ``-pretrigger_s + k dt + phase_s``), NaN past the end of a shorter span."""
+    dt = digitizer.sample_interval_s
+    n_span = int(math.floor(duration_s / dt)) + 1
+    first = np.ceil((start_s + digitizer.pretrigger_s - phase_s) / dt)
+    times = -digitizer.pretrigger_s + (first[:, None] + np.arange(n_span)[None, :]) * dt + phase_s[:, None]
+    return np.where(times <= (start_s + duration_s)[:, None], times, np.nan)
+
+
 @kernel(nogil=True)
-def _powers(t, pulses, col, cuts, echoes, extent):
-    out = np.empty(t.shape[0])
-    for i in range(t.shape[0]):
-        out[i] = optical_power(t[i], pulses[i], col, cuts, echoes, extent)
-    return out
+def _span_powers(times, pulses, col, cuts, echoes, extent):
+    """Powers [W] of pulse ``pulses[i]`` at ``times[i, j]`` (NaN: none): its echoes alone, its column as the
+    target cuts it plus background, and the processor's baseline (the uncut column plus background)."""
+    n, m = times.shape
+    echo, column, baseline = np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m))
+    for i in range(n):
+        p = pulses[i]
+        for j in range(m):
+            t = times[i, j]
+            if math.isnan(t):
+                continue
+            power = optical_power(t, p, col, cuts, echoes, extent)  # MULS Eq. 1
+            cut = cuts.background_w[p]
+            for c in range(cuts.cut_tau_s.shape[1]):
+                if cuts.cut_weight[p, c] != 0.0:
+                    cut += cuts.cut_weight[p, c] * column_value(t, cuts.cut_tau_s[p, c], col)
+            echo[i, j] = power - cut
+            column[i, j] = cut
+            baseline[i, j] = cuts.background_w[p] + uncut_column_value(t, col)
+    return echo, column, baseline
 
 
 def range_batch(model: OpticalModel, batch: PulseBatch, records: Records, echoes: Echoes | None = None) -> Ranging:
@@ -171,5 +206,5 @@ def range_batch(model: OpticalModel, batch: PulseBatch, records: Records, echoes
     chosen, return_number, number_of_returns, dropped = choose_returns(model, peaks)
     has_return = np.zeros(batch.n_pulses, bool)
     has_return[chosen.pulse] = True
-    cause = dropout_causes(model, batch, has_return, dropped, echoes)
+    cause = dropout_causes(model, batch, has_return, dropped, echoes, records.phase_s)
     return Ranging(chosen, return_number, number_of_returns, peaks, cause, ref_time)
