@@ -13,7 +13,7 @@ import numpy as np
 from .detection import Records
 from .peaks import Peaks, find_peaks
 from .runtime import kernel
-from .waveform import Echoes, OpticalModel, PulseBatch, column_value, optical_power, uncut_column_value
+from .waveform import Echoes, OpticalModel, PulseBatch, column_value, uncut_column_value
 
 DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
 NO_DROPOUT = -1
@@ -101,7 +101,7 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
 
     One rule per cause, the first that holds (docs/outputs.md tables them): ``no_hit`` no echo begins within the
     record; ``blind_zone`` none that does carries light; ``saturated`` a clipped return was dropped; then, over the
-    samples of the strongest echo (from its start to the end of its pulse, :func:`echo_span_times`) and at the
+    samples of the strongest echo (from its start to the end of its pulse, :func:`echo_span_samples`) and at the
     sample where the echoes alone are highest (the echo's peak): ``masked_by_backscatter`` if in a channel open at
     the peak the echo alone clears the threshold over dark noise (k sigma) and the column hides it there: the
     residual over the processor's baseline (the open-water column and background) is at most k times the noise
@@ -132,32 +132,28 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     strongest = np.full(batch.n_pulses, -1, np.int64)
     ranked = np.lexsort((-np.arange(delay.size), np.where(delay < record_end, energy, -1.0), pulse_of))
     strongest[pulse_of[ranked]] = ranked  # the last of each pulse's run wins
-    times = echo_span_times(delay[strongest[todo]], ins.pulse.duration_s, dig, phase_s[todo])
-    echo_w, column_w, baseline_w = _span_powers(times, todo, model.column, model.cuts(batch), echoes,
-                                                ins.pulse.duration_s)
-    valid = ~np.isnan(times)
-    peak = np.argmax(np.where(valid, echo_w, -np.inf), axis=1)[:, None]  # the echo's peak sample
-    t_peak = np.take_along_axis(times, peak, axis=1)[:, 0]
-    echo_peak = np.take_along_axis(echo_w, peak, axis=1)[:, 0]
-    # The residual the peak search measures: the record (column cut by the target, echo, background) over the
-    # processor's baseline (the open-water column and background).
-    resid_peak = echo_peak + np.take_along_axis(column_w - baseline_w, peak, axis=1)[:, 0]
-    base_peak = np.take_along_axis(baseline_w, peak, axis=1)[:, 0]
+    first, count = echo_span_samples(delay[strongest[todo]], ins.pulse.duration_s, dig, phase_s[todo])
     chans = model.channels
+    signal = slice(1, len(ins.channels) + 1)
+    top_w = (dig.max_code - chans.dark_mean_lsb[signal]) / chans.lsb_per_w[signal]  # the power that clips each channel
+    sampling = (-dig.pretrigger_s, dig.sample_interval_s)
+    t_peak, echo_peak, column_peak, base_peak, clipped = _span_terms(
+        first, count, phase_s[todo], sampling, todo, model.column, model.cuts(batch), echoes, ins.pulse.duration_s,
+        chans.gate_open_s[signal], chans.gate_close_s[signal], top_w)
+    # The residual the peak search measures: the record (column cut by the targets, echo, background) over the
+    # processor's baseline (the open-water column and background).
+    resid_peak = echo_peak + column_peak - base_peak
     k = ins.processing.threshold_sigma
     masked = np.zeros(todo.size, bool)
     seen_open = np.zeros(todo.size, bool)
     seen_shut = np.zeros(todo.size, bool)
     for c in range(1, len(ins.channels) + 1):
         open_at_peak = (chans.gate_open_s[c] <= t_peak) & (t_peak < chans.gate_close_s[c])
-        open_over = valid & (chans.gate_open_s[c] <= times) & (times < chans.gate_close_s[c])
         dark = math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
         sigma = np.sqrt(dark**2 + chans.shot_lsb2_per_w[c] * base_peak)
         visible_alone = chans.lsb_per_w[c] * echo_peak > k * dark  # MULS Eqs. 12-13 in LSB
         under_column = chans.lsb_per_w[c] * resid_peak <= k * sigma
-        top_w = (dig.max_code - chans.dark_mean_lsb[c]) / chans.lsb_per_w[c]  # the power that clips the channel
-        clipped = np.any(open_over & ((baseline_w >= top_w) | (column_w + echo_w >= top_w)), axis=1)
-        masked |= open_at_peak & visible_alone & (under_column | clipped)
+        masked |= open_at_peak & visible_alone & (under_column | clipped[:, c - 1])
         seen_open |= open_at_peak & visible_alone
         seen_shut |= ~open_at_peak & visible_alone
     cause[todo] = np.where(masked, DROPOUT_CAUSES.index("masked_by_backscatter"),
@@ -166,37 +162,90 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     return cause
 
 
-def echo_span_times(start_s, duration_s: float, digitizer, phase_s) -> np.ndarray:
-    """(n, m) the sample times [s] of each pulse's record from ``start_s`` (n,) to ``start_s + duration_s``
-    (sample k at ``-pretrigger_s + k dt + phase_s``), NaN past the end of a shorter span."""
+def echo_span_samples(start_s, duration_s: float, digitizer, phase_s) -> tuple[np.ndarray, np.ndarray]:
+    """(first, count), each (n,) int64: the samples of each pulse's record from ``start_s`` (n,) [s] to
+    ``start_s + duration_s``, both included (sample k at ``-pretrigger_s + k dt + phase_s`` (n,) [s])."""
     dt = digitizer.sample_interval_s
-    n_span = int(math.floor(duration_s / dt)) + 1
-    first = np.ceil((start_s + digitizer.pretrigger_s - phase_s) / dt)
-    times = -digitizer.pretrigger_s + (first[:, None] + np.arange(n_span)[None, :]) * dt + phase_s[:, None]
-    return np.where(times <= (start_s + duration_s)[:, None], times, np.nan)
+    first = np.ceil((start_s + digitizer.pretrigger_s - phase_s) / dt).astype(np.int64)
+    last = np.floor((start_s + duration_s + digitizer.pretrigger_s - phase_s) / dt).astype(np.int64)
+    return first, np.maximum(last - first + 1, 0)
 
 
 @kernel(nogil=True)
-def _span_powers(times, pulses, col, cuts, echoes, extent):
-    """Powers [W] of pulse ``pulses[i]`` at ``times[i, j]`` (NaN: none): its echoes alone, its column as the
-    target cuts it plus background, and the processor's baseline (the uncut column plus background)."""
-    n, m = times.shape
-    echo, column, baseline = np.zeros((n, m)), np.zeros((n, m)), np.zeros((n, m))
+def _span_terms(first, count, phase, sampling, pulses, col, cuts, echoes, extent, gate_open, gate_close, top_w):
+    """The terms of pulse ``pulses[i]`` over its span, samples ``first[i]`` to ``first[i] + count[i] - 1`` of its
+    record (sample k at ``sampling[0] + k sampling[1] + phase[i]`` [s]): the peak's time [s] (the first sample
+    where the echoes alone are highest), there the echoes alone, the column as the targets cut it plus background,
+    and the processor's baseline (the uncut column plus background) [W], each (n,); and whether each signal
+    channel (n, channels), at a sample where its gate (``gate_open``, ``gate_close`` [s]) is open, is clipped
+    (power at or over ``top_w`` [W]) by the baseline alone or by the record (column and echo).
+
+    Each echo's pulse is stepped from sample to sample by constant factors; the cut column is evaluated only where
+    it decides a clip (the baseline under a channel's top and the baseline with the echo at or over it: the cut
+    column never exceeds the baseline)."""
+    n = pulses.shape[0]
+    n_chan = top_w.shape[0]
+    t0, dt = sampling
+    t_peak, echo_peak = np.full(n, np.nan), np.zeros(n)
+    column_peak, base_peak = np.zeros(n), np.zeros(n)
+    clipped = np.zeros((n, n_chan), np.bool_)
+    basis = col.basis
+    ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
+    times, echo = np.empty(count.max() if n else 0), np.empty(count.max() if n else 0)
     for i in range(n):
         p = pulses[i]
-        for j in range(m):
-            t = times[i, j]
-            if math.isnan(t):
+        last = count[i]
+        if last == 0:
+            continue
+        for j in range(last):
+            times[j] = t0 + (first[i] + j) * dt + phase[i]
+        echo[:last] = 0.0
+        for e in range(echoes.offsets[p], echoes.offsets[p + 1]):
+            j = 0
+            while j < last and times[j] < echoes.delay_s[e]:
+                j += 1
+            if j == last:
                 continue
-            power = optical_power(t, p, col, cuts, echoes, extent)  # MULS Eq. 1
-            cut = cuts.background_w[p]
-            for c in range(cuts.cut_tau_s.shape[1]):
-                if cuts.cut_weight[p, c] != 0.0:
-                    cut += cuts.cut_weight[p, c] * column_value(t, cuts.cut_tau_s[p, c], col)
-            echo[i, j] = power - cut
-            column[i, j] = cut
-            baseline[i, j] = cuts.background_w[p] + uncut_column_value(t, col)
-    return echo, column, baseline
+            u = times[j] - echoes.delay_s[e]
+            ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
+            while j < last and u < extent:  # MULS Eq. 1's echo term, pulse_value(u) stepped
+                echo[j] += echoes.energy_j[e] * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
+                j += 1
+                u += dt
+                ea *= ra
+                eb *= rb
+        peak = 0
+        for j in range(last):
+            t = times[j]
+            if echo[j] > echo[peak]:
+                peak = j
+            base = cuts.background_w[p] + uncut_column_value(t, col)
+            decides = False
+            for c in range(n_chan):
+                is_open = (gate_open[c] <= t) & (t < gate_close[c])
+                if is_open and base >= top_w[c]:
+                    clipped[i, c] = True
+                decides = decides or (is_open and not clipped[i, c] and base + echo[j] >= top_w[c])
+            if decides:
+                record = _cut_column(t, p, col, cuts) + echo[j]
+                for c in range(n_chan):
+                    if (gate_open[c] <= t) & (t < gate_close[c]) and record >= top_w[c]:
+                        clipped[i, c] = True
+        t_peak[i] = times[peak]
+        echo_peak[i] = echo[peak]
+        column_peak[i] = _cut_column(times[peak], p, col, cuts)
+        base_peak[i] = cuts.background_w[p] + uncut_column_value(times[peak], col)
+    return t_peak, echo_peak, column_peak, base_peak, clipped
+
+
+@kernel(inline="always")
+def _cut_column(t, p, col, cuts):
+    """Pulse ``p``'s column at time ``t`` [s] as its targets cut it, plus background [W] (MULS Eq. 1 less echoes)."""
+    power = cuts.background_w[p]
+    for c in range(cuts.cut_tau_s.shape[1]):
+        if cuts.cut_weight[p, c] != 0.0:
+            power += cuts.cut_weight[p, c] * column_value(t, cuts.cut_tau_s[p, c], col)
+    return power
 
 
 def range_batch(model: OpticalModel, batch: PulseBatch, records: Records, echoes: Echoes | None = None) -> Ranging:

@@ -13,7 +13,7 @@ import pytest
 
 from muls import mul2023
 from muls.presets import study_water
-from muls.ranging import DROPOUT_CAUSES, NO_DROPOUT, echo_span_times
+from muls.ranging import DROPOUT_CAUSES, NO_DROPOUT, echo_span_samples
 from muls.simulate import simulate
 from muls.waveform import OpticalModel, PulseBatch
 from scanner_sim.config.loading import load_scene
@@ -220,15 +220,14 @@ def test_plate_darkening_the_column_is_masked_at_every_reflectance():
 
 
 def test_echo_span_is_every_sample_from_the_echo_start_to_the_end_of_its_pulse():
-    """The span over which clipping is judged: the record's own samples (``-pretrigger + k dt + phase``) from the
-    echo's start to its start plus the pulse's duration, both ends included when a sample falls on them."""
+    """The span over which clipping is judged: the record's own samples (sample k at ``-pretrigger + k dt + phase``)
+    from the echo's start to its start plus the pulse's duration, both ends included when a sample falls on them,
+    counted here by walking the record's samples."""
     dig = mul2023().digitizer
     dt, pre = dig.sample_interval_s, dig.pretrigger_s
-    phase = np.array([0.0, 0.3e-9, 0.0])
-    start = np.array([20e-9, 20e-9, 20.5e-9])
-    times = echo_span_times(start, 4e-9, dig, phase)
-    by_hand = [[-pre + k * dt + ph for k in range(60) if s - 1e-15 <= -pre + k * dt + ph <= s + 4e-9 + 1e-15]
-               for s, ph in zip(start, phase)]
-    assert [len(h) for h in by_hand] == [5, 4, 4]
-    for row, hand in zip(times, by_hand):
-        np.testing.assert_allclose(row[~np.isnan(row)], hand, rtol=0, atol=1e-18)
+    phase = np.array([0.0, 0.3e-9, 0.0, 0.7e-9])
+    start = np.array([20e-9, 20e-9, 20.5e-9, 20e-9])
+    first, count = echo_span_samples(start, 4e-9, dig, phase)
+    by_hand = [[k for k in range(60) if s - 1e-15 <= -pre + k * dt + ph <= s + 4e-9 + 1e-15] for s, ph in zip(start, phase)]
+    assert [len(h) for h in by_hand] == [5, 4, 4, 4]
+    assert [list(range(f, f + c)) for f, c in zip(first, count)] == by_hand
