@@ -45,6 +45,20 @@ def _open_water(batch: PulseBatch) -> PulseBatch:
                    column_cut_weight=np.ones((n, 1)))
 
 
+def _echo_watts(total, column, times, chans):
+    """(n, samples) the echoes alone [W]: the record less the record with the echoes dark, read in the channel open
+    at each sample whose float32 codes resolve it best (a shut channel records its dark level only)."""
+    best, error = np.zeros(times.shape), np.full(times.shape, np.inf)
+    for j in range(total.shape[1]):
+        c = j + 1
+        is_open = (chans.gate_open_s[c] <= times) & (times < chans.gate_close_s[c])
+        resolution = np.spacing(np.maximum(total[:, j], column[:, j]).astype(np.float32)) / chans.lsb_per_w[c]
+        better = is_open & (resolution < error)
+        best = np.where(better, (total[:, j] - column[:, j]) / chans.lsb_per_w[c], best)
+        error = np.where(better, resolution, error)
+    return best
+
+
 def expected_causes(model: OpticalModel, batch: PulseBatch, seed, margin=0.0):
     """(reported causes, causes by definition) of every pulse of ``batch``; a definition's thresholds scaled by
     ``1 + margin``. The terms come from noise-free full records (1 GS/s, one window per pulse)."""
@@ -56,8 +70,7 @@ def expected_causes(model: OpticalModel, batch: PulseBatch, seed, margin=0.0):
     total = rec.noise_free_lsb.astype(float)  # (n, channels, samples), the windows are the pulses
     column, baseline = dark.noise_free_lsb.astype(float), base.noise_free_lsb.astype(float)
     times = rec.sample_times_s(model)
-    assert np.isinf(chans.gate_close_s[1]) and np.isinf(-chans.gate_open_s[1])  # CH1 ungated: the echo in watts
-    echo_w = (total[:, 0] - column[:, 0]) / chans.lsb_per_w[1]
+    echo_w = _echo_watts(total, column, times, chans)
 
     echoes = model.echoes(batch)
     expected = np.full(batch.n_pulses, NO_DROPOUT)
@@ -104,11 +117,11 @@ def assert_causes_match_definitions(model, batch, seed):
     reported causes' counts."""
     reported, low = expected_causes(model, batch, seed, -MARGIN)
     _, high = expected_causes(model, batch, seed, MARGIN)
+    lost = reported >= 0
     decided = low == high
-    assert decided.mean() > 0.95
+    assert not lost.any() or decided[lost].mean() > 0.95
     bad = np.flatnonzero(decided & (reported != low))
     assert bad.size == 0, [(int(p), DROPOUT_CAUSES[reported[p]], DROPOUT_CAUSES[low[p]]) for p in bad[:5]]
-    lost = reported >= 0
     return {DROPOUT_CAUSES[c]: int(n) for c, n in enumerate(np.bincount(reported[lost], minlength=6)) if n}
 
 
