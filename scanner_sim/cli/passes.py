@@ -164,6 +164,7 @@ def _cmd_run(args) -> int:
     from pathlib import Path
 
     from scanner_sim.config import load_scene
+    from scanner_sim.io.run_dir import hold_output
     from scanner_sim.survey.pipeline import run_pass
     from scanner_sim.survey.setup import PassOptions
 
@@ -173,8 +174,9 @@ def _cmd_run(args) -> int:
                           chunk_pulses=args.chunk_pulses, waveforms=args.waveforms, progress=not args.quiet,
                           render=not args.no_render)
     out = Path(args.out or config.output_dir)
-    _first_run_notice()
-    summary = run_pass(config, out, options).summary
+    with hold_output(out):  # taken before the pass is built, so a second writer is refused at once
+        _first_run_notice()
+        summary = run_pass(config, out, options).summary
     if not args.quiet:
         dropped = ", ".join(f"{k} {v:,}" for k, v in summary["dropouts"].items() if v) or "none"
         print(f"{summary['pulses']:,} pulses -> {summary['points']:,} points in {summary['wall_s']:.1f} s "

@@ -29,6 +29,7 @@ from scanner_sim.config import ConfigError, SceneConfig, build, load_scene
 from scanner_sim.config.base import Choice, Integer, Positive, StrictModel
 from scanner_sim.config.errors import invalid
 from scanner_sim.config.loading import load_strict_yaml
+from scanner_sim.io.run_dir import hold_output
 from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.render import viz
 from scanner_sim.runs.jobs import PassOutcome, run_jobs, run_pass_segmented
@@ -224,8 +225,14 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, client=None, *, redo: 
                  progress: bool = True) -> dict:
     """Run every pass of ``campaign`` into ``out_dir`` (on ``client``, else in this process) and write the
     campaign table and charts. Returns the content of campaign.json; its ``failed`` counts the passes whose
-    task failed (re-running the campaign redoes them)."""
+    task failed (re-running the campaign redoes them). The folder is locked while the campaign runs
+    (:func:`~scanner_sim.io.run_dir.hold_output`): a second writer is refused."""
     out = Path(out_dir)
+    with hold_output(out):
+        return _run_campaign(campaign, out, client, redo, progress)
+
+
+def _run_campaign(campaign: Campaign, out: Path, client, redo: bool, progress: bool) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     outcomes = run_jobs(campaign.jobs, out, client, retries=campaign.config.options.retries, redo=redo,

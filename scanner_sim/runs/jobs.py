@@ -16,6 +16,7 @@ from tqdm import tqdm
 
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
+from scanner_sim.io.run_dir import hold_output
 from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassFiles, PassJob, compute_pass, submit_pass
 from scanner_sim.survey.pipeline import PassResult
 from scanner_sim.survey.setup import PassOptions, PassPlan
@@ -142,5 +143,6 @@ def run_pass_segmented(config: SceneConfig, out_dir: str | Path, options: PassOp
         raise ValueError(f"segments = {segments!r}: must be an integer >= 1")
     out = Path(out_dir or config.output_dir)
     job = PassJob(out.name, config, options, segments)
-    files = compute_pass(job) if client is None else submit_pass(client, job).result()
-    return PassResult(write_pass(out, files), out)
+    with hold_output(out):  # one writer at a time, as run_pass (io/run_dir.py)
+        files = compute_pass(job) if client is None else submit_pass(client, job).result()
+        return PassResult(write_pass(out, files), out)
