@@ -179,3 +179,40 @@ def test_ctrl_c_on_a_dask_campaign_is_one_line_exit_130_and_keeps_finished_passe
     assert proc.returncode == 130 and len(lines) == 1 and "interrupted (Ctrl-C)" in lines[0], err
     for name, text in finished.items():
         assert (out / name / "summary.json").read_text() == text and json.loads(text)["pulses"] == 4000
+
+
+# -- the Python API -----------------------------------------------------------------------------------------------
+def _api_calls():
+    import muls
+    import scanner_sim as sim
+
+    config = sim.load_scene("pool_panel")
+    options = sim.PassOptions(max_pulses=5, progress=False)
+    return {
+        "config": [lambda: sim.simulate_pass("pool_panel"), lambda: sim.run_pass({"name": "x"}, "out"),
+                   lambda: sim.build_scene("pool_panel"), lambda: sim.PassSetup.build(None)],
+        "options": [lambda: sim.simulate_pass(config, {"max_pulses": 5}), lambda: sim.run_pass(config, "out", "fast")],
+        "scene": [lambda: sim.simulate_pass(config, options, scene="pool_panel")],
+        "out_dir": [lambda: sim.run_pass(config, 5, options)],
+        "PassOptions.max_pulses": [lambda: sim.PassOptions(max_pulses="5000")],
+        "PassOptions.waveforms": [lambda: sim.PassOptions(waveforms="all")],
+        "PassOptions.render_size": [lambda: sim.PassOptions(render_size=800)],
+        "PassOptions.coverage": [lambda: sim.PassOptions(coverage=0.25)],
+        "PassOptions.progress": [lambda: sim.PassOptions(progress="no")],
+        "overrides": [lambda: config.with_overrides("survey.seed=3"), lambda: config.with_overrides({1: 2})],
+        "water": [lambda: muls.instrument_preset("single_channel", "coastal_ocean")],
+    }
+
+
+@pytest.mark.parametrize("parameter", list(_api_calls()))
+def test_the_python_api_answers_a_wrong_type_with_a_type_error_naming_the_parameter(parameter, tmp_path,
+                                                                                     monkeypatch):
+    """Root cause: the entry points used their arguments' attributes without checking their types, so a scene
+    name where a SceneConfig belongs, a dict for PassOptions or a string for an option's number ended in an
+    AttributeError (or a TypeError from deep inside) that named no parameter."""
+    monkeypatch.chdir(tmp_path)
+    for call in _api_calls()[parameter]:
+        with pytest.raises(TypeError) as exc:
+            call()
+        assert str(exc.value).startswith(f"{parameter} must be "), str(exc.value)
+    assert list(tmp_path.iterdir()) == []  # refused before anything was written

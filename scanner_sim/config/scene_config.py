@@ -90,6 +90,9 @@ class SceneConfig(StrictModel):
         """This scene with values replaced by dotted key (``{"survey.seed": 3, "water": "turbid_harbor",
         "platform.altitude_m": 4}``), validated again as a whole the way a file is: a bad value or an unknown
         key raises the one-line :class:`ConfigError` naming it. Source path and mesh folder are kept."""
+        if not isinstance(overrides, Mapping) or not all(isinstance(key, str) for key in overrides):
+            raise TypeError(f"overrides must be a mapping of dotted scene keys (str) to values, "
+                            f"not {type(overrides).__name__} {overrides!r:.60}")
         data = self.model_dump(exclude_unset=True)
         for key, value in overrides.items():
             *sections, last = key.split(".")

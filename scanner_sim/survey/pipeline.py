@@ -9,6 +9,7 @@ muls; navigation noise is a function of time), so a seed fixes a pass bit for bi
 
 from __future__ import annotations
 
+import os
 import time
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -69,6 +70,8 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     ``setup_s`` the scene, BVH and tables built before it. A scene with a seabed also gets its coverage: the
     summary's ``coverage``, coverage_grid.npz and, when rendering, coverage_map.png. ``scene`` reuses a built scene.
     """
+    if out_dir is not None and not isinstance(out_dir, (str, os.PathLike)):
+        raise TypeError(f"out_dir must be a folder path (str or Path) or None, not {type(out_dir).__name__} {out_dir!r}")
     t_setup = time.perf_counter()
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup

@@ -23,6 +23,7 @@ from scanner_sim.config import (
     MeshObject,
     MooredMineObject,
     PanelObject,
+    SceneConfig,
     reflectance_of,
 )
 from scanner_sim.io.ply import ply_element_counts
@@ -279,6 +280,9 @@ def panel_mesh(center_m, size_m, normal, up):
 
 def build_scene(config) -> Scene:
     """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds)."""
+    if not isinstance(config, SceneConfig):
+        raise TypeError(f"config must be a SceneConfig (scanner_sim.load_scene(name_or_path) gives one), not "
+                        f"{type(config).__name__} {config!r:.60}")
     parts: list[Part] = []
     hf = None
     sb = config.seabed
