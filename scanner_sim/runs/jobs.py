@@ -30,7 +30,7 @@ from scanner_sim.survey.pipeline import PassResult
 from scanner_sim.survey.setup import PassOptions, PassPlan, checked_trajectory
 
 #: Keys of summary.json that time the pass: they differ from run to run.
-TIMING_KEYS = ("wall_s", "setup_s", "pulses_per_s")
+TIMING_KEYS = ("wall_s", "setup_s", "compile_s", "pulses_per_s")
 
 
 
