@@ -58,6 +58,8 @@ def _quiet_processes() -> Iterator:
     line) and closes the cluster, instead of each worker printing its KeyboardInterrupt."""
     saved_env = {key: os.environ.get(key) for key in QUIET_ENVIRONMENT}
     os.environ.update(QUIET_ENVIRONMENT)
+    if saved_env["PYTHONWARNINGS"]:  # the user's filters kept, ours after them
+        os.environ["PYTHONWARNINGS"] = f"{saved_env['PYTHONWARNINGS']},{QUIET_ENVIRONMENT['PYTHONWARNINGS']}"
     in_main = threading.current_thread() is threading.main_thread()
     handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
     try:
