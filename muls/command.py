@@ -72,7 +72,7 @@ def _arg_type(name: str, convert, ok, allowed: str, bad_values: tuple[str, ...],
         value = None
         with contextlib.suppress(ValueError, OverflowError, TypeError):
             value = convert(text) if text.strip() and "\0" not in text else None
-        if value is None or not ok(value):
+        if value is None or not ok(value):  # ok may raise ArgumentTypeError with a message of its own
             raise argparse.ArgumentTypeError(f"{key + ' ' if key else ''}must be {allowed}, not {text!r}")
         return value
 
@@ -134,7 +134,29 @@ def nonempty(key: str | None = None):
     return _arg_type("nonempty", str, lambda v: bool(v.strip()), "non-empty text", ("", "  "), key)
 
 
+#: [bytes] The longest name of one file or folder on the usual file systems (ext4, XFS, Btrfs, tmpfs: 255).
+NAME_MAX_BYTES = 255
+#: [bytes] What a writer adds to a name for its hidden temporary beside it: ``.NAME.1a2b3c4d.tmp`` for a file (14),
+#: ``.NAME.run-PID-1a2b3c4d`` for an output folder (22, a pid of up to 7 digits).
+FILE_ROOM_BYTES, FOLDER_ROOM_BYTES = 14, 22
+
+
+def check_name_lengths(path: str, room: int = 0) -> None:
+    """Refuse (argparse.ArgumentTypeError, one line) a path with a name longer than the file system takes, the last
+    one ``room`` bytes shorter (the hidden temporary beside it); before anything stats it, which would raise
+    ``OSError: File name too long`` inside argparse."""
+    parts = Path(path).parts
+    for i, part in enumerate(parts):
+        size, limit = len(os.fsencode(part)), NAME_MAX_BYTES - (room if i == len(parts) - 1 else 0)
+        if size > limit:
+            shown = part if len(part) <= 40 else part[:37] + "..."
+            extra = f", less the {room} its hidden temporary beside it adds" if room and i == len(parts) - 1 else ""
+            raise argparse.ArgumentTypeError(f"the name {shown!r} has {size:,} bytes, more than the {limit} a name may "
+                                             f"have ({NAME_MAX_BYTES} on the usual file systems{extra})")
+
+
 def _output_file_ok(path: str) -> bool:
+    check_name_lengths(path, FILE_ROOM_BYTES)
     p = Path(path)
     return not p.is_dir() and p.parent.is_dir()
 
@@ -146,6 +168,7 @@ def output_file(key: str | None = None):
 
 
 def _output_dir_ok(path: str) -> bool:
+    check_name_lengths(path, FOLDER_ROOM_BYTES)
     p = Path(os.path.abspath(path))
     return not any(q.exists() and not q.is_dir() for q in (p, *p.parents))
 
@@ -256,6 +279,12 @@ def run_guarded(prog: str, func, bad_input: tuple[type[BaseException], ...] = ()
         return EXIT_FAILURE
     except OSError as exc:
         where = f" writing {exc.filename}" if exc.filename else ""
+        if exc.errno == errno.ENAMETOOLONG:  # a name the user gave (a file, --out, a sweep value): bad input
+            shown = os.fsdecode(exc.filename or "")
+            shown = shown if len(shown) <= 80 else f"{shown[:77]}... ({len(os.fsencode(shown)):,} bytes)"
+            print(f"{prog}: error: file name too long: {shown!r}; a name may have at most {NAME_MAX_BYTES} bytes "
+                  f"(less for a folder a run writes beside: {FOLDER_ROOM_BYTES}), a path 4,096", file=sys.stderr)
+            return EXIT_USAGE
         if exc.errno in (errno.ENOSPC, errno.EDQUOT):
             print(f"{prog}: error: the disk is full ({exc.strerror}){where}; no partial file was left under a "
                   "final name: free some space or write elsewhere", file=sys.stderr)

@@ -189,6 +189,9 @@ def coaxial() -> Instrument:
 
 def instrument_preset(name: str, water: Water | None = None) -> Instrument:
     """The named instrument; ``single_channel`` sets its gain for ``water``."""
+    if water is not None and not isinstance(water, Water):
+        raise TypeError(f"water must be a Water (muls.water_preset(name) gives one) or None, not "
+                        f"{type(water).__name__} {water!r:.60}")
     if name == "mul2023":
         return mul2023()
     if name == "coaxial":

@@ -107,6 +107,7 @@ def _cmd_tradeoff(args) -> int:
     from pathlib import Path
 
     from scanner_sim.config import load_scene
+    from scanner_sim.io.run_dir import hold_output
     from scanner_sim.studies.tradeoff import (
         check_tradeoff_memory,
         failure_table_rows,
@@ -120,9 +121,10 @@ def _cmd_tradeoff(args) -> int:
                           keys=("--pulses", "--waveform-pulses"))
     out = Path(args.out or Path(config.output_dir) / "tradeoff")
     progress = None if args.json else (lambda name: print(f"running {name}", file=sys.stderr, flush=True))
-    result = tradeoff(config, tuple(args.levels), tuple(args.knobs), args.pulses, args.waveform_pulses, progress,
-                      convergence=not args.no_convergence, repeat=args.repeat)
-    path = write_tradeoff(result, out, render=not args.no_render)
+    with hold_output(out):  # taken before the runs, so a second writer is refused at once
+        result = tradeoff(config, tuple(args.levels), tuple(args.knobs), args.pulses, args.waveform_pulses, progress,
+                          convergence=not args.no_convergence, repeat=args.repeat)
+        path = write_tradeoff(result, out, render=not args.no_render)
     if args.json:
         print(json.dumps(result))
     elif args.failure_rows:
@@ -169,6 +171,7 @@ def _cmd_coverage(args) -> int:
     from pathlib import Path
 
     from scanner_sim.config import load_scene
+    from scanner_sim.io.run_dir import hold_output
     from scanner_sim.metrics.coverage import CoverageSettings
     from scanner_sim.render.report import main_table, markdown_table
     from scanner_sim.studies.coverage_study import StudyPlan, run_study
@@ -179,9 +182,10 @@ def _cmd_coverage(args) -> int:
                      tuple(args.instruments), args.gate)
     settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m)
     out = Path(args.out or Path(config.output_dir) / "coverage")
-    study = run_study(config, plan, out, settings=settings, fidelity=args.fidelity, seed=args.seed,
-                      max_pulses=args.max_pulses, render=not args.no_render, progress=not args.quiet,
-                      workers=_workers(args), scheduler=args.scheduler, redo=args.redo)
+    with hold_output(out):  # taken before the passes are built, so a second writer is refused at once
+        study = run_study(config, plan, out, settings=settings, fidelity=args.fidelity, seed=args.seed,
+                          max_pulses=args.max_pulses, render=not args.no_render, progress=not args.quiet,
+                          workers=_workers(args), scheduler=args.scheduler, redo=args.redo)
     if not args.quiet:
         print(markdown_table(*main_table(study)))
         print(f"{len(study['records'])} passes in {study['wall_s']:.0f} s")
@@ -246,12 +250,15 @@ def _add_campaign(sub):
 def _cmd_campaign(args) -> int:
     from pathlib import Path
 
+    from scanner_sim.io.run_dir import hold_output
     from scanner_sim.runs.campaign import load_campaign, run_campaign
     from scanner_sim.runs.cluster import maybe_client
 
     campaign = load_campaign(args.campaign)
     out = Path(args.out or Path("out") / "campaigns" / campaign.name)
-    with maybe_client(scheduler=args.scheduler, workers=_workers(args), announce=not args.quiet) as client:
+    # the folder's lock before the cluster starts, so a second writer is refused at once
+    with hold_output(out), maybe_client(scheduler=args.scheduler, workers=_workers(args),
+                                        announce=not args.quiet) as client:
         result = run_campaign(campaign, out, client, redo=args.redo, progress=not args.quiet)
     if not args.quiet:
         print(f"{len(result['passes'])} passes in {result['wall_s']:.0f} s: {result['ran']} ran, "

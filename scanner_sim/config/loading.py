@@ -138,23 +138,24 @@ def resolve_scene_path(name_or_path: str | Path) -> Path:
                       + (f"did you mean {hint[0]!r}? " if hint else "") + f"(shipped: {', '.join(scenes)})")
 
 
-def read_scene_text(path: Path) -> str:
-    """The text of a scene file: at most :data:`MAX_SCENE_BYTES`, UTF-8, no NUL bytes; else ConfigError."""
+def read_scene_text(path: Path, kind: str = "scene") -> str:
+    """The text of a scene (or ``kind``, e.g. campaign) file: at most :data:`MAX_SCENE_BYTES`, UTF-8, no NUL bytes;
+    else ConfigError naming the file."""
     try:
         with open(path, "rb") as fh:
             raw = fh.read(MAX_SCENE_BYTES + 1)
     except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the scene file ({exc.strerror or exc})") from None
+        raise ConfigError(f"{path}: cannot read the {kind} file ({exc.strerror or exc})") from None
     if len(raw) > MAX_SCENE_BYTES:
-        raise ConfigError(f"{path}: larger than {MAX_SCENE_BYTES:,} bytes; a scene file is a few kilobytes of YAML")
+        raise ConfigError(f"{path}: larger than {MAX_SCENE_BYTES:,} bytes; a {kind} file is a few kilobytes of YAML")
     if b"\0" in raw:
         nul = raw.index(b"\0")
-        raise ConfigError(f"{path}: binary data (a NUL byte at offset {nul:,}); a scene file is YAML text")
+        raise ConfigError(f"{path}: binary data (a NUL byte at offset {nul:,}); a {kind} file is YAML text")
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} at offset {exc.start:,}); "
-                          "save the scene file as UTF-8") from None
+                          f"save the {kind} file as UTF-8") from None
 
 
 def load_strict_yaml(text: str):
@@ -162,8 +163,9 @@ def load_strict_yaml(text: str):
     return yaml.load(text, Loader=StrictLoader)
 
 
-def parse_yaml_text(text: str, path: Path) -> dict:
-    """The mapping a scene file's text holds; raises a one-line ConfigError naming ``path`` for anything else."""
+def parse_yaml_text(text: str, path: Path, kind: str = "scene", keys: str = "format_version, name, platform, ...") -> dict:
+    """The mapping a scene (or ``kind``) file's text holds, ``keys`` an example of its keys; raises a one-line
+    ConfigError naming ``path`` for anything else."""
     try:
         data = load_strict_yaml(text)
     except yaml.YAMLError as exc:
@@ -181,10 +183,9 @@ def parse_yaml_text(text: str, path: Path) -> dict:
             raise ConfigError(f"{path}:{where}: {problem}") from None
         raise ConfigError(f"{path}: YAML syntax error{where}: {problem}") from None
     if data is None:
-        raise ConfigError(f"{path}: empty; a scene file starts with 'format_version: 1'")
+        raise ConfigError(f"{path}: empty; a {kind} file starts with 'format_version: 1'")
     if not isinstance(data, dict):
-        raise ConfigError(f"{path}: the document is a {type(data).__name__}, not a mapping of scene keys "
-                          "(format_version, name, platform, ...)")
+        raise ConfigError(f"{path}: the document is a {type(data).__name__}, not a mapping of {kind} keys ({keys})")
     return data
 
 

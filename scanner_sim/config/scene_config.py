@@ -101,6 +101,9 @@ class SceneConfig(StrictModel):
 
         ``given``: the values are the user's, listed in :attr:`overrides` (a pass's provenance names them);
         False for values a pass derives itself (the operator's gate rule)."""
+        if not isinstance(overrides, Mapping) or not all(isinstance(key, str) for key in overrides):
+            raise TypeError(f"overrides must be a mapping of dotted scene keys (str) to values, "
+                            f"not {type(overrides).__name__} {overrides!r:.60}")
         data = self.model_dump(exclude_unset=True)
         for key, value in overrides.items():
             *sections, last = key.split(".")

@@ -421,9 +421,10 @@ def read_las(path: PathLike, *, gps_time_offset_s: float | None = None) -> Point
     the file's metadata VLR, 0 if there is none). A field the file does not carry (``pulse_index``,
     or the extra dimensions of a LAS from another tool) gets its declared unknown value (-1 for
     ``object_id`` and ``pulse_index``, else 0); points of one pulse share their ``gps_time``.
-    Formats 0-5 give ``scan_angle_deg`` from their whole-degree ``scan_angle_rank``.
+    Formats 0-5 give ``scan_angle_deg`` from their whole-degree ``scan_angle_rank``. A file that is not LAS/LAZ,
+    or holds fewer points than its header promises (a copy cut short), raises ValueError naming it.
     """
-    las = laspy.read(path)
+    las = _read_whole(path)
     if gps_time_offset_s is None:
         gps_time_offset_s = float(_metadata_from_header(las.header).get("gps_time_offset_s", 0.0))
     n = len(las.points)
@@ -440,3 +441,25 @@ def read_las(path: PathLike, *, gps_time_offset_s: float | None = None) -> Point
             values = np.full((n,) if col.width is None else (n, col.width), col.unknown)
         fields[name] = values.astype(col.dtype)
     return PointRecords(**fields)
+
+
+def _read_whole(path: PathLike) -> laspy.LasData:
+    """``laspy.read(path)``, refused in one line naming the file (ValueError) when it is not LAS/LAZ or is cut short.
+
+    laspy reads an uncompressed file cut short as the points it holds, silently (a LAS of 300 points cut at 10 kB
+    reads as 133), and lazrs reports compressed data that ends early as its own ``LazrsError``."""
+    shown = os.fspath(path)
+    try:
+        las = laspy.read(path)
+    except laspy.LaspyException as exc:
+        raise ValueError(f"{shown}: not a readable LAS/LAZ file ({' '.join(str(exc).split())})") from None
+    except RuntimeError as exc:  # lazrs: the LAZ decompressor's errors
+        if "lazrs" not in type(exc).__module__.lower():
+            raise
+        raise ValueError(f"{shown}: the compressed points end early or are corrupt (a LAZ file cut short?: "
+                         f"{' '.join(str(exc).split())})") from None
+    promised = int(las.header.point_count)
+    if len(las.points) < promised:
+        raise ValueError(f"{shown}: truncated: its header promises {promised:,} points, the file holds "
+                         f"{len(las.points):,} (a copy cut short?)")
+    return las

@@ -13,10 +13,13 @@ So a folder holds a complete run, the previous one or the new one, at every inst
 run killed outright (``kill -9``, power loss) leaves its hidden folder, which the next run into the same
 folder removes.
 
-A second run into a folder while one writes it is refused (:class:`OutputBusyError`). The lock is an
-``flock`` on the lock file, which the kernel releases when its process dies, so the lock file a killed run
-leaves (with a dead pid in it) is simply taken over. Where ``flock`` is unsupported the pid in the file
-decides: a live process keeps the folder, a dead one's lock is taken over.
+A second run into a folder while one writes it is refused (:class:`OutputBusyError`). The lock
+(:class:`OutputLock`) is an ``flock`` on the lock file, which the kernel releases when its process dies, so the
+lock file a killed run leaves (with a dead pid in it) is simply taken over. Where ``flock`` is unsupported the pid
+in the file decides: a live process keeps the folder, a dead one's lock is taken over. The commands that write a
+folder of many passes (``coverage``, ``campaign``, ``tradeoff``) hold the same lock on their folder for as long as
+they run (:func:`hold_output`; ``run`` takes it before it builds the pass), so any two writers of one folder,
+whatever their commands, exclude each other.
 
 Only a folder that holds a complete run (a ``summary.json``) or nothing is replaced; any other folder is
 refused, so that ``--out .`` or ``--out ~/Documents`` can never delete files that are not a run's.
@@ -41,7 +44,7 @@ try:
 except ImportError:  # pragma: no cover - not POSIX
     fcntl = None
 
-__all__ = ["OutputBusyError", "RunDirectory", "abort_on_error"]
+__all__ = ["OutputBusyError", "OutputLock", "RunDirectory", "abort_on_error", "held_output", "hold_output"]
 
 #: The file whose presence makes a folder a complete run (written last by every pass).
 COMPLETE_MARKER = "summary.json"
@@ -77,8 +80,7 @@ class RunDirectory:
         self.final = Path(final)
         self.path: Path | None = None
         self._target = Path(os.path.abspath(self.final))
-        self._lock_fd: int | None = None
-        self._lock_path = self._target.parent / f".{self._target.name}.lock"
+        self._lock: OutputLock | None = None
 
     # -- the protocol ------------------------------------------------------------------------------------
     def open(self) -> RunDirectory:
@@ -86,13 +88,14 @@ class RunDirectory:
         if self.path is not None:
             raise ValueError(f"output folder {str(self.final)!r} is already open")
         self._check_target()
-        self._lock()
+        # the lock this thread holds on the folder (the command took it, hold_output), else its own
+        self._lock = None if held_output(self.final) else OutputLock(self.final).acquire()
         try:
             self._remove_leftovers()
             self.path = self._target.parent / f".{self._target.name}.run-{os.getpid()}-{secrets.token_hex(4)}"
             self.path.mkdir()
         except BaseException:
-            self._unlock()
+            self._release()
             raise
         _open_runs().append(self)
         return self
@@ -179,10 +182,40 @@ class RunDirectory:
                 if leftover.is_dir() and not leftover.is_symlink():
                     shutil.rmtree(leftover, ignore_errors=True)
 
-    # -- the lock ----------------------------------------------------------------------------------------
-    def _lock(self) -> None:
+    def _release(self) -> None:
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
+
+    def _close(self) -> None:
+        self._release()
+        with contextlib.suppress(ValueError):
+            _open_runs().remove(self)
+
+
+class OutputLock:
+    """The lock of the output folder ``folder``: an exclusive ``flock`` on ``.NAME.lock`` beside it (hidden, so it
+    never looks like an output), holding the pid of its process.
+
+    :meth:`acquire` raises :class:`OutputBusyError` (one line naming the holder's pid and the lock file) while
+    another open lock holds it, in this process or any other; :meth:`release` unlinks the file. A process killed
+    outright leaves the file, but the kernel drops its ``flock``, so the next writer takes the lock over.
+    """
+
+    def __init__(self, folder: PathLike):
+        self.folder = Path(folder)
+        target = Path(os.path.abspath(self.folder))
+        self.path = target.parent / f".{target.name}.lock"
+        self._fd: int | None = None
+
+    def acquire(self) -> OutputLock:
+        """Take the lock (the folder's parent is created when missing)."""
+        if self._fd is not None:
+            raise ValueError(f"the lock of output folder {str(self.folder)!r} is already held")
+        with contextlib.suppress(FileExistsError):
+            self.path.parent.mkdir(parents=True, exist_ok=True)
         while True:
-            fd = os.open(self._lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
             try:
                 state = _flock(fd)
                 if state == "busy":
@@ -191,8 +224,8 @@ class RunDirectory:
                     holder = _pid_in(fd)
                     if holder is not None and holder != os.getpid() and _alive(holder):
                         raise self._busy(holder)
-                # The run that held the lock may have removed the file since we opened it: hold the one named so.
-                if os.fstat(fd).st_ino != os.stat(self._lock_path).st_ino:
+                # The writer that held the lock may have removed the file since we opened it: hold the one named so.
+                if os.fstat(fd).st_ino != os.stat(self.path).st_ino:
                     os.close(fd)
                     continue
             except FileNotFoundError:
@@ -203,27 +236,61 @@ class RunDirectory:
                 raise
             os.ftruncate(fd, 0)
             os.write(fd, f"{os.getpid()}\n".encode())
-            self._lock_fd = fd
+            self._fd = fd
+            return self
+
+    def release(self) -> None:
+        """Give the lock up and remove its file (nothing when not held)."""
+        if self._fd is None:
             return
+        with contextlib.suppress(OSError):
+            os.unlink(self.path)
+        with contextlib.suppress(OSError):
+            os.close(self._fd)
+        self._fd = None
 
     def _busy(self, pid: int | None) -> OutputBusyError:
         who = f"pid {pid}" if pid is not None else "another process"
-        return OutputBusyError(f"output folder {str(self.final)!r} is being written by another run ({who}, lock "
-                               f"{str(self._lock_path)!r}); wait for it to finish or give another folder")
+        return OutputBusyError(f"output folder {str(self.folder)!r} is being written by another run ({who}, lock "
+                               f"{str(self.path)!r}); wait for it to finish or give another folder")
 
-    def _unlock(self) -> None:
-        if self._lock_fd is None:
-            return
-        with contextlib.suppress(OSError):
-            os.unlink(self._lock_path)
-        with contextlib.suppress(OSError):
-            os.close(self._lock_fd)
-        self._lock_fd = None
+    def __enter__(self) -> OutputLock:
+        return self.acquire()
 
-    def _close(self) -> None:
-        self._unlock()
-        with contextlib.suppress(ValueError):
-            _open_runs().remove(self)
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.release()
+
+
+_held = threading.local()
+
+
+def _held_folders() -> dict[str, OutputLock]:
+    if not hasattr(_held, "folders"):
+        _held.folders = {}
+    return _held.folders
+
+
+def held_output(folder: PathLike) -> bool:
+    """Whether this thread holds the lock of ``folder`` through :func:`hold_output`."""
+    return os.path.abspath(folder) in _held_folders()
+
+
+@contextlib.contextmanager
+def hold_output(folder: PathLike):
+    """Hold the :class:`OutputLock` of ``folder`` for the block, on any ending (an error, Ctrl-C and SIGTERM
+    included). Nested blocks of one thread on the same folder, and a :class:`RunDirectory` opened inside, share
+    the lock: a command takes it before its slow set-up (a scene, a Dask cluster), and the library function it
+    calls takes it again."""
+    held, key = _held_folders(), os.path.abspath(folder)
+    if key in held:
+        yield held[key]
+        return
+    with OutputLock(folder) as lock:
+        held[key] = lock
+        try:
+            yield lock
+        finally:
+            del held[key]
 
 
 def _flock(fd: int) -> str:

@@ -21,14 +21,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
-import yaml
 from pydantic import BeforeValidator, model_validator
 
+from muls.command import NAME_MAX_BYTES
 from scanner_sim import io
 from scanner_sim.config import ConfigError, SceneConfig, build, load_scene
 from scanner_sim.config.base import Choice, Integer, Positive, StrictModel
 from scanner_sim.config.errors import invalid
-from scanner_sim.config.loading import load_strict_yaml
+from scanner_sim.config.loading import parse_yaml_text, read_scene_text
+from scanner_sim.io.run_dir import hold_output
 from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.render import viz
 from scanner_sim.runs.jobs import PassOutcome, run_jobs, run_pass_segmented
@@ -196,6 +197,9 @@ def parse_campaign(data: Any, base_dir: Path | None = None, name: str = "campaig
         except ConfigError as exc:
             raise ConfigError(f"sweep: {exc}") from None
         name = pass_name(config.sweep, combo) or base.name
+        if len(name.encode()) > NAME_MAX_BYTES:
+            raise ConfigError(f"sweep: the pass folder {name[:60] + '...'!r} is {len(name.encode()):,} bytes long, more "
+                              f"than the {NAME_MAX_BYTES} a name may have; use shorter values (or fewer axes)")
         if name in names:
             raise ConfigError(f"sweep: {names[name]} and {combo} give the same folder name {name!r}; "
                               "make the values differ more")
@@ -209,12 +213,8 @@ def load_campaign(path: str | Path) -> Campaign:
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"campaign = {str(path)!r}: file not found")
-    try:
-        data = load_strict_yaml(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise ConfigError(f"{path.name}: YAML syntax error{where}: {getattr(exc, 'problem', None) or exc}") from None
+    # the scene files' bounds and one-line refusals naming the file: empty, binary, not UTF-8, not a mapping
+    data = parse_yaml_text(read_scene_text(path, "campaign"), path, "campaign", "format_version, scene, sweep, ...")
     return parse_campaign(data, path.parent, path.stem, path)
 
 
@@ -238,8 +238,14 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, client=None, *, redo: 
                  progress: bool = True) -> dict:
     """Run every pass of ``campaign`` into ``out_dir`` (on ``client``, else in this process) and write the
     campaign table and charts. Returns the content of campaign.json; its ``failed`` counts the passes whose
-    task failed (re-running the campaign redoes them)."""
+    task failed (re-running the campaign redoes them). The folder is locked while the campaign runs
+    (:func:`~scanner_sim.io.run_dir.hold_output`): a second writer is refused."""
     out = Path(out_dir)
+    with hold_output(out):
+        return _run_campaign(campaign, out, client, redo, progress)
+
+
+def _run_campaign(campaign: Campaign, out: Path, client, redo: bool, progress: bool) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     outcomes = run_jobs(campaign.jobs, out, client, retries=campaign.config.options.retries, redo=redo,

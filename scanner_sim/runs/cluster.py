@@ -5,7 +5,10 @@ or a client of a running scheduler.
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
+import signal
+import threading
 from collections.abc import Iterator
 
 #: Dask settings of the local cluster's workers. The statistical profiler samples the task's stack every
@@ -34,11 +37,54 @@ def dask_client(scheduler: str | None = None, workers: int | None = None, *,
     n = default_workers() if workers is None else workers
     if not (isinstance(n, int) and n >= 1):
         raise ValueError(f"workers = {workers!r}: must be an integer >= 1")
-    with dask.config.set(WORKER_CONFIG):
+    with dask.config.set(WORKER_CONFIG), _quiet_processes():
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                                dashboard_address="127.0.0.1:0" if dashboard else None)
-    with cluster, Client(cluster) as client:
+    with _quiet_logs(), cluster, Client(cluster) as client:
         yield client
+
+
+#: What the processes of a local cluster inherit: Dask's logs at CRITICAL only (a pass's failure is the
+#: campaign's to report, in one line; the dashboard keeps the details), and no warning from multiprocessing's
+#: resource tracker about the semaphores of workers killed at shutdown.
+QUIET_ENVIRONMENT = {"DASK_LOGGING__DISTRIBUTED": "critical",
+                     "PYTHONWARNINGS": "ignore::UserWarning:multiprocessing.resource_tracker"}
+
+
+@contextlib.contextmanager
+def _quiet_processes() -> Iterator:
+    """Start a local cluster's processes with :data:`QUIET_ENVIRONMENT` and SIGINT ignored, which they inherit.
+    Ctrl-C reaches every process of the terminal's process group: the command alone answers it (exit 130, one
+    line) and closes the cluster, instead of each worker printing its KeyboardInterrupt."""
+    saved_env = {key: os.environ.get(key) for key in QUIET_ENVIRONMENT}
+    os.environ.update(QUIET_ENVIRONMENT)
+    if saved_env["PYTHONWARNINGS"]:  # the user's filters kept, ours after them
+        os.environ["PYTHONWARNINGS"] = f"{saved_env['PYTHONWARNINGS']},{QUIET_ENVIRONMENT['PYTHONWARNINGS']}"
+    in_main = threading.current_thread() is threading.main_thread()
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
+    try:
+        yield
+    finally:
+        if in_main:
+            signal.signal(signal.SIGINT, handler)
+        for key, value in saved_env.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+@contextlib.contextmanager
+def _quiet_logs() -> Iterator:
+    """Dask's logs in this process (the scheduler and the nannies of a local cluster) at CRITICAL only while the
+    cluster runs and closes: an interrupted campaign cancels tasks in flight, which Dask would log as errors."""
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 @contextlib.contextmanager

@@ -15,14 +15,23 @@ from pathlib import Path
 from tqdm import tqdm
 
 from scanner_sim import io
-from scanner_sim.config import SceneConfig
-from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassFiles, PassJob, compute_pass, submit_pass
+from scanner_sim.config import ConfigError, SceneConfig
+from scanner_sim.io.run_dir import hold_output
+from scanner_sim.runs.tasks import (
+    DEFAULT_RETRIES,
+    PassFiles,
+    PassJob,
+    Refused,
+    cached_scene,
+    compute_pass,
+    submit_pass,
+)
 from scanner_sim.survey.pipeline import PassResult
 from scanner_sim.survey.provenance import inputs_fingerprint
-from scanner_sim.survey.setup import PassOptions, PassPlan
+from scanner_sim.survey.setup import PassOptions, PassPlan, checked_trajectory
 
 #: Keys of summary.json that time the pass: they differ from run to run.
-TIMING_KEYS = ("wall_s", "setup_s", "pulses_per_s")
+TIMING_KEYS = ("wall_s", "setup_s", "compile_s", "pulses_per_s")
 
 
 
@@ -78,6 +87,20 @@ def completed_summary(folder: Path, job: PassJob) -> dict | None:
     return summary
 
 
+def check_jobs(jobs: Sequence[PassJob]) -> None:
+    """Run every job's set-up checks here, before any pass runs: the pass's size and memory, its start within the
+    track (:func:`~scanner_sim.survey.budget.check_pass_budget`), and its built track against the water surface, the
+    seabed and the objects (:func:`~scanner_sim.survey.setup.checked_trajectory`). Raises the first refusal as a
+    ConfigError naming the pass; a set-up error is then never met in a task, where it would be retried and
+    reported only when its pass started."""
+    for job in jobs:
+        config = job.config.with_overrides(job.options.scene_overrides())
+        try:
+            checked_trajectory(config, cached_scene(job.config))
+        except ConfigError as exc:
+            raise ConfigError(f"pass {job.name}: {exc}") from None
+
+
 def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retries: int = DEFAULT_RETRIES,
              redo: bool = False, progress: bool = True) -> list[PassOutcome]:
     """Run ``jobs`` into ``out_dir/JOB.name/`` and return their outcomes in the order of ``jobs``.
@@ -91,6 +114,7 @@ def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retri
     names = [job.name for job in jobs]
     if len(set(names)) != len(names):
         raise ValueError(f"passes: folder names repeat ({sorted({n for n in names if names.count(n) > 1})})")
+    check_jobs(jobs)
     outcomes: dict[int, PassOutcome] = {}
     todo = []
     for k, job in enumerate(jobs):
@@ -113,7 +137,11 @@ def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retri
         for future in as_completed(futures):
             k = futures[future]
             try:
-                outcomes[k] = PassOutcome(jobs[k], "ran", write_pass(out / jobs[k].name, future.result()))
+                files = future.result()
+                if isinstance(files, Refused):  # a bad input or set-up, tried once
+                    outcomes[k] = PassOutcome(jobs[k], "failed", None, files.error)
+                else:
+                    outcomes[k] = PassOutcome(jobs[k], "ran", write_pass(out / jobs[k].name, files))
             except Exception as exc:  # the task's own error, after its retries; the others go on
                 outcomes[k] = PassOutcome(jobs[k], "failed", None, f"{type(exc).__name__}: {exc}".splitlines()[0])
             future.release()
@@ -132,5 +160,8 @@ def run_pass_segmented(config: SceneConfig, out_dir: str | Path, options: PassOp
         raise ValueError(f"segments = {segments!r}: must be an integer >= 1")
     out = Path(out_dir or config.output_dir)
     job = PassJob(out.name, config, options, segments)
-    files = compute_pass(job) if client is None else submit_pass(client, job).result()
-    return PassResult(write_pass(out, files), out)
+    with hold_output(out):  # one writer at a time, as run_pass (io/run_dir.py)
+        files = compute_pass(job) if client is None else submit_pass(client, job).result()
+        if isinstance(files, Refused):
+            raise ValueError(files.error)
+        return PassResult(write_pass(out, files), out)

@@ -128,19 +128,33 @@ def compute_pass(job: PassJob) -> PassFiles:
                           *(simulate_segment(job.config, job.options, i, job.segments) for i in range(job.segments)))
 
 
+class Refused(NamedTuple):
+    """What a task returns instead of raising a ValueError (a bad input or set-up: the same on any worker, so
+    Dask must not retry it): the error in one line."""
+
+    error: str
+
+
 def on_worker(task, *args):
     """Run ``task(*args)`` as a Dask task: with one numba thread, since the workers (one thread each) are
     the parallelism; numba's own threads on top would oversubscribe the cores (measured: a third more CPU
-    time for the same coverage sweep on 2 cores)."""
+    time for the same coverage sweep on 2 cores). A ValueError is returned as :class:`Refused`, not raised, so
+    it is tried once and logged by no worker; a refused segment's merge is refused with it."""
     import numba
 
+    refused = next((arg for arg in args if isinstance(arg, Refused)), None)
+    if refused is not None:
+        return refused
     numba.set_num_threads(1)
-    return task(*args)
+    try:
+        return task(*args)
+    except ValueError as exc:
+        return Refused(" ".join(f"{type(exc).__name__}: {exc}".split()))
 
 
 def submit_pass(client, job: PassJob, *, retries: int = DEFAULT_RETRIES, token: str | None = None):
     """Submit ``job`` to ``client``; returns the future of its :class:`PassFiles` (a merge of segment
-    futures when ``job.segments`` > 1). Keys read ``pass-NAME-TOKEN`` on the dashboard."""
+    futures when ``job.segments`` > 1), or of a :class:`Refused`. Keys read ``pass-NAME-TOKEN`` on the dashboard."""
     token = token or uuid.uuid4().hex[:8]
     key = f"pass-{job.name}-{token}"
     if job.segments == 1:

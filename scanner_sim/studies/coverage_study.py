@@ -19,6 +19,7 @@ from pathlib import Path
 from muls.errors import ParameterError
 from muls.presets import instrument_preset, water_preset
 from scanner_sim.config import SceneConfig
+from scanner_sim.io.run_dir import hold_output
 from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.runs.cluster import maybe_client
 from scanner_sim.runs.jobs import run_jobs
@@ -113,7 +114,8 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     The study is a campaign (docs/campaigns.md): its passes run as Dask tasks on ``client``, or on the
     scheduler at ``scheduler``, or on a local cluster of ``workers`` processes; with none of them (or
     ``workers=0``), one after another in this process. The results are the same bits either way. Passes
-    already complete in ``out_dir`` are kept, unless ``redo``.
+    already complete in ``out_dir`` are kept, unless ``redo``. The folder is locked while the study runs: a
+    second writer is refused (:func:`~scanner_sim.io.run_dir.hold_output`).
     """
     from scanner_sim import io
     from scanner_sim.render import report
@@ -130,35 +132,36 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
                                 render=render, render_size=STUDY_RENDER_SIZE, write_scene=False, coverage=settings))
             for water, altitude, instrument in combos]
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    started = time.perf_counter()
-    scene = cached_scene(config)
-    io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
-    with maybe_client(client, scheduler, workers, announce=progress) as dask:
-        outcomes = run_jobs(jobs, out, dask, redo=redo, progress=progress)
-    failed = [o for o in outcomes if o.status == "failed"]
-    if failed:
-        raise RuntimeError(f"{len(failed)} of {len(jobs)} passes failed ({failed[0].job.name}: {failed[0].error}); "
-                           "the others are complete in the output folder: run the study again to redo only these")
-    records = [study_record(job.config, o.summary, water, altitude, instrument, job.name)
-               for (water, altitude, instrument), job, o in zip(combos, jobs, outcomes)]
-    study = {
-        "scene": config.name,
-        "study": {"waters": list(plan.waters),
-                  "altitudes_m": [a if a is not None else config.platform.altitude_m for a in plan.altitudes_m],
-                  "instruments": list(plan.instruments), "gate": plan.gate, "cell_m": settings.cell_m,
-                  "min_points": settings.min_points, "tolerance_m": settings.tolerance_m},
-        "wall_s": round(time.perf_counter() - started, 1),
-        "records": records,
-    }
-    io.write_summary_json(out / "coverage.json", study)
-    io.write_text(out / "coverage.md", report.coverage_markdown(study))
-    if render:
-        from scanner_sim.render import viz
+    with hold_output(out):  # one writer at a time (io/run_dir.py)
+        out.mkdir(parents=True, exist_ok=True)
+        started = time.perf_counter()
+        scene = cached_scene(config)
+        io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
+        with maybe_client(client, scheduler, workers, announce=progress) as dask:
+            outcomes = run_jobs(jobs, out, dask, redo=redo, progress=progress)
+        failed = [o for o in outcomes if o.status == "failed"]
+        if failed:
+            raise RuntimeError(f"{len(failed)} of {len(jobs)} passes failed ({failed[0].job.name}: {failed[0].error}); "
+                               "the others are complete in the output folder: run the study again to redo only these")
+        records = [study_record(job.config, o.summary, water, altitude, instrument, job.name)
+                   for (water, altitude, instrument), job, o in zip(combos, jobs, outcomes)]
+        study = {
+            "scene": config.name,
+            "study": {"waters": list(plan.waters),
+                      "altitudes_m": [a if a is not None else config.platform.altitude_m for a in plan.altitudes_m],
+                      "instruments": list(plan.instruments), "gate": plan.gate, "cell_m": settings.cell_m,
+                      "min_points": settings.min_points, "tolerance_m": settings.tolerance_m},
+            "wall_s": round(time.perf_counter() - started, 1),
+            "records": records,
+        }
+        io.write_summary_json(out / "coverage.json", study)
+        io.write_text(out / "coverage.md", report.coverage_markdown(study))
+        if render:
+            from scanner_sim.render import viz
 
-        viz.plot_coverage_vs_altitude(out / "coverage_vs_altitude.png", records,
-                                      title=f"{config.name}: coverage against altitude")
-        io.write_text(out / "report.html", report.report_html(study, out))
+            viz.plot_coverage_vs_altitude(out / "coverage_vs_altitude.png", records,
+                                          title=f"{config.name}: coverage against altitude")
+            io.write_text(out / "report.html", report.report_html(study, out))
     return study
 
 

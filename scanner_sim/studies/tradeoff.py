@@ -21,6 +21,7 @@ import numpy as np
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.fidelity import FIDELITY_LEVELS, FidelityLevel
+from scanner_sim.io.run_dir import hold_output
 from scanner_sim.studies import accuracy
 from scanner_sim.survey import sinks
 from scanner_sim.survey.pipeline import pass_chunks, stream_pass
@@ -298,10 +299,16 @@ def failure_table_rows(result: dict) -> str:
 
 def write_tradeoff(result: dict, out_dir: str | Path, render: bool = True) -> Path:
     """tradeoff.json, tradeoff.md and (``render``) tradeoff.png in ``out_dir``, each written atomically; returns
-    the path of tradeoff.json."""
+    the path of tradeoff.json. The folder is locked while they are written: a second writer is refused
+    (:func:`~scanner_sim.io.run_dir.hold_output`)."""
+    out = Path(out_dir)
+    with hold_output(out):
+        return _write_tradeoff(result, out, render)
+
+
+def _write_tradeoff(result: dict, out: Path, render: bool) -> Path:
     from scanner_sim.render.viz import plot_tradeoff
 
-    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if render:
         plot_tradeoff(out / "tradeoff.png", result)

@@ -9,6 +9,7 @@ muls; navigation noise is a function of time), so a seed fixes a pass bit for bi
 
 from __future__ import annotations
 
+import os
 import time
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -66,14 +67,18 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     The files are those of the pass's plan (:class:`~scanner_sim.survey.setup.PassPlan`): what the scene's
     ``output`` asks for (points.las and/or points.laz, or one per leg; trajectory.csv; waveforms.npz), dropouts.npz,
     and summary.json last. The summary's ``wall_s`` and ``pulses_per_s`` time the pass itself (chunks and sinks),
-    ``setup_s`` the scene, BVH and tables built before it. A scene with a seabed also gets its coverage: the
+    ``setup_s`` the scene, BVH and tables built before it, ``compile_s`` the kernels compiled or loaded from the
+    cache before it (:func:`warm_up`). A scene with a seabed also gets its coverage: the
     summary's ``coverage``, coverage_grid.npz and, when rendering, coverage_map.png. ``scene`` reuses a built scene.
     """
+    if out_dir is not None and not isinstance(out_dir, (str, os.PathLike)):
+        raise TypeError(f"out_dir must be a folder path (str or Path) or None, not {type(out_dir).__name__} {out_dir!r}")
     t_setup = time.perf_counter()
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
     run_dir = RunDirectory(out_dir or setup.config.output_dir).open()  # locked; written in a hidden sibling
-    summary = stream_to_files(setup, run_dir.path, pass_chunks(setup, options), options, setup_s)
+    compile_s = warm_up(setup, options)
+    summary = stream_to_files(setup, run_dir.path, pass_chunks(setup, options), options, setup_s, compile_s=compile_s)
     return PassResult(summary, run_dir.commit())  # swapped in whole for the output folder (io/run_dir.py)
 
 
@@ -85,13 +90,34 @@ def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), sce
     t_setup = time.perf_counter()
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
+    compile_s = warm_up(setup, options)
     memory = sinks.MemorySink()
     stats, coverage, wall_s = stream_pass(setup, pass_chunks(setup, options), [memory], options)
     dropouts = memory.dropouts()
-    summary = sinks.pass_summary(pass_facts(setup, options), stats, stats.points, dropouts.counts_by_cause(), wall_s, setup_s)
+    summary = sinks.pass_summary(pass_facts(setup, options), stats, stats.points, dropouts.counts_by_cause(), wall_s,
+                                 setup_s, compile_s)
     if coverage is not None:
         summary["coverage"] = coverage.figures()
     return PassResult(summary, None, memory.points(), dropouts, trajectory_table(setup))
+
+
+#: Pulse slots of the chunk :func:`warm_up` simulates and discards.
+WARM_UP_SLOTS = 64
+
+
+def warm_up(setup: PassSetup, options: PassOptions) -> float:
+    """Compile every kernel of the pass's flow (numba compiles a kernel on its first call, about a minute for all of
+    them on a fresh machine), or load it from the cache, before the pass's clock starts: simulate the pass's first
+    :data:`WARM_UP_SLOTS` slots, and the whole records of one when the pass keeps some, and discard them. Returns
+    the seconds it took, the summary's ``compile_s``. A chunk is a pure function of its slots, so the pass's bits
+    do not change."""
+    started = time.perf_counter()
+    first = next(iter(setup.slot_chunks()), None)
+    if first is not None and first.size:
+        setup.simulate_chunk(first[:WARM_UP_SLOTS])
+        if options.waveforms or setup.config.output.waveform_every_n_pulses:
+            setup.simulate_chunk(first[:1], record_mode="full", every_channel=True)
+    return time.perf_counter() - started
 
 
 def pass_facts(setup: PassSetup, options: PassOptions) -> sinks.PassFacts:
@@ -209,11 +235,11 @@ def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOption
 
 
 def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, setup_s: float,
-                    earlier_wall_s: float = 0.0) -> dict:
+                    earlier_wall_s: float = 0.0, compile_s: float = 0.0) -> dict:
     """``chunks`` of the pass streamed into the files of its plan in ``out`` (what the scene's ``output`` asks
     for, dropouts, coverage grid, trajectory, scene, waveforms, pictures), summary.json last; returns the summary.
     ``earlier_wall_s``: seconds already spent simulating the chunks elsewhere (a pass split in segments), added to
-    ``wall_s``."""
+    ``wall_s``; ``compile_s``: seconds :func:`warm_up` took, reported apart."""
     facts, files, output = pass_facts(setup, options), setup.plan.files, setup.config.output
     render = "render.png" in files
     with ExitStack() as stack:
@@ -225,7 +251,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
         stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts, waveforms]
                                               + ([sample] if render else []), options)
     summary = sinks.pass_summary(facts, stats, stats.points, dropouts.counts_by_cause(), wall_s + earlier_wall_s,
-                                 setup_s)
+                                 setup_s, compile_s)
     if coverage is not None:
         summary["coverage"] = coverage.write(out / "coverage_grid.npz")
     if "scene.ply" in files:

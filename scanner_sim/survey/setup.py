@@ -56,11 +56,55 @@ class PassOptions:
     write_scene: bool = True
     coverage: CoverageSettings = CoverageSettings()
 
+    def __post_init__(self):
+        """The options' types, each refused by name (TypeError); the values of the scene keys they override are
+        checked with the scene's (ConfigError naming ``survey.max_pulses`` and so on)."""
+        def integer(value) -> bool:
+            return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+        for name in ("water", "fidelity"):
+            if not isinstance(getattr(self, name), (str, type(None))):
+                raise _type_error(f"PassOptions.{name}", "a name (str) or None", getattr(self, name))
+        for name in ("seed", "max_pulses", "chunk_pulses"):
+            if not (getattr(self, name) is None or integer(getattr(self, name))):
+                raise _type_error(f"PassOptions.{name}", "an integer or None", getattr(self, name))
+        if not integer(self.waveforms):
+            raise _type_error("PassOptions.waveforms", "an integer", self.waveforms)
+        if self.waveforms < 0:
+            raise ValueError(f"PassOptions.waveforms = {self.waveforms!r}: must be >= 0")
+        for name in ("progress", "render", "write_scene"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise _type_error(f"PassOptions.{name}", "True or False", getattr(self, name))
+        size = self.render_size
+        if not (isinstance(size, (tuple, list)) and len(size) == 2 and all(integer(n) for n in size)):
+            raise _type_error("PassOptions.render_size", "a pair of integers (width, height) [px]", size)
+        if min(size) < 1:
+            raise ValueError(f"PassOptions.render_size = {tuple(size)!r}: must be >= 1 px each")
+        if not isinstance(self.coverage, CoverageSettings):
+            raise _type_error("PassOptions.coverage", "a CoverageSettings", self.coverage)
+
     def scene_overrides(self) -> dict[str, Any]:
         """The scene keys these options set, by dotted name."""
         keys = {"water": self.water, "survey.seed": self.seed, "survey.fidelity": self.fidelity,
                 "survey.max_pulses": self.max_pulses, "survey.chunk_pulses": self.chunk_pulses}
         return {k: v for k, v in keys.items() if v is not None}
+
+
+def _type_error(parameter: str, allowed: str, value) -> TypeError:
+    """A one-line TypeError naming the parameter, what it takes and what it was given."""
+    shown = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
+    return TypeError(f"{parameter} must be {allowed}, not {type(value).__name__} {shown}")
+
+
+def check_pass_arguments(config, options, scene) -> None:
+    """The arguments of a pass's entry points (:func:`~scanner_sim.survey.pipeline.run_pass`, ``simulate_pass``,
+    :meth:`PassSetup.build`): a TypeError naming the parameter, instead of an AttributeError deep inside."""
+    if not isinstance(config, SceneConfig):
+        raise _type_error("config", "a SceneConfig (scanner_sim.load_scene(name_or_path) gives one)", config)
+    if not isinstance(options, PassOptions):
+        raise _type_error("options", "a PassOptions (scanner_sim.PassOptions(max_pulses=...))", options)
+    if scene is not None and not isinstance(scene, Scene):
+        raise _type_error("scene", "a Scene built from this config (scanner_sim.build_scene(config)) or None", scene)
 
 
 @dataclass(frozen=True)
@@ -219,6 +263,7 @@ class PassSetup:
               level: FidelityLevel | None = None) -> PassSetup:
         """``scene``: the already built :class:`Scene` of ``config`` to reuse, if any; ``level``: run at this
         fidelity level instead of the scene's (the trade-off study's knobs)."""
+        check_pass_arguments(config, options, scene)
         configure_process()
         config = given = config.with_overrides(options.scene_overrides())
         survey = config.survey

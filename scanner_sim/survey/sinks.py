@@ -241,8 +241,10 @@ class CloudSample:
 
 
 def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_counts: dict, wall_s: float,
-                 setup_s: float) -> dict:
-    """The summary of a pass: counts, speed, range error quantiles and the settings that made it."""
+                 setup_s: float, compile_s: float = 0.0) -> dict:
+    """The summary of a pass: counts, speed, range error quantiles and the settings that made it. ``wall_s`` [s]
+    times the chunk loop, so ``pulses_per_s`` leaves out ``setup_s`` and ``compile_s`` (compiling the kernels, or
+    loading them from the cache, before the loop)."""
     return {
         "scene": facts.scene,
         "water": facts.water,
@@ -254,6 +256,7 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
         "channels": {name: int(stats.channels[i + 1]) for i, name in enumerate(facts.channels)},
         "wall_s": round(wall_s, 3),
         "setup_s": round(setup_s, 3),
+        "compile_s": round(compile_s, 3),
         "pulses_per_s": round(stats.pulses / wall_s, 1) if wall_s > 0 else None,
         "range_error_m": {"median": stats.error_quantile_m(0.5), "p95": stats.error_quantile_m(0.95)},
         "settings": {

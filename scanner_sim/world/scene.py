@@ -23,8 +23,10 @@ from scanner_sim.config import (
     MeshObject,
     MooredMineObject,
     PanelObject,
+    SceneConfig,
     reflectance_of,
 )
+from scanner_sim.io.ply import ply_element_counts
 from scanner_sim.world.materials import LABELS
 from scanner_sim.world.terrain import HeightField, generate_heightfield, rock_meshes
 
@@ -310,6 +312,9 @@ def panel_mesh(center_m, size_m, normal, up):
 
 def build_scene(config) -> Scene:
     """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds)."""
+    if not isinstance(config, SceneConfig):
+        raise TypeError(f"config must be a SceneConfig (scanner_sim.load_scene(name_or_path) gives one), not "
+                        f"{type(config).__name__} {config!r:.60}")
     parts: list[Part] = []
     hf = None
     sb = config.seabed
@@ -402,6 +407,7 @@ def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]
     if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or v.ndim != 2 or v.shape[1] != 3:
         raise ConfigError(f"{where}: no triangles (an empty file, or not a mesh format trimesh recognises by its "
                           "suffix)")
+    _check_ply_whole(obj, where, len(v), len(f))
     bad = ~np.isfinite(v).all(axis=1)
     if bad.any():
         raise ConfigError(f"{where}: {int(bad.sum()):,} of {len(v):,} vertices are not finite (NaN or infinite), "
@@ -417,6 +423,18 @@ def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]
         raise ConfigError(f"{where}: all {len(f):,} triangles are degenerate (zero area)")
     mesh = trimesh.Trimesh(v, f, process=True)
     return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+
+
+def _check_ply_whole(obj: MeshObject, where: str, n_vertices: int, n_faces: int) -> None:
+    """Refuse a PLY file that holds fewer vertices or faces than its header promises (a copy cut short): trimesh
+    reads an ASCII one as the lines it holds, silently. (A face may be cut into triangles, so more faces is fine.)"""
+    if not str(obj.resolved_path).lower().endswith(".ply"):
+        return
+    promised = ply_element_counts(obj.resolved_path) or {}
+    for element, plural, held in (("vertex", "vertices", n_vertices), ("face", "faces", n_faces)):
+        if held < promised.get(element, 0):
+            raise ConfigError(f"{where}: truncated: its header promises {promised[element]:,} {plural}, the file "
+                              f"holds {held:,} (a copy cut short?)")
 
 
 def plate_scene(distance_m: float, size_m: float = 20.0, center_xy_m=(0.0, 0.0), origin_m=(0.0, 0.0, 0.0),
