@@ -446,19 +446,30 @@ def read_las(path: PathLike, *, gps_time_offset_s: float | None = None) -> Point
 def _read_whole(path: PathLike) -> laspy.LasData:
     """``laspy.read(path)``, refused in one line naming the file (ValueError) when it is not LAS/LAZ or is cut short.
 
-    laspy reads an uncompressed file cut short as the points it holds, silently (a LAS of 300 points cut at 10 kB
-    reads as 133), and lazrs reports compressed data that ends early as its own ``LazrsError``."""
+    laspy reads an uncompressed file cut short at a record's end as the points it holds, silently (a LAS of 300
+    points cut at 10 kB reads as 133), and elsewhere with numpy's own message; lazrs reports compressed data that
+    ends early as its own ``LazrsError``, and a LAZ cut inside its records' headers loses its LasZip VLR."""
     shown = os.fspath(path)
     try:
-        las = laspy.read(path)
+        with laspy.open(path) as reader:
+            header = reader.header
     except laspy.LaspyException as exc:
         raise ValueError(f"{shown}: not a readable LAS/LAZ file ({' '.join(str(exc).split())})") from None
-    except RuntimeError as exc:  # lazrs: the LAZ decompressor's errors
-        if "lazrs" not in type(exc).__module__.lower():
+    promised = int(header.point_count)
+    if not header.are_points_compressed:
+        record = header.point_format.size
+        held = max(0, os.path.getsize(path) - header.offset_to_point_data) // record
+        if held < promised:
+            raise ValueError(f"{shown}: truncated: its header promises {promised:,} points, the file holds "
+                             f"{held:,} (a copy cut short?)")
+    try:
+        las = laspy.read(path)
+    except (laspy.LaspyException, ValueError, RuntimeError) as exc:  # lazrs raises RuntimeError subclasses
+        if isinstance(exc, RuntimeError) and "lazrs" not in type(exc).__module__.lower():
             raise
-        raise ValueError(f"{shown}: the compressed points end early or are corrupt (a LAZ file cut short?: "
-                         f"{' '.join(str(exc).split())})") from None
-    promised = int(las.header.point_count)
+        what = ("the compressed points end early or are corrupt (a LAZ file cut short?" if header.are_points_compressed
+                else "not a readable LAS/LAZ file (")
+        raise ValueError(f"{shown}: {what}: {' '.join(str(exc).split())})") from None
     if len(las.points) < promised:
         raise ValueError(f"{shown}: truncated: its header promises {promised:,} points, the file holds "
                          f"{len(las.points):,} (a copy cut short?)")
