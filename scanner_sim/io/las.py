@@ -467,9 +467,9 @@ def _read_whole(path: PathLike) -> laspy.LasData:
     except (laspy.LaspyException, ValueError, RuntimeError) as exc:  # lazrs raises RuntimeError subclasses
         if isinstance(exc, RuntimeError) and "lazrs" not in type(exc).__module__.lower():
             raise
-        what = ("the compressed points end early or are corrupt (a LAZ file cut short?" if header.are_points_compressed
+        what = ("the compressed points end early or are corrupt (a LAZ file cut short?: " if header.are_points_compressed
                 else "not a readable LAS/LAZ file (")
-        raise ValueError(f"{shown}: {what}: {' '.join(str(exc).split())})") from None
+        raise ValueError(f"{shown}: {what}{' '.join(str(exc).split())})") from None
     if len(las.points) < promised:
         raise ValueError(f"{shown}: truncated: its header promises {promised:,} points, the file holds "
                          f"{len(las.points):,} (a copy cut short?)")
