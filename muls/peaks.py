@@ -262,6 +262,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                     continue  # blind wherever a run may lie: every residual there is zero
                 for g in range(n_seg):
                     k, end = seg_first[g], seg_end[g]
+                    behind = -1  # the first sample behind the last plateau taken in this stretch
                     while k < end:
                         if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
                             k += 1
@@ -271,12 +272,14 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                         clipped_first = -1
                         clipped_last = -1
                         while k < n_samples and resid[k] - echoes[k] > 0.5 * k_sigma * sigma[k]:
-                            if resid[k] - echoes[k] > resid[top] - echoes[top]:
-                                top = k
-                            if codes[w, c, k] >= max_code:
+                            # The run's first plateau: its clipped samples, across a single unclipped one (noise at the
+                            # top code); a later plateau is a later echo, found once this one's model is taken off.
+                            if codes[w, c, k] >= max_code and (clipped_last < 0 or k - clipped_last <= 2):
                                 if clipped_first < 0:
                                     clipped_first = k
                                 clipped_last = k
+                            if resid[k] - echoes[k] > resid[top] - echoes[top] and (clipped_first < 0 or k <= clipped_last):
+                                top = k
                             k += 1
                         # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
                         # threshold there, over what the echoes already found leave if their shape is a little off.
@@ -305,6 +308,8 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                         height = resid[top] - echoes[top]
                         if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
                             continue
+                        if clipped_first < 0 and behind >= 0 and not _climbs(resid, behind, top, k_sigma * sigma[top]):
+                            continue
                         if counts[slot] >= cap:
                             continue
                         if clipped_first >= 0:
@@ -320,6 +325,8 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                             # Plain peak detection reports the first sample at the top code; the plateau's model
                             # still places the echo that is taken off before the search goes on.
                             found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
+                            k = clipped_last + 1  # look again behind the plateau once the echo's model is taken off
+                            behind = k
                         else:
                             d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
                                                settings.fit, fit_table)
@@ -337,6 +344,18 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                         out_snr[j] = amp / sigma[top]
                         out_sat[j] = clipped_first >= 0
                         counts[slot] += 1
+
+
+@kernel(inline="always")
+def _climbs(resid, first, top, rise):
+    """Whether the record over its baseline, ``resid`` [LSB], climbs by more than ``rise`` [LSB] from its lowest sample
+    in ``first..top`` to sample ``top``. Behind a clipped plateau the model of its echo is known only as well as the
+    plateau's width (and the plateau may hide a second echo), so what the search finds in the residual there may be
+    that model's error: only a climb of the record itself shows a further echo."""
+    low = resid[top]
+    for j in range(first, top):
+        low = min(low, resid[j])
+    return resid[top] - low > rise
 
 
 @kernel(nogil=True)
