@@ -7,7 +7,9 @@ background, as measured in open water), and its noise the dark noise plus the sh
 the processor knows its own noise model. A peak is the maximum of a run of samples whose residual over the
 baseline exceeds half the threshold, kept when the maximum exceeds the threshold (hysteresis stops noise
 on a peak's shoulder from splitting one echo in two). Echoes closer than a pulse merge into one run, and
-its range is biased, as in a real instrument.
+its range is biased, as in a real instrument. Behind each peak, clipped or not, the search goes on once the
+echo's modelled pulse is taken off; behind a clipped plateau, whose model is known only to the plateau's
+width, only where the record itself climbs by the threshold.
 """
 
 from __future__ import annotations
