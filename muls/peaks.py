@@ -269,8 +269,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                     continue  # blind wherever a run may lie: every residual there is zero
                 for g in range(n_seg):
                     k, end = seg_first[g], seg_end[g]
-                    behind = -1  # the first sample behind the last plateau taken in this stretch
-                    clip_start, clip_scale = 0.0, 0.0  # that plateau's fitted pulse: start [s], area [LSB s]
+                    clip_start, clip_scale = 0.0, 0.0  # the last plateau's fitted pulse here: start [s], area [LSB s]
                     while k < end:
                         if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
                             k += 1
@@ -316,9 +315,9 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                         height = resid[top] - echoes[top]
                         if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
                             continue
-                        # Behind a plateau, over what the fitted pulse may be off by there (CLIPPED_TAIL_TOLERANCE).
-                        if clipped_first < 0 and behind >= 0 and height <= k_sigma * sigma[top] + CLIPPED_TAIL_TOLERANCE \
-                                * clip_scale * pulse_value(times[top] - clip_start, basis):
+                        # Behind a plateau, over what its fitted pulse may be off by there too (CLIPPED_TAIL_TOLERANCE).
+                        if clipped_first < 0 and height <= k_sigma * sigma[top] + CLIPPED_TAIL_TOLERANCE * clip_scale \
+                                * pulse_value(times[top] - clip_start, basis):
                             continue
                         if counts[slot] >= cap:
                             continue
@@ -336,7 +335,6 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                             # still places the echo that is taken off before the search goes on.
                             found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
                             k = clipped_last + 1  # look again behind the plateau once the echo's model is taken off
-                            behind = k
                             clip_start = t0 + idx * dt + phase[p] - settings.peak_delay_s
                             clip_scale = amp / settings.peak_density
                         else:
