@@ -194,3 +194,25 @@ def test_regression_a_clipped_echos_tail_does_not_take_the_next_returns_truth():
     upper = (points.object_id >= 0) & (points.object_id <= 2)
     surface_z = np.array([o["center_m"][2] for o in objects])
     np.testing.assert_array_less(np.abs(points.xyz[upper, 2] - surface_z[points.object_id[upper]]), 0.3)
+
+
+# -- 8. a surface behind a clipped echo -----------------------------------------------------------------------
+@pytest.mark.parametrize("fidelity", ["fast", "balanced", "auto", "reference"])
+def test_return_behind_clipped_echo_is_ranged_at_every_level(fidelity):
+    """Root cause: the peak search resumed behind an unclipped peak but, behind a clipped one, only after the whole
+    run, over which the clipped echo's tail carried on past a surface 2 m behind: that surface was never
+    reported (0 of 1000 pulses, no dropout, no flag) at every level. The geometry of the shipped failure scene
+    ``behind_clipped_echo`` (half the beam on a plate 7 m down whose echo clips every channel, half on sand 2 m
+    behind) as a whole pass: every pulse ranges the plate and nearly every one the sand at its depth, within the
+    coverage tolerance (0.15 m, IHO S-44 Exclusive Order); nothing else is reported."""
+    plate_z, sand_z = LIDAR_Z - 7.0, LIDAR_Z - 9.0
+    pulses = 300
+    objects = [_panel("plate", (0.75, 0, plate_z), (1.5, 3)) | {"material": None, "reflectance": 0.4},
+               _panel("sand", (0, 0, sand_z), (3, 3), label="seabed")]
+    points = _points(_static_scene([{k: v for k, v in o.items() if v is not None} for o in objects], water="pool",
+                                   fidelity=fidelity, pulses=pulses))
+    near = np.abs(points.xyz[:, 2] - plate_z) < 0.15
+    far = np.abs(points.xyz[:, 2] - sand_z) < 0.15
+    assert np.count_nonzero(near & points.saturated) == pulses  # the premise: the plate clips every channel
+    assert np.count_nonzero(far) >= 0.99 * pulses
+    assert np.all(near | far)

@@ -528,6 +528,37 @@ def test_two_echoes_in_one_footprint_give_two_returns_and_close_ones_merge():
     assert np.all((merged > 15.0) & (merged < 15.3))  # one biased range between the two surfaces
 
 
+
+@pytest.mark.parametrize("near_reflectance", [0.5, 0.9])
+@pytest.mark.parametrize("mode, deciding_only", [("windowed", False), ("windowed", True), ("full", False)])
+def test_return_behind_clipped_echo_is_ranged(mode, deciding_only, near_reflectance):
+    """Root cause: the peak search went on behind an unclipped peak (its modelled pulse taken off, the search
+    resumed right after it) but not behind a clipped one: it resumed after the whole run, and a clipped echo's
+    tail runs on over a surface a few metres behind, so that surface was never reported (0 of 1000 pulses, no
+    dropout, no flag) while the same plate 10 % darker, unclipped, let it be ranged on every pulse. Half the beam on
+    a plate 7 m away whose echo clips every channel open there, half on sand 2 m behind: the sand is ranged at 9 m
+    on every pulse, in both record modes and with only the deciding channels (every fidelity level's path). With
+    the whiter plate CH1's plateau runs on over the sand's echo (one plateau, two echoes): the model fitted to it
+    is wrong behind it, and what that leaves in the residual must not be reported as a third surface."""
+    from muls.radiometry import lambertian_weight
+
+    model = _model()
+    ins = model.instrument
+    n, near_m, far_m = 200, 7.0, 7.0 + 2.0
+    half = [0.5 * lambertian_weight(ins, r, rho) for r, rho in ((near_m, near_reflectance), (far_m, 0.43))]
+    batch = PulseBatch(
+        pulse_id=np.arange(n), return_pulse=np.repeat(np.arange(n), 2), return_range_m=np.tile([near_m, far_m], n),
+        return_weight_per_sr=np.tile(half, n), column_cut_m=np.full((n, 1), far_m), column_cut_weight=np.ones((n, 1)),
+        background_w=np.zeros(n))
+    _, ranging = simulate(model, batch, seed=4, mode=mode, deciding_only=deciding_only)
+    first, second = (ranging.returns.select(ranging.return_number == k) for k in (1, 2))
+    # The premise: the plate's return is clipped in every channel (a return keeps a clipped peak only then).
+    assert first.pulse.size == n and first.saturated.all() and np.all(np.abs(first.range_m - near_m) < 0.15)
+    assert second.pulse.size == n and not second.saturated.any()
+    assert np.all(np.abs(second.range_m - far_m) < 0.15)  # IHO S-44 Exclusive Order, the coverage tolerance
+    assert np.all(ranging.number_of_returns == 2)
+
+
 # --- the prototype's plain peak detection (Processing.peak_fit = "sample_maximum") ----------------------------
 
 def _prototype(model):
