@@ -77,14 +77,21 @@ class ScatteringTables:
         transmission's error 0 (a seen plate's is > 0), the direct share 1 and the spread 0."""
         return (self.transmission_rel_err > 0.0) | (self.direct_share < 1.0) | np.any(self.spread_s > 0.0, axis=1)
 
+    def seen_spread(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rows :meth:`spread_at` interpolates over: (ranges (k,) [m], direct share (k,), node delays (k,
+        SPREAD_NODES) [s]), the ranges the Monte Carlo saw (all of them where it saw none), C-contiguous float64."""
+        seen = self.seen if np.any(self.seen) else np.ones(self.ranges_m.shape, bool)
+        return (np.ascontiguousarray(self.ranges_m[seen], np.float64),
+                np.ascontiguousarray(self.direct_share[seen], np.float64),
+                np.ascontiguousarray(self.spread_s[seen], np.float64))
+
     def spread_at(self, range_m) -> tuple[np.ndarray, np.ndarray]:
         """(direct share (n,), node delays (n, SPREAD_NODES) [s]) of echoes at ``range_m`` (n,) [m]: interpolated
         linearly in range over the ranges the Monte Carlo saw (:attr:`seen`), held outside them, as the attenuation
         is filled: an unseen plate's placeholder (no spread) is not a measurement to interpolate towards."""
         r = np.asarray(range_m, float)
-        seen = self.seen if np.any(self.seen) else np.ones(self.ranges_m.shape, bool)
-        ranges, spread = self.ranges_m[seen], self.spread_s[seen]
-        share = np.interp(r, ranges, self.direct_share[seen])
+        ranges, direct, spread = self.seen_spread()
+        share = np.interp(r, ranges, direct)
         delays = np.stack([np.interp(r, ranges, spread[:, q]) for q in range(spread.shape[1])], axis=-1)
         return share, delays
 
