@@ -98,7 +98,8 @@ def test_the_first_pass_on_a_fresh_machine_leaves_compilation_out_of_pulses_per_
     assert len(said) == 2 and said_again == []
     assert f"compiled in {first['compile_s']:.0f} s" in said[1], said
     assert first["compile_s"] > 10 and second["compile_s"] < first["compile_s"] / 10
-    for summary in (first, second):
-        assert summary["pulses_per_s"] == pytest.approx(summary["pulses"] / summary["wall_s"], rel=1e-3)
+    for summary in (first, second):  # wall_s is rounded to the millisecond: the rate agrees within that
+        wall_s = summary["wall_s"]
+        assert summary["pulses"] / (wall_s + 5e-4) <= summary["pulses_per_s"] <= summary["pulses"] / (wall_s - 5e-4)
     # the first pass's rate is that of a cached one (within the noise of a shared machine), not a hundredth of it
     assert first["pulses_per_s"] > second["pulses_per_s"] / 3, (first, second)
