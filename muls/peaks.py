@@ -9,7 +9,9 @@ baseline exceeds half the threshold, kept when the maximum exceeds the threshold
 on a peak's shoulder from splitting one echo in two). Echoes closer than a pulse merge into one run, and
 its range is biased, as in a real instrument. Behind each peak, clipped or not, the search goes on once the
 echo's modelled pulse is taken off; behind a clipped plateau, whose fitted pulse is known only to the plateau's
-width, a run must clear the threshold over a share of that pulse too (:data:`CLIPPED_TAIL_TOLERANCE`).
+width, a run must clear the threshold over a share of that pulse too (:data:`CLIPPED_TAIL_TOLERANCE`), and an echo
+that began before the plateau ended (its peak less than the pulse's rise behind the plateau) rose inside it, where
+the channel cannot time it: it is left to a channel that does not clip.
 """
 
 from __future__ import annotations
@@ -270,6 +272,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                 for g in range(n_seg):
                     k, end = seg_first[g], seg_end[g]
                     clip_start, clip_scale = 0.0, 0.0  # the last plateau's fitted pulse here: start [s], area [LSB s]
+                    clip_end = -1.0  # the last plateau's end here, where its fitted pulse falls through the clip [samples]
                     while k < end:
                         if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
                             k += 1
@@ -335,12 +338,18 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                             # still places the echo that is taken off before the search goes on.
                             found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
                             k = clipped_last + 1  # look again behind the plateau once the echo's model is taken off
+                            clip_end = clipped_last + 0.5
                             clip_start = t0 + idx * dt + phase[p] - settings.peak_delay_s
                             clip_scale = amp / settings.peak_density
                         else:
                             d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
                                                settings.fit, fit_table)
                             idx = float(window_start[w] + top) + d
+                            # An echo that began before the last plateau ended rose inside it: its light is in the
+                            # plateau the single pulse was fitted to, so the fit and what it leaves are both off, and
+                            # this channel cannot time it (a lower-gain channel that does not clip can).
+                            if idx - window_start[w] - settings.peak_delay_s / dt < clip_end:
+                                continue
                             found = idx
                             amp = height / ratio
                             k = top + 1  # look again behind this echo once its modelled shape is taken off

@@ -559,6 +559,34 @@ def test_return_behind_clipped_echo_is_ranged(mode, deciding_only, near_reflecta
     assert np.all(ranging.number_of_returns == 2)
 
 
+def test_no_late_return_from_an_echo_rising_inside_a_plateau():
+    """Root cause: behind a clipped plateau the search goes on once the single pulse fitted to the plateau is taken
+    off. Where a second echo rises before the first echo's plateau ends (a step 1 m down, 8.9 ns behind, under a
+    10 ns pulse), the plateau holds both: the fitted pulse is off, and what it leaves of the second echo peaks
+    late, where it was reported as a third surface (step_edges, slot 749: CH1 at 7.19 m, 0.49 m behind the step
+    CH2 ranges at 6.75 m). An echo whose peak lies less than the pulse's rise behind the plateau's end began
+    inside the plateau, so the clipping channel cannot time it and no longer reports it; CH2, which does not clip,
+    ranges it. Two-thirds of the beam on sand 5.7 m away, a third on sand 1 m lower (step_edges' geometry, CH1
+    clipped over the upper echo on every pulse): every return lies on one of the two surfaces, within 0.25 m (the
+    late points lay 0.3-0.54 m behind the lower one)."""
+    from muls.radiometry import lambertian_weight
+
+    ins = mul2023(26e-9, 158e-9)  # step_edges' gate (a CH3 gate that opens past both echoes)
+    model = OpticalModel.build(ins, water_preset("coastal_ocean"))
+    n, upper_m, lower_m = 400, 5.7, 6.7
+    weights = [share * lambertian_weight(ins, r, 0.43) for share, r in ((2 / 3, upper_m), (1 / 3, lower_m))]
+    batch = PulseBatch(
+        pulse_id=np.arange(n), return_pulse=np.repeat(np.arange(n), 2), return_range_m=np.tile([upper_m, lower_m], n),
+        return_weight_per_sr=np.tile(weights, n), column_cut_m=np.full((n, 1), lower_m),
+        column_cut_weight=np.ones((n, 1)), background_w=np.zeros(n))
+    records, ranging = simulate(model, batch, seed=7)
+    assert np.all(records.codes[:, 0].max(axis=1) == ins.digitizer.max_code)  # the premise: CH1 clips every pulse
+    ranges = ranging.returns.range_m
+    off = np.minimum(np.abs(ranges - upper_m), np.abs(ranges - lower_m))
+    assert np.all(off < 0.25), np.sort(ranges[off >= 0.25])
+    assert np.count_nonzero(np.abs(ranges - lower_m) < 0.15) >= 0.9 * n  # the lower step is still ranged
+
+
 # --- the prototype's plain peak detection (Processing.peak_fit = "sample_maximum") ----------------------------
 
 def _prototype(model):
