@@ -80,7 +80,9 @@ class ScatteringTables:
     def seen_spread(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The rows :meth:`spread_at` interpolates over: (ranges (k,) [m], direct share (k,), node delays (k,
         SPREAD_NODES) [s]), the ranges the Monte Carlo saw (all of them where it saw none), C-contiguous float64."""
-        seen = self.seen if np.any(self.seen) else np.ones(self.ranges_m.shape, bool)
+        seen = self.seen
+        if not np.any(seen):
+            seen = np.ones(self.ranges_m.shape, bool)
         return (np.ascontiguousarray(self.ranges_m[seen], np.float64),
                 np.ascontiguousarray(self.direct_share[seen], np.float64),
                 np.ascontiguousarray(self.spread_s[seen], np.float64))

@@ -291,10 +291,11 @@ class OpticalModel:
         return Echoes(offsets, delay, energy, source)
 
     @cached_property
-    def _spread_moments(self) -> tuple:
-        """The seen rows' node-delay moments (:func:`_spread_moments`), once per model."""
-        _, direct, nodes = self.scattering.seen_spread()
-        return _spread_moments(direct, nodes)
+    def _spread_rows(self) -> tuple:
+        """(ranges, direct share, node delays, their moments) of the seen table rows (:meth:`ScatteringTables.
+        seen_spread`, :func:`_spread_moments`): taken once per model, not once per chunk."""
+        ranges, direct, nodes = self.scattering.seen_spread()
+        return ranges, direct, nodes, _spread_moments(direct, nodes)
 
     def spread(self, pulse, delay, energy, source, range_m):
         """Echoes (m,) spread in time by multiple scattering (:mod:`muls.scattering`): each becomes its share on the
@@ -302,8 +303,7 @@ class OpticalModel:
         energy-weighted mean delay where their spread is under :data:`SPREAD_MERGE_S`, the means of
         :data:`~muls.scattering.SPREAD_NODES` / 2 pairs of neighbouring nodes where it is under :data:`SPREAD_FINE_S`,
         every node beyond. Returns (pulse, delay, energy, source) of the echoes, pulse ascending."""
-        ranges, direct, nodes = self.scattering.seen_spread()
-        moments = self._spread_moments
+        ranges, direct, nodes, moments = self._spread_rows
         lower, weight = _spread_brackets(np.ascontiguousarray(range_m, dtype=np.float64), ranges)
         count = _spread_counts(lower, weight, direct, nodes.shape[1], moments)
         offsets = np.zeros(count.shape[0] + 1, np.int64)
