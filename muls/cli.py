@@ -2,6 +2,9 @@
 multiple-scattering Monte Carlo beside MULS (multiscatter, multiscatter-study) and against a published benchmark
 (mobley1993).
 
+One module for one concept, the command line: every subcommand's options and its printed table sit beside the
+option checks they share, so it is longer than the other modules.
+
 Each command runs one function of :mod:`muls.studies`, prints its result as JSON with ``--json`` (otherwise
 a short table), and, except ``bench``, writes a picture (``--out``, a default name otherwise; ``--no-plot``
 skips it). Bad arguments give one line on stderr naming the option and what is allowed, and exit code 2.

@@ -1,6 +1,6 @@
 """Peaks in the digitised records, as the instrument finds them: runs over the local baseline, sub-sample
 refinement on the known pulse shape, ranges from the CH0 reference peak (MULS Eq. 14), and the echo behind
-each peak.
+each peak. One search, one compiled kernel with the helpers it calls, hence a module a little over the usual length.
 
 The baseline of each channel is the calibrated no-target record of the water (column backscatter plus
 background, as measured in open water), and its noise the dark noise plus the shot noise of that baseline:

@@ -3,7 +3,8 @@
 The layout comes from the field declarations of :class:`~scanner_sim.survey.point_records.PointRecords`: a
 :class:`~scanner_sim.survey.point_records.LasStandard` field fills standard dimensions through its conversion
 (:data:`_TO_LAS`, :data:`_FROM_LAS`), a :class:`~scanner_sim.survey.point_records.LasExtra` field is an extra
-dimension (:data:`EXTRA_DIMENSIONS`). Header, VLRs and time mapping: ``docs/outputs.md``.
+dimension (:data:`EXTRA_DIMENSIONS`). Header, VLRs and time mapping: ``docs/outputs.md``. Writer and reader stay in
+one module because both are built from the same field tables.
 
 It is longer than the other io modules on purpose: it is one format, written (streamed, with the LAS 1.4 range
 checks of point format 6) and read back, and both directions share the one field mapping above; split, the
