@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scanner_sim.survey.point_records import PointRecords
-from scanner_sim.survey.uncertainty import K95_HORIZONTAL, K95_VERTICAL
+from scanner_sim.survey.uncertainty import K95_HORIZONTAL, thu_of, tvu_of
 from scanner_sim.world.materials import NOISE_CLASS
 
 #: [m] A true beam whose first hit lies further than this along it from the truth of the point's own line of sight
@@ -30,12 +30,14 @@ CHART_LEVELS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.99
 
 @dataclass(frozen=True)
 class TrueErrors:
-    """Per judged point (k of them): vertical error (k,) [m] signed, horizontal error (k,) [m] >= 0, and the
-    points themselves (their THU, TVU, channel and incidence); ``skipped`` the points not judged, by reason."""
+    """Per judged point (k of them): vertical error (k,) [m] signed, horizontal error (k,) [m] >= 0, the points
+    themselves (their THU, TVU, channel and incidence), and the error the pass's uncertainty model predicts for them
+    (``predicted``: mean (k, 3) [m] and covariance (k, 3, 3) [m^2]); ``skipped`` the points not judged, by reason."""
 
     vertical_m: np.ndarray
     horizontal_m: np.ndarray
     points: PointRecords
+    predicted: tuple[np.ndarray, np.ndarray]
     skipped: dict
 
 
@@ -56,7 +58,19 @@ def true_errors(setup, points: PointRecords) -> TrueErrors:
     error = points.xyz[judged] - truth
     skipped = {"noise": int(noise.sum()), "true_beam_meets_nothing": int((~noise & ~met).sum()),
                "other_surface": int((~noise & met & ~same).sum())}
-    return TrueErrors(error[:, 2], np.hypot(error[:, 0], error[:, 1]), points.select(judged), skipped)
+    mine = points.select(judged)
+    return TrueErrors(error[:, 2], np.hypot(error[:, 0], error[:, 1]), mine, predicted_error(setup, mine), skipped)
+
+
+def predicted_error(setup, points: PointRecords) -> tuple[np.ndarray, np.ndarray]:
+    """The mean (n, 3) and covariance (n, 3, 3) of the error the pass's model (``setup.tpu``) predicts for
+    ``points``, from the navigation's estimated poses at their times, as the pass computed their THU and TVU."""
+    estimate = setup.trajectory.poses(points.gps_time_s, estimated=True)
+    _, direction = setup.scanner.beam_rays(estimate)
+    attitude = np.c_[estimate.roll_rad, estimate.pitch_rad, estimate.yaw_rad]
+    return setup.tpu.error_model(points.xyz - estimate.position, direction, attitude, points.channel, points.snr,
+                                 points.saturated, points.return_number > 1,
+                                 points.true_range_m.astype(np.float64) + points.range_error_m, points.incidence_deg)
 
 
 def _fractions(errors: TrueErrors, mask: np.ndarray) -> dict:
@@ -93,16 +107,13 @@ def _quantiles(values: np.ndarray) -> dict:
 
 def coverage_curve(errors: TrueErrors) -> dict:
     """Predicted against observed coverage: for each level q of :data:`CHART_LEVELS`, the share of points whose
-    |vertical error| is within the q quantile of their predicted normal error (sigma = TVU / 1.96), and whose
-    horizontal error is within the q quantile of their predicted circular bivariate normal (sigma = THU / 2.45)."""
-    from scipy.stats import norm
-
-    p = errors.points
-    sigma_z = p.tvu_m / K95_VERTICAL
-    sigma_h = p.thu_m / K95_HORIZONTAL
-    k_z = norm.ppf(0.5 + 0.5 * CHART_LEVELS)  # |N(0,1)| <= k with probability q
-    k_h = np.sqrt(-2.0 * np.log(1.0 - CHART_LEVELS))  # Rayleigh radius holding q
-    observed_z = (np.abs(errors.vertical_m)[None, :] <= k_z[:, None] * sigma_z[None, :]).mean(axis=1)
-    observed_h = (errors.horizontal_m[None, :] <= k_h[:, None] * sigma_h[None, :]).mean(axis=1)
-    return {"levels": CHART_LEVELS.tolist(), "vertical": np.round(observed_z, 4).tolist(),
-            "horizontal": np.round(observed_h, 4).tolist()}
+    |vertical error| is within the q quantile of its predicted distribution (a normal of the predicted mean and
+    variance, folded), and whose horizontal error is within the q radius of a circular bivariate normal of the
+    predicted mean square (sqrt(-2 ln(1 - q)) sigma_h, as THU takes 2.45 for q = 0.95)."""
+    mean, cov = errors.predicted
+    sigma_h = thu_of(mean, cov) / K95_HORIZONTAL
+    observed_z, observed_h = [], []
+    for q in CHART_LEVELS:
+        observed_z.append(_share(np.abs(errors.vertical_m) <= tvu_of(mean, cov, float(q))))
+        observed_h.append(_share(errors.horizontal_m <= np.sqrt(-2.0 * np.log(1.0 - q)) * sigma_h))
+    return {"levels": CHART_LEVELS.tolist(), "vertical": observed_z, "horizontal": observed_h}
