@@ -61,6 +61,12 @@ class NavigationSigmas:
         return cls(noise.position_sigma_m, noise.depth_sigma_m, math.radians(noise.attitude_sigma_deg),
                    math.radians(noise.heading_sigma_deg))
 
+    def as_dict(self) -> dict:
+        """The sigmas as the summary states them: position and depth [m], attitude and heading [deg]."""
+        return {"position_sigma_m": self.position_m, "depth_sigma_m": self.depth_m,
+                "attitude_sigma_deg": round(math.degrees(self.attitude_rad), 6),
+                "heading_sigma_deg": round(math.degrees(self.heading_rad), 6)}
+
 
 @dataclass(frozen=True)
 class TpuModel:
