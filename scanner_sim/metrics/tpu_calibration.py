@@ -45,28 +45,25 @@ class CheckedErrors(NamedTuple):
     skipped: dict
 
 
-def checked_errors(points: PointRecords, sight, tpu) -> CheckedErrors:
+def checked_errors(points: PointRecords, sight, mean: np.ndarray, var: np.ndarray) -> CheckedErrors:
     """The true errors (module doc) of a chunk's ``points`` against their THU and TVU, from the chunk's lines of
     sight ``sight`` (:class:`~scanner_sim.survey.georeference.LinesOfSight`: the true beam axes and their first hits)
-    and the pass's uncertainty model ``tpu`` (the predicted distributions, at the estimated poses)."""
+    and the points' predicted error, ``mean`` (n, 3) and variances ``var`` (n, 3)
+    (:meth:`~scanner_sim.survey.uncertainty.TpuModel.predict`)."""
     row = np.searchsorted(sight.slot, points.pulse_index)
     true_range = sight.axis_range_m[row]
     noise = points.classification == NOISE_CLASS
     met = np.isfinite(true_range)
     same = met & (np.abs(true_range - points.true_range_m) <= SAME_SURFACE_M)
-    judged = ~noise & same
-    p, row = points.select(judged), row[judged]
-    truth = sight.true_origin_m[row] + true_range[judged, None] * sight.true_direction[row]
-    error = p.xyz - truth
+    judged = np.nonzero(~noise & same)[0]
+    row = row[judged]
+    error = points.xyz[judged] - (sight.true_origin_m[row] + true_range[judged, None] * sight.true_direction[row])
     horizontal = np.hypot(error[:, 0], error[:, 1])
-    mean, var = tpu.error_model(p.xyz - sight.platform_m[row], sight.direction[row], sight.attitude_rad[row], p.channel,
-                                p.snr, p.saturated, p.return_number > 1,
-                                p.true_range_m.astype(np.float64) + p.range_error_m, p.incidence_deg)
-    level_z, level_h = coverage_levels(mean, var, error[:, 2], horizontal)
+    level_z, level_h = coverage_levels(mean[judged], var[judged], error[:, 2], horizontal)
     skipped = {"noise": int(noise.sum()), "true_beam_meets_nothing": int((~noise & ~met).sum()),
                "other_surface": int((~noise & met & ~same).sum())}
-    return CheckedErrors(error[:, 2], horizontal, p.tvu_m, p.thu_m, p.channel, p.incidence_deg, level_z, level_h,
-                         skipped)
+    return CheckedErrors(error[:, 2], horizontal, points.tvu_m[judged], points.thu_m[judged], points.channel[judged],
+                         points.incidence_deg[judged], level_z, level_h, skipped)
 
 
 #: [m] Bin of the streaming histograms of THU, TVU and the true errors (their medians and 95th percentiles), and the

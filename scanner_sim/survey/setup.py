@@ -38,7 +38,7 @@ from scanner_sim.survey.georeference import LinesOfSight, georeference
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.ranging_precision import measure_ranging_precision, panel_ranges_m
-from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel
+from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel, with_uncertainty
 from scanner_sim.world.scene import Scene, build_scene
 
 
@@ -365,9 +365,11 @@ class PassSetup:
         sight, lost = cast.sight, ranging.dropout_cause >= 0
         dropouts = DropoutRecords(pulse_index=cast.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
                                   direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
-        points = georeference(ranging, cast.hits, sight, self.tpu)
+        points = georeference(ranging, cast.hits, sight)
+        mean, var = self.tpu.predict(points, sight)
+        points = with_uncertainty(points, mean, var)
         return Chunk(cast.slots, points, dropouts, records, cast.footprint,
-                     errors=checked_errors(points, sight, self.tpu))
+                     errors=checked_errors(points, sight, mean, var))
 
     def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, every_channel: bool = False,
                        whole_records: bool = False) -> Chunk:

@@ -24,6 +24,7 @@ sqrt(-2 ln 0.05) = 2.4477 sigma, of the same mean square horizontal error.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -116,10 +117,22 @@ class TpuModel:
         sigma_range = np.hypot(std, self.footprint_sigma_m(range_m, incidence_deg))
         return bias[:, None] * direction, self.variances(lever_m, direction, attitude_rad, sigma_range)
 
-    def __call__(self, *point) -> tuple[np.ndarray, np.ndarray]:
-        """(THU, TVU) [m] at 95 %, each (n,), of n points (arguments as :meth:`error_model`), to the millimetre."""
-        mean, var = self.error_model(*point)
-        return np.round(thu_of(mean, var), REPORTED_DECIMALS), np.round(tvu_of(mean, var), REPORTED_DECIMALS)
+    def predict(self, points, sight) -> tuple[np.ndarray, np.ndarray]:
+        """The predicted error (:meth:`error_model`) of a chunk's ``points`` (:class:`PointRecords`) from its lines of
+        sight ``sight`` (:class:`~scanner_sim.survey.georeference.LinesOfSight`: each pulse's estimated beam and
+        pose); the measured range is the point's distance from its beam's origin."""
+        row = np.searchsorted(sight.slot, points.pulse_index)
+        origin, direction = sight.origin_m[row], sight.direction[row]
+        range_m = np.einsum("ij,ij->i", points.xyz - origin, direction)
+        return self.error_model(points.xyz - sight.platform_m[row], direction, sight.attitude_rad[row], points.channel,
+                                points.snr, points.saturated, points.return_number > 1, range_m, points.incidence_deg)
+
+
+def with_uncertainty(points, mean, var):
+    """``points`` (:class:`PointRecords`) with ``thu_m`` and ``tvu_m`` (95 %, to the millimetre) of their predicted
+    error of ``mean`` (n, 3) and variances ``var`` (n, 3)."""
+    return dataclasses.replace(points, thu_m=np.round(thu_of(mean, var), REPORTED_DECIMALS),
+                               tvu_m=np.round(tvu_of(mean, var), REPORTED_DECIMALS))
 
 
 def horizontal_sigma(mean, var) -> np.ndarray:
