@@ -3,8 +3,8 @@
 A point is X = p + R(roll, pitch, yaw) (m + rho u): the platform position p, its attitude R, the beam's exit m on
 the vehicle (the mounting) and the measured range rho along the beam's direction u at the mirror's scan angle. Each
 independent error source k moves X by J_k e_k, its Jacobian times its error, and the covariance of X is the sum of
-their variances times J_k J_k^T (the propagation of Hare 1995 and Hare, Godin and Mayer 2011 for hydrographic
-sounders, applied to a lidar beam; ``docs/uncertainty.md`` states every term and its source):
+their variances times J_k J_k^T (the propagation of variances of Hare 1995 for multibeam sounders and of Eren et al.
+2019 for bathymetric lidar; ``docs/uncertainty.md`` states every term and its source):
 
 - ranging: rho's error per channel, SNR and clipping, measured from the instrument's own ranging
   (:mod:`scanner_sim.survey.ranging_precision`): a mean b (its systematic part) and a standard deviation, along the
@@ -17,7 +17,8 @@ sounders, applied to a lidar beam; ``docs/uncertainty.md`` states every term and
   -Rz(yaw) y, roll about the vehicle's forward axis R x.
 
 TVU is the 95 % quantile of |vertical error| for a normal error of mean u_z b and standard deviation sigma_z (the
-folded normal's; 1.96 sigma_z when b = 0, about |u_z b| + 1.645 sigma_z when the bias dominates). THU = 2.45 sigma_h
+folded normal's; 1.96 sigma_z when b = 0, the one-dimensional 95 % factor, about |u_z b| + 1.645 sigma_z when the
+bias dominates). THU = 2.45 sigma_h
 with sigma_h^2 = (sigma_x^2 + sigma_y^2 + |u_xy b|^2) / 2: the 95 % radius of a circular bivariate normal,
 sqrt(-2 ln 0.05) = 2.4477 sigma, of the same mean square horizontal error.
 """
@@ -33,8 +34,6 @@ from scipy.special import ndtr, ndtri
 
 from scanner_sim.survey.ranging_precision import RangingPrecision
 
-#: 95 % factor of a one-dimensional normal error of zero mean (vertical).
-K95_VERTICAL = 1.96
 #: The confidence of THU and TVU.
 CONFIDENCE = 0.95
 #: Newton steps of :func:`folded_normal_quantile`: from within 0.43 sigma of the root, four steps reach it to
