@@ -27,7 +27,7 @@ REFLECTANCES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
 #: Quantiles of the pass's echo ranges at which the panels stand.
 RANGE_QUANTILES = (0.02, 0.25, 0.5, 0.75, 0.98)
 #: Shots per (range, reflectance).
-SHOTS = 64
+SHOTS = 256
 #: Bins of log10(SNR) per decade, from SNR 1 to 10^6.
 BINS_PER_DECADE = 4
 SNR_DECADES = (0.0, 6.0)
