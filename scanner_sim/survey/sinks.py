@@ -57,6 +57,7 @@ class PassFacts:
     provenance: dict
     gate_delay_ns: float | None = None
     gate_width_ns: float | None = None
+    crs: str | None = None  # the scene's CRS by its code ('EPSG:32631'), None for a local frame
 
     def metadata(self) -> dict:
         """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file, and the
@@ -271,6 +272,7 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
             "scene_file": facts.scene_file,
             "gate_delay_ns": facts.gate_delay_ns,
             "gate_width_ns": facts.gate_width_ns,
+            "crs": facts.crs,
         },
         "provenance": facts.provenance,
     }

@@ -26,6 +26,7 @@ from scanner_sim.config import (
     SceneConfig,
     reflectance_of,
 )
+from scanner_sim.config.crs import to_crs
 from scanner_sim.io.ply import ply_element_counts
 from scanner_sim.world.materials import LABELS
 from scanner_sim.world.terrain import HeightField, generate_heightfield, rock_meshes
@@ -69,11 +70,12 @@ class Scene:
     vertices (n_v, 3) float64 world [m]; faces (n_f, 3) int64; face_object (n_f,) int32; face_surface (n_f,)
     int32 (:func:`smooth_surfaces`: which smooth surface of the scene the face belongs to); face_label (n_f,)
     int16 (LAS code); face_reflectance (n_f,) float64; face_normal (n_f, 3) float64 unit (right-hand winding);
-    local_origin (3,) float64 world [m]; heightfield: the seabed's, or None; objects: list of SceneObject.
+    local_origin (3,) float64 world [m]; heightfield: the seabed's, or None; objects: list of SceneObject;
+    crs: the :class:`pyproj.CRS` whose map coordinates the world frame is in, or None (a local frame).
     """
 
     def __init__(self, parts: list[Part], heightfield: HeightField | None = None,
-                 local_origin: np.ndarray | None = None):
+                 local_origin: np.ndarray | None = None, crs=None):
         if not parts:
             raise ParameterError("scene: no geometry (give a seabed or at least one object)")
         verts = [np.asarray(p.vertices, float) for p in parts]
@@ -97,6 +99,7 @@ class Scene:
         self.objects = [SceneObject(i, p.name, p.kind, p.label, p.reflectance, int(ends[i - 1]) if i else 0,
                                     int(ends[i]), p.centreline) for i, p in enumerate(parts)]
         self.heightfield = heightfield
+        self.crs = crs
         self.local_extent_m = float(np.abs(local).max())
 
     @property
@@ -382,7 +385,7 @@ def build_scene(config) -> Scene:
             raise ConfigError(f"objects[{index}] ({obj.name!r}): its sizes and position give coordinates that are not "
                               f"finite or beyond +-{MAX_COORDINATE_M:.0e} m; check them (metres)")
         parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline))
-    return Scene(parts, hf)
+    return Scene(parts, hf, crs=to_crs(config.crs))
 
 
 def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]:
