@@ -7,6 +7,7 @@
 - :mod:`~scanner_sim.io.ply`: ``scene.ply``, the labelled truth meshes.
 - :mod:`~scanner_sim.io.summary`: ``summary.json``.
 - :mod:`~scanner_sim.io.tables`: ``trajectory.csv``, ``waveforms.npz``, ``coverage_grid.npz``, text files.
+- :mod:`~scanner_sim.io.gis`: Cloud-Optimized GeoTIFF and GeoJSON in a map CRS (a scene with a ``crs``).
 """
 
 from scanner_sim.io.atomic import atomic_path

@@ -134,6 +134,7 @@ class Trajectory:
             d = np.gradient(xy, ds, axis=0)
             yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
         self._s, self._xy, self._yaw = s, xy, yaw
+        self.waypoints_xy_m = path[:1] if self.static else path  # (m, 2) the plan the legs join [m]
         # Where each leg ends along the path [m]: a leg runs from one waypoint to the next.
         self._leg_end_m = chord[1:-1] if not self.static else np.zeros(0)
         self._z, self._terrain_pitch = self._profile(s, xy)

@@ -61,10 +61,10 @@ _SCENES: dict[str, Scene] = {}
 
 
 def cached_scene(config: SceneConfig) -> Scene:
-    """The built scene of ``config``, kept per process: the scene depends only on the seabed and the
+    """The built scene of ``config``, kept per process: the scene depends only on its CRS, the seabed and the
     objects (and the folder mesh files are found in), so passes that differ in water, instrument, platform,
     scanner or survey share one build. One scene is kept."""
-    key = config.model_dump_json(include={"seabed", "objects"}) + str(config.source_path)
+    key = config.model_dump_json(include={"crs", "seabed", "objects"}) + str(config.source_path)
     if key not in _SCENES:
         _SCENES.clear()
         _SCENES[key] = build_scene(config)

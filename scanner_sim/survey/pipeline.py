@@ -27,6 +27,7 @@ from scanner_sim.config.crs import crs_label
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.render import viz
 from scanner_sim.survey import provenance, sinks
+from scanner_sim.survey.gis_products import write_gis_products
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup
 from scanner_sim.world.scene import Scene
@@ -245,7 +246,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     render = "render.png" in files
     with ExitStack() as stack:
         clouds = [stack.enter_context(sink) for sink in
-                  sinks.point_cloud_sinks(output, out, setup.scene.local_origin, facts.metadata())]
+                  sinks.point_cloud_sinks(output, out, setup.scene.local_origin, facts.metadata(), setup.scene.crs)]
         dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
         waveforms = sinks.WaveformSink(setup.model.instrument.digitizer, facts.channels)
         sample = sinks.CloudSample()
@@ -258,8 +259,12 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     if "scene.ply" in files:
         scene = setup.scene
         io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
+    crs = setup.scene.crs
+    table = trajectory_table(setup) if output.trajectory_csv or crs is not None else None
     if output.trajectory_csv:
-        sinks.write_trajectory(out, trajectory_table(setup), output.split_legs)
+        sinks.write_trajectory(out, table, output.split_legs)
+    if crs is not None:
+        write_gis_products(out, crs, coverage, table, setup.trajectory.waypoints_xy_m)
     if "waveforms.npz" in files:
         waveforms.write(out / "waveforms.npz")
     if render:

@@ -34,6 +34,7 @@ from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.budget import check_pass_budget
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.georeference import LinesOfSight, georeference
+from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.world.scene import Scene, build_scene
@@ -135,6 +136,7 @@ class PassPlan:
         files += ["waveforms.npz"] if options.waveforms or output.waveform_every_n_pulses else []
         files += ["render.png"] if options.render and clouds else []
         files += ["coverage_map.png"] if options.render and coverage else []
+        files += gis_files(coverage) if config.crs is not None else []
         return cls(level or config.survey.level, coverage, (*files, "summary.json"))
 
 

@@ -76,8 +76,10 @@ class PassFacts:
 class LasSink(io.LasWriter):
     """points.las or points.laz (by the suffix), streamed chunk by chunk."""
 
-    def __init__(self, path: Path, local_origin: np.ndarray, metadata: dict | None = None, file_source_id: int = 0):
-        super().__init__(path, offset_m=local_origin, metadata=metadata, file_source_id=file_source_id)
+    def __init__(self, path: Path, local_origin: np.ndarray, metadata: dict | None = None, file_source_id: int = 0,
+                 crs_wkt: str | None = None):
+        super().__init__(path, offset_m=local_origin, metadata=metadata, file_source_id=file_source_id,
+                         crs_wkt=crs_wkt)
 
     def add(self, chunk) -> None:
         self.write(chunk.points)
@@ -87,8 +89,10 @@ class LegLasSink:
     """One LAS/LAZ file per survey leg (``leg007_points.laz``...), like a HELIOS++ leg, each opened when its
     leg's first point arrives and carrying the leg as its file source id."""
 
-    def __init__(self, out: Path, suffix: str, local_origin: np.ndarray, metadata: dict | None = None):
+    def __init__(self, out: Path, suffix: str, local_origin: np.ndarray, metadata: dict | None = None,
+                 crs_wkt: str | None = None):
         self.out, self.suffix, self.local_origin, self.metadata = out, suffix, local_origin, metadata
+        self.crs_wkt = crs_wkt
         self.writers: dict[int, LasSink] = {}
 
     def path(self, leg: int) -> Path:
@@ -98,7 +102,8 @@ class LegLasSink:
         points = chunk.points
         for leg in np.unique(points.leg):
             if leg not in self.writers:
-                self.writers[leg] = LasSink(self.path(int(leg)), self.local_origin, self.metadata, int(leg))
+                self.writers[leg] = LasSink(self.path(int(leg)), self.local_origin, self.metadata, int(leg),
+                                            self.crs_wkt)
                 self.writers[leg].open()
             self.writers[leg].write(points.select(points.leg == leg))
 
@@ -114,13 +119,15 @@ class LegLasSink:
             writer.__exit__(exc_type, exc, tb)
 
 
-def point_cloud_sinks(output, out: Path, local_origin: np.ndarray, metadata: dict) -> list:
+def point_cloud_sinks(output, out: Path, local_origin: np.ndarray, metadata: dict, crs=None) -> list:
     """The point-cloud writers a scene's ``output`` section asks for: points.las and/or points.laz, or one file per
-    leg of each, every one carrying ``metadata`` and placing points off ``local_origin`` (3,) [m]."""
+    leg of each, every one carrying ``metadata`` and placing points off ``local_origin`` (3,) [m], in the map
+    coordinates of ``crs`` (a :class:`pyproj.CRS`, its WKT in the LAS CRS record) or, with None, the local frame."""
     suffixes = [s for s, on in ((".las", output.las), (".laz", output.laz)) if on]
+    wkt = None if crs is None else crs.to_wkt("WKT1_GDAL")  # LAS 1.4 R15: OGC WKT 1 (01-009)
     if output.split_legs:
-        return [LegLasSink(out, s, local_origin, metadata) for s in suffixes]
-    return [LasSink(out / f"points{s}", local_origin, metadata) for s in suffixes]
+        return [LegLasSink(out, s, local_origin, metadata, wkt) for s in suffixes]
+    return [LasSink(out / f"points{s}", local_origin, metadata, crs_wkt=wkt) for s in suffixes]
 
 
 class DropoutSink(io.DropoutWriter):
