@@ -209,3 +209,16 @@ def test_cached_scene_of_another_crs_is_not_reused():
     first = cached_scene(parse_scene(utm_scene_data(32631)))
     second = cached_scene(parse_scene(utm_scene_data(25831)))  # ETRS89 / UTM zone 31N
     assert first.crs.to_epsg() == 32631 and second.crs.to_epsg() == 25831
+
+
+def test_a_compound_crs_reaches_the_las_file_with_its_vertical_datum(tmp_path):
+    import laspy
+
+    config = turbid_utm_scene(crs="EPSG:32631+3855")  # UTM zone 31N + EGM2008 height
+    run_pass(config, tmp_path, PassOptions(max_pulses=300, fidelity="fast", progress=False, render=False,
+                                           write_scene=False))
+    with laspy.open(tmp_path / "points.las") as las:
+        crs = las.header.parse_crs()
+    assert crs.is_compound and [part.to_epsg() for part in crs.sub_crs_list] == [32631, 3855]
+    member = json.loads((tmp_path / "gaps.geojson").read_text())["crs"]["properties"]["name"]
+    assert member.startswith("COMPD_CS[")

@@ -12,6 +12,7 @@
 
 from scanner_sim.io.atomic import atomic_path
 from scanner_sim.io.dropouts import DropoutWriter, read_dropouts_npz, write_dropouts_npz
+from scanner_sim.io.gis import write_cog, write_geojson
 from scanner_sim.io.las import (
     EXTRA_DIMENSIONS,
     LAS_POINT_FORMAT,
@@ -55,8 +56,10 @@ __all__ = [
     "read_trajectory_csv",
     "read_waveforms_npz",
     "scan_angle_to_las",
+    "write_cog",
     "write_coverage_grid_npz",
     "write_dropouts_npz",
+    "write_geojson",
     "write_las",
     "write_scene_ply",
     "write_summary_json",
