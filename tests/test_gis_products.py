@@ -100,6 +100,14 @@ def test_the_rasters_add_up_to_the_summary_coverage_figures(utm_pass):
         assert np.count_nonzero(state == code) * cell_area == pytest.approx(figures["gaps_m2"][cause])
     with rasterio.open(out / "density.tif") as ds:
         density = ds.read(1)
+        # every reached cell's centre, looked up by its map coordinates, has its coverage_grid.npz state and count
+        grid = read_coverage_grid_npz(out / "coverage_grid.npz")
+        rows, cols = np.nonzero(grid["state"] != -2)
+        cell = float(grid["cell_m"])
+        x, y = grid["origin_m"][0] + (cols + 0.5) * cell, grid["origin_m"][1] + (rows + 0.5) * cell
+        tif_rows, tif_cols = rasterio.transform.rowcol(ds.transform, x, y)
+    assert np.array_equal(state[tif_rows, tif_cols], grid["state"][rows, cols])
+    assert np.allclose(density[tif_rows, tif_cols], grid["valid"][rows, cols] / cell ** 2)
     assert np.nansum(density.astype(float)) * cell_area == pytest.approx(figures["valid_points_in_reach"], rel=1e-6)
     assert np.array_equal(np.isnan(density), state == -2)
 
@@ -199,6 +207,44 @@ def test_split_legs_clouds_carry_the_crs(tmp_path):
     for path in clouds:
         with laspy.open(path) as las:
             assert las.header.parse_crs().to_epsg() == 32631
+
+
+class _Tally:
+    """The parts of a coverage tally the gap polygons read: a plan grid, its cell tally and min_points 1."""
+
+    def __init__(self, grid, cells):
+        from scanner_sim.metrics.coverage import CoverageSettings
+
+        self.grid, self.cells, self.settings = grid, cells, CoverageSettings()
+
+    def cell_states(self):
+        return self.cells.states(1).reshape(self.grid.shape)
+
+
+def test_a_gap_takes_the_cause_of_most_of_its_pulses_and_its_cells_edges():
+    """By hand on a 3 x 4 grid of 2 m cells at (100, 200): row 0's cells 0, 1, 2 form one gap, cell 0 failed by 9
+    no_hit pulses, cells 1 and 2 by 4 below_threshold pulses each. Most cells say below_threshold, most pulses
+    no_hit (9 of 17): the gap's cause is no_hit. Cell (row 1, col 3) touches it only by a corner, so it is a
+    second gap (4-connected), below_threshold."""
+    from shapely.geometry import box, shape
+
+    from scanner_sim.metrics.coverage import BinTally, PlanGrid
+    from scanner_sim.survey.gis_products import gap_features
+
+    grid = PlanGrid((100.0, 200.0), 2.0, (3, 4))
+    no_hit, below = GAP_CAUSES.index("no_hit"), GAP_CAUSES.index("below_threshold")
+    failing = {0: (9, no_hit), 1: (4, below), 2: (4, below), 7: (4, below)}  # flat cell = row * 4 + col
+    reaching = np.concatenate([np.full(failing.get(c, (1,))[0], c) for c in range(12)])
+    outcome = np.array([failing[c][1] if c in failing else -1 for c in reaching])
+    cells = BinTally(grid.size)
+    cells.add(reaching, outcome, reaching[outcome == -1])
+    features = gap_features(_Tally(grid, cells))
+    assert len(features) == 2
+    first, second = (f["properties"] for f in features)
+    assert first["cause"] == "no_hit" and first["cause_share"] == pytest.approx(9 / 17) and first["cells"] == 3
+    assert first["failed_pulses"] == first["reaching_pulses"] == 17 and first["area_m2"] == 12.0
+    assert shape(features[0]["geometry"]).equals(box(100, 200, 106, 202))  # row 0 is the southern row
+    assert second["cause"] == "below_threshold" and shape(features[1]["geometry"]).equals(box(106, 202, 108, 204))
 
 
 def test_cached_scene_of_another_crs_is_not_reused():
