@@ -268,3 +268,15 @@ def test_a_compound_crs_reaches_the_las_file_with_its_vertical_datum(tmp_path):
     assert crs.is_compound and [part.to_epsg() for part in crs.sub_crs_list] == [32631, 3855]
     member = json.loads((tmp_path / "gaps.geojson").read_text())["crs"]["properties"]["name"]
     assert member.startswith("COMPD_CS[")
+
+
+def test_a_static_platform_is_one_station_point():
+    from scanner_sim.survey.gis_products import line_features, track_features
+
+    (station,) = line_features(np.array([[500_010.0, 5_700_020.0]]))
+    assert station["geometry"] == {"type": "Point", "coordinates": [500_010.0, 5_700_020.0]}
+    table = {"time_s": np.arange(4) * 0.1, "leg": np.ones(4, np.uint16),
+             "position_m": np.tile([500_010.0, 5_700_020.0, -12.5], (4, 1))}
+    (track,) = track_features(table)
+    assert track["geometry"] == {"type": "Point", "coordinates": [500_010.0, 5_700_020.0, -12.5]}
+    assert track["properties"] == {"leg": 1, "start_s": 0.0, "stop_s": pytest.approx(0.3), "length_m": 0.0}
