@@ -280,3 +280,27 @@ def test_a_static_platform_is_one_station_point():
     (track,) = track_features(table)
     assert track["geometry"] == {"type": "Point", "coordinates": [500_010.0, 5_700_020.0, -12.5]}
     assert track["properties"] == {"leg": 1, "start_s": 0.0, "stop_s": pytest.approx(0.3), "length_m": 0.0}
+
+
+def test_a_campaign_runs_again_a_pass_that_lacks_a_gis_product(tmp_path):
+    """The products are in the pass's plan, which a campaign's completeness check reads: a pass folder without its
+    gaps.geojson is run again, one with every product is skipped."""
+    import yaml
+
+    from scanner_sim.runs.campaign import load_campaign, run_campaign
+
+    (tmp_path / "utm.yaml").write_text(yaml.safe_dump(utm_scene_data(32631)))
+    (tmp_path / "campaign.yaml").write_text(yaml.safe_dump(
+        {"scene": "utm.yaml", "sweep": {"seed": [1]}, "options": {"max_pulses": 300, "render": False}}))
+    out = tmp_path / "out"
+
+    def statuses():
+        result = run_campaign(load_campaign(tmp_path / "campaign.yaml"), out, progress=False)
+        return [p["status"] for p in result["passes"]]
+
+    assert statuses() == ["ran"]
+    (folder,) = [p for p in out.iterdir() if p.is_dir()]
+    assert (folder / "gaps.geojson").is_file() and (folder / "coverage.tif").is_file()
+    assert statuses() == ["skipped"]
+    (folder / "gaps.geojson").unlink()
+    assert statuses() == ["ran"] and (folder / "gaps.geojson").is_file()
