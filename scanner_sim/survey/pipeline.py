@@ -258,7 +258,7 @@ def bag_sinks(setup: PassSetup, out: Path, facts: sinks.PassFacts) -> list:
         return truth, trajectory.estimate_of(truth)
 
     return [sinks.RosbagSink(Path(bag.dir) if bag.dir else out / ROSBAG_NAME, bag, setup.scene.local_origin,
-                             setup.scanner.line_index, poses_at, setup.scanner.pulse_rate_hz,
+                             setup.scanner.line_index, poses_at, (0.0, trajectory.duration_s), setup.scanner.pulse_rate_hz,
                              setup.scanner.mount_position_m, facts.metadata())]
 
 

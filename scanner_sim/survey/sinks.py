@@ -134,13 +134,14 @@ class RosbagSink(RosbagWriter):
     :data:`ODOMETRY_RATE_HZ` grid from the first pulse up to the tick after the last.
 
     line_of: times (n,) [s] -> scan line (n,) int; poses_at: times (n,) [s] -> (true, estimated)
-    :class:`~scanner_sim.motion.trajectory.Poses`; pulse_rate_hz: slot k fires at k / pulse_rate_hz."""
+    :class:`~scanner_sim.motion.trajectory.Poses`, on the track from ``track_s`` (start, end) [s]; pulse_rate_hz:
+    slot k fires at k / pulse_rate_hz."""
 
-    def __init__(self, path: Path, settings, local_origin: np.ndarray, line_of, poses_at, pulse_rate_hz: float,
-                 lidar_offset_m, metadata: dict | None = None):
+    def __init__(self, path: Path, settings, local_origin: np.ndarray, line_of, poses_at, track_s: tuple,
+                 pulse_rate_hz: float, lidar_offset_m, metadata: dict | None = None):
         super().__init__(path, frame=settings.frame, storage=settings.storage, offset_m=local_origin,
                          lidar_offset_m=lidar_offset_m, metadata=metadata)
-        self.line_of, self.poses_at, self.pulse_rate_hz = line_of, poses_at, pulse_rate_hz
+        self.line_of, self.poses_at, self.track_s, self.pulse_rate_hz = line_of, poses_at, track_s, pulse_rate_hz
         self._pending = PointRecords.empty()
         self._next_tick: int | None = None
         self._last_s: float | None = None
@@ -164,17 +165,21 @@ class RosbagSink(RosbagWriter):
             self.write_line(points.select(lines == line), int(line))
 
     def _write_ticks(self, last_tick: int) -> None:
-        """Poses at ticks ``_next_tick`` .. ``last_tick``; the twist from the poses half a tick either side."""
+        """Poses at ticks ``_next_tick`` .. ``last_tick``; the twist from the poses half a tick either side (one side
+        at the track's ends, where the vehicle stands still)."""
         ticks = np.arange(self._next_tick, last_tick + 1)
         if ticks.size == 0:
             return
         t, h = ticks / ODOMETRY_RATE_HZ, 0.5 / ODOMETRY_RATE_HZ
-        for truth, (now, before, after) in zip((True, False), zip(self.poses_at(t), self.poses_at(t - h),
-                                                                   self.poses_at(t + h))):
-            velocity = (after.position - before.position) / (2 * h)
-            spin = np.einsum("nji,njk->nik", now.rotation, (after.rotation - before.rotation) / (2 * h))  # R^T dR/dt
+        t0, t1 = np.clip(t - h, *self.track_s), np.clip(t + h, *self.track_s)
+        dt = np.where(t1 > t0, t1 - t0, np.inf)[:, None]  # no time on the track: no motion
+        for truth, (now, before, after) in zip((True, False), zip(self.poses_at(t), self.poses_at(t0),
+                                                                   self.poses_at(t1))):
+            velocity = (after.position - before.position) / dt
+            spin = np.einsum("nji,njk->nik", now.rotation, (after.rotation - before.rotation) / dt[:, :, None])
             angular = 0.5 * np.c_[spin[:, 2, 1] - spin[:, 1, 2], spin[:, 0, 2] - spin[:, 2, 0],
                                   spin[:, 1, 0] - spin[:, 0, 1]]
+            # R^T dR/dt is the skew matrix of the angular rate in the vehicle frame
             self.write_poses(t, now.position, now.rotation, velocity, angular, truth)
         self._next_tick = last_tick + 1
 
