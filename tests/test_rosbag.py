@@ -295,3 +295,18 @@ def test_points_beyond_float32_millimetres_are_refused(tmp_path):
     with pytest.raises(ValueError, match="5,000 m"), rosbag.RosbagWriter(tmp_path / "bag") as bag:
         bag.write_line(records, 0)
     assert not (tmp_path / "bag").exists()
+
+
+def test_campaign_pass_keeps_its_rosbag_folder(tmp_path):
+    """A campaign's pass (a Dask task) returns its files by name and the campaign writes them into the pass's
+    folder. Root cause of the bug it pins: the task read only the top folder's files, so the bag (a folder) was
+    dropped and the pass never looked complete (its plan lists rosbag/metadata.yaml)."""
+    from scanner_sim.runs.jobs import completed_summary, write_pass
+    from scanner_sim.runs.tasks import PassJob, pass_files
+
+    config = load_scene("cable_survey").with_overrides({"output.rosbag": {}})
+    job = PassJob("bagged", config, PassOptions(max_pulses=300, progress=False, render=False, write_scene=False))
+    write_pass(tmp_path / "bagged", pass_files(job.config, job.options))
+    assert completed_summary(tmp_path / "bagged", job) is not None
+    points = sum(_points(m).size for _, m in _read_bag(tmp_path / "bagged" / "rosbag")["/points"])
+    assert points == laspy.read(tmp_path / "bagged" / "points.las").header.point_count

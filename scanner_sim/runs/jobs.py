@@ -55,6 +55,7 @@ def write_pass(folder: Path, files: PassFiles) -> dict:
     with contextlib.suppress(FileNotFoundError):
         (folder / "summary.json").unlink()
     for name, data in sorted(files.files.items(), key=lambda item: item[0] == "summary.json"):
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)  # a file in a sub-folder: a bag's
         with io.atomic_path(folder / name) as tmp:
             tmp.write_bytes(data)
     return json.loads(files.files["summary.json"])
