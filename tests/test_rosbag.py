@@ -310,3 +310,33 @@ def test_campaign_pass_keeps_its_rosbag_folder(tmp_path):
     assert completed_summary(tmp_path / "bagged", job) is not None
     points = sum(_points(m).size for _, m in _read_bag(tmp_path / "bagged" / "rosbag")["/points"])
     assert points == laspy.read(tmp_path / "bagged" / "points.las").header.point_count
+
+
+def test_the_documented_reading_example_gives_the_las_points(enu_pass):
+    """docs/outputs.md's example of reading a bag back, run as written on this pass's bag."""
+    import re
+    from pathlib import Path
+
+    out, _, las = enu_pass
+    page = (Path(__file__).resolve().parent.parent / "docs" / "outputs.md").read_text()
+    code = re.search(r"### Reading it back\n\n```python\n(.*?)```", page, re.S).group(1)
+    names = {}
+    exec(code.replace('"out/cable_survey/rosbag"', repr(str(out / "rosbag"))), names)  # noqa: S102 - our own docs
+    np.testing.assert_allclose(names["xyz"], np.c_[las.x, las.y, las.z], rtol=0, atol=1e-6)
+
+
+def test_the_documented_point_fields_are_the_bag_fields(enu_pass):
+    """docs/outputs.md's table of PointCloud2 fields names the bag's fields, types and order."""
+    import re
+    from pathlib import Path
+
+    _, topics, _ = enu_pass
+    page = (Path(__file__).resolve().parent.parent / "docs" / "outputs.md").read_text()
+    table = page[page.index("### PointCloud2 fields"):page.index("The coordinates are float32")]
+    documented = []
+    for names, kind in re.findall(r"^\| ([a-z_, ]+) \| ([A-Z0-9]+) \|", table, re.M):
+        documented += [(name.strip(), kind) for name in names.split(",")]
+    kinds = {1: "INT8", 2: "UINT8", 3: "INT16", 4: "UINT16", 5: "INT32", 6: "UINT32", 7: "FLOAT32", 8: "FLOAT64"}
+    cloud = topics["/points"][0][1]
+    assert documented == [(f.name, kinds[f.datatype]) for f in cloud.fields]
+    assert f"`point_step` {cloud.point_step} bytes" in page
