@@ -23,7 +23,7 @@ PULSES = 3000
 LINES_PER_S = 16.0
 #: PointField datatype -> numpy type (sensor_msgs/msg/PointField constants).
 NUMPY_OF = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
-TYPESTORE = get_typestore(Stores.ROS2_JAZZY)  # the reader's own, not the writer's module constant
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)  # the reader's own, not the writer's
 
 
 def _pass(tmp_path, name="run", pulses=PULSES, **settings):

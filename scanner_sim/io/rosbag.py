@@ -17,15 +17,13 @@ The bag is written into a locked hidden folder beside its final one and swapped 
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
-from scipy.spatial.transform import Rotation
 
 from scanner_sim.io.atomic import PathLike, StreamingWriter
 from scanner_sim.io.las import LAS_SCALE_M
@@ -34,7 +32,7 @@ from scanner_sim.io.summary import jsonable
 from scanner_sim.survey.point_records import PointRecords
 
 __all__ = ["BAG_FRAMES", "BAG_STORAGES", "PASS_START_UNIX_NS", "POINT_FIELDS", "ROSBAG_NAME", "BagFrame",
-           "RosbagWriter", "bag_files", "stamp_ns"]
+           "RosbagWriter", "bag_files", "stamp_ns", "typestore"]
 
 #: Unix time [ns] of the pass start: GPS second 1e9 (LAS ``gps_time`` 0, ``docs/outputs.md``), 1980-01-06 being
 #: Unix second 315,964,800 and GPS time 15 s ahead of UTC in September 2011: 2011-09-14 01:46:25 UTC.
@@ -42,10 +40,8 @@ PASS_START_UNIX_NS = (315_964_800 + 1_000_000_000 - 15) * 1_000_000_000
 #: Farthest a point may lie from the local origin [m] along any axis: float32 steps there are 0.49 mm, under half
 #: the LAS's 1 mm, so the bag's float32 rounds back to the LAS's millimetre.
 MAX_FLOAT32_EXACT_M = 4096.0
-#: The message definitions written (their type hashes go into the bag).
-TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-BAG_STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
-_STORAGE_SUFFIX = {"mcap": ".mcap", "sqlite3": ".db3"}
+#: rosbag2 storages: name -> suffix of the storage file.
+BAG_STORAGES = {"mcap": ".mcap", "sqlite3": ".db3"}
 #: The file that makes a bag folder complete (written last by rosbags).
 BAG_MARKER = "metadata.yaml"
 #: The bag's folder in the output folder, unless the scene's ``output.rosbag.dir`` puts it elsewhere.
@@ -54,23 +50,37 @@ ROSBAG_NAME = "rosbag"
 
 def bag_files(folder: str, storage: str) -> tuple[str, str]:
     """The files of a complete bag in ``folder`` (its name), as paths under the folder's parent."""
-    return f"{folder}/{BAG_MARKER}", f"{folder}/{folder}{_STORAGE_SUFFIX[storage]}"
+    return f"{folder}/{BAG_MARKER}", f"{folder}/{folder}{BAG_STORAGES[storage]}"
 
-_T = TYPESTORE.types
-_PF = _T["sensor_msgs/msg/PointField"]
+
+@functools.cache
+def typestore():
+    """The message definitions written, ROS 2 Jazzy's (their type hashes go into the bag). rosbags is imported
+    here, on a bag's first use, so a pass without a bag does not pay for it (0.07 s measured)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _msg(kind: str, **fields):
+    """A message of ROS type ``kind`` (``std_msgs/msg/Header``) with ``fields``."""
+    return typestore().types[kind](**fields)
+
+#: sensor_msgs/msg/PointField datatype constants.
+_UINT8, _INT32, _UINT32, _FLOAT32 = 2, 5, 6, 7
 #: PointCloud2 fields: name -> (numpy dtype, PointField datatype, meaning).
 POINT_FIELDS = {
-    "x": (np.float32, _PF.FLOAT32, "[m] world frame, from the local origin"),
-    "y": (np.float32, _PF.FLOAT32, "[m]"),
-    "z": (np.float32, _PF.FLOAT32, "[m]"),
-    "intensity": (np.float32, _PF.FLOAT32, "LAS intensity (0..65535)"),
-    "time": (np.float32, _PF.FLOAT32, "[s] pulse emission after the message stamp"),
-    "line": (np.uint32, _PF.UINT32, "scan line of the pass"),
-    "object_id": (np.int32, _PF.INT32, "scene object hit, -1 none"),
-    "range_error": (np.float32, _PF.FLOAT32, "[m] measured - true range, NaN without truth"),
-    "return_number": (np.uint8, _PF.UINT8, "1-based, nearest first"),
-    "classification": (np.uint8, _PF.UINT8, "ground-truth class (LAS classification)"),
-    "channel": (np.uint8, _PF.UINT8, "detection channel"),
+    "x": (np.float32, _FLOAT32, "[m] world frame, from the local origin"),
+    "y": (np.float32, _FLOAT32, "[m]"),
+    "z": (np.float32, _FLOAT32, "[m]"),
+    "intensity": (np.float32, _FLOAT32, "LAS intensity (0..65535)"),
+    "time": (np.float32, _FLOAT32, "[s] pulse emission after the message stamp"),
+    "line": (np.uint32, _UINT32, "scan line of the pass"),
+    "object_id": (np.int32, _INT32, "scene object hit, -1 none"),
+    "range_error": (np.float32, _FLOAT32, "[m] measured - true range, NaN without truth"),
+    "return_number": (np.uint8, _UINT8, "1-based, nearest first"),
+    "classification": (np.uint8, _UINT8, "ground-truth class (LAS classification)"),
+    "channel": (np.uint8, _UINT8, "detection channel"),
 }
 #: The points' layout: every field at its natural alignment, 36 bytes a point.
 _POINT_DTYPE = np.dtype([(name, dtype) for name, (dtype, _, _) in POINT_FIELDS.items()], align=True)
@@ -108,16 +118,16 @@ def stamp_ns(time_s) -> np.ndarray:
 
 
 def _header(stamp: int, frame_id: str):
-    time = _T["builtin_interfaces/msg/Time"](sec=int(stamp // 1_000_000_000), nanosec=int(stamp % 1_000_000_000))
-    return _T["std_msgs/msg/Header"](stamp=time, frame_id=frame_id)
+    time = _msg("builtin_interfaces/msg/Time", sec=int(stamp // 1_000_000_000), nanosec=int(stamp % 1_000_000_000))
+    return _msg("std_msgs/msg/Header", stamp=time, frame_id=frame_id)
 
 
 def _vector(v, kind: str = "geometry_msgs/msg/Vector3"):
-    return _T[kind](x=float(v[0]), y=float(v[1]), z=float(v[2]))
+    return _msg(kind, x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
 
 def _quaternion(q):
-    return _T["geometry_msgs/msg/Quaternion"](x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+    return _msg("geometry_msgs/msg/Quaternion", x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
 
 
 class RosbagWriter(StreamingWriter):
@@ -143,30 +153,32 @@ class RosbagWriter(StreamingWriter):
                        "muls_scanner.pass_start_unix_ns": str(PASS_START_UNIX_NS),
                        "muls_scanner.pass_metadata": json.dumps(jsonable(metadata or {}), sort_keys=True)}
         self._run: RunDirectory | None = None
-        self._bag: Writer | None = None
+        self._bag = None  # the rosbags Writer while open
         self._topics: dict = {}
         self.point_count = 0
 
     def open(self) -> None:
         """Lock the bag folder and start the bag in its hidden sibling."""
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
         self._run = RunDirectory(self.path, complete_marker=BAG_MARKER)
         hidden = self._run.open().path
         try:
             self._bag = Writer(hidden / self.path.name, version=Writer.VERSION_LATEST,
-                               storage_plugin=BAG_STORAGES[self.storage])
+                               storage_plugin=StoragePlugin[self.storage.upper()])
             for key, value in self.custom.items():
                 self._bag.set_custom_data(key, value)
             self._bag.open()
             for topic, kind in (("/points", "sensor_msgs/msg/PointCloud2"), ("/odometry", "nav_msgs/msg/Odometry"),
                                 ("/ground_truth/odometry", "nav_msgs/msg/Odometry"), ("/tf", "tf2_msgs/msg/TFMessage")):
-                self._topics[topic] = (self._bag.add_connection(topic, kind, typestore=TYPESTORE), kind)
+                self._topics[topic] = (self._bag.add_connection(topic, kind, typestore=typestore()), kind)
         except BaseException:
             self.abort()
             raise
 
     def _write(self, topic: str, stamp: int, message) -> None:
         connection, kind = self._topics[topic]
-        self._bag.write(connection, int(stamp), TYPESTORE.serialize_cdr(message, kind))
+        self._bag.write(connection, int(stamp), typestore().serialize_cdr(message, kind))
 
     def write_line(self, records: PointRecords, line: int) -> None:
         """One scan line's points (in pass order) as one PointCloud2, stamped at its first pulse's emission.
@@ -189,9 +201,9 @@ class RosbagWriter(StreamingWriter):
         points["object_id"] = records.object_id
         points["channel"] = records.channel
         points["range_error"] = records.range_error_m
-        fields = [_PF(name=name, offset=_POINT_DTYPE.fields[name][1], datatype=datatype, count=1)
-                  for name, (_, datatype, _) in POINT_FIELDS.items()]
-        message = _T["sensor_msgs/msg/PointCloud2"](
+        fields = [_msg("sensor_msgs/msg/PointField", name=name, offset=_POINT_DTYPE.fields[name][1], datatype=datatype,
+                       count=1) for name, (_, datatype, _) in POINT_FIELDS.items()]
+        message = _msg("sensor_msgs/msg/PointCloud2",
             header=_header(stamp, self.frame.world), height=1, width=len(points), fields=fields, is_bigendian=False,
             point_step=_POINT_DTYPE.itemsize, row_step=_POINT_DTYPE.itemsize * len(points),
             data=points.view(np.uint8), is_dense=True)
@@ -202,31 +214,33 @@ class RosbagWriter(StreamingWriter):
         """Odometry at ``time_s`` (n,) [s]: positions (n, 3) [m] and vehicle-to-world rotations (n, 3, 3) in the
         scene's world, velocity (n, 3) [m/s] in the world and angular rate (n, 3) [rad/s] in the vehicle frame.
         The navigation's (``truth`` False) also gives /tf; the truth goes to /ground_truth/odometry."""
+        from scipy.spatial.transform import Rotation  # here: scipy.spatial costs a pass without a bag 0.1 s
+
         position, turn = self.frame.pose(np.asarray(position_m) - self.offset_m, rotation)
         quaternions = Rotation.from_matrix(turn).as_quat()  # (x, y, z, w), scalar last as ROS has it
         linear = np.einsum("nji,nj->ni", turn, np.asarray(velocity_m_s) @ self.frame.world_axes.T)  # R'^T v'
         angular = np.asarray(angular_rad_s) @ self.frame.body_axes.T
         covariance = np.zeros(36)  # not estimated: the navigation's errors are in trajectory.csv
         for t, p, q, v, w in zip(stamp_ns(time_s), position, quaternions, linear, angular):
-            pose = _T["geometry_msgs/msg/Pose"](position=_vector(p, "geometry_msgs/msg/Point"), orientation=_quaternion(q))
-            twist = _T["geometry_msgs/msg/Twist"](linear=_vector(v), angular=_vector(w))
-            odometry = _T["nav_msgs/msg/Odometry"](
-                header=_header(t, self.frame.world), child_frame_id=self.frame.vehicle,
-                pose=_T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=covariance),
-                twist=_T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=covariance))
+            pose = _msg("geometry_msgs/msg/Pose", position=_vector(p, "geometry_msgs/msg/Point"),
+                        orientation=_quaternion(q))
+            twist = _msg("geometry_msgs/msg/Twist", linear=_vector(v), angular=_vector(w))
+            odometry = _msg("nav_msgs/msg/Odometry", header=_header(t, self.frame.world), child_frame_id=self.frame.vehicle,
+                            pose=_msg("geometry_msgs/msg/PoseWithCovariance", pose=pose, covariance=covariance),
+                            twist=_msg("geometry_msgs/msg/TwistWithCovariance", twist=twist, covariance=covariance))
             self._write("/ground_truth/odometry" if truth else "/odometry", t, odometry)
             if not truth:
                 self._write("/tf", t, self._transforms(t, p, q))
 
     def _transforms(self, stamp: int, position: np.ndarray, quaternion: np.ndarray):
-        frame, stamped = self.frame, _T["geometry_msgs/msg/TransformStamped"]
-        vehicle = stamped(header=_header(stamp, frame.world), child_frame_id=frame.vehicle,
-                          transform=_T["geometry_msgs/msg/Transform"](translation=_vector(position),
-                                                                      rotation=_quaternion(quaternion)))
-        lidar = stamped(header=_header(stamp, frame.vehicle), child_frame_id=frame.lidar,
-                        transform=_T["geometry_msgs/msg/Transform"](translation=_vector(self.lidar_offset_m),
-                                                                    rotation=_quaternion((0.0, 0.0, 0.0, 1.0))))
-        return _T["tf2_msgs/msg/TFMessage"](transforms=[vehicle, lidar])
+        frame, stamped = self.frame, "geometry_msgs/msg/TransformStamped"
+        vehicle = _msg(stamped, header=_header(stamp, frame.world), child_frame_id=frame.vehicle,
+                       transform=_msg("geometry_msgs/msg/Transform", translation=_vector(position),
+                                      rotation=_quaternion(quaternion)))
+        lidar = _msg(stamped, header=_header(stamp, frame.vehicle), child_frame_id=frame.lidar,
+                     transform=_msg("geometry_msgs/msg/Transform", translation=_vector(self.lidar_offset_m),
+                                    rotation=_quaternion((0.0, 0.0, 0.0, 1.0))))
+        return _msg("tf2_msgs/msg/TFMessage", transforms=[vehicle, lidar])
 
     def close(self) -> None:
         """Finish the bag (its index and metadata.yaml) and swap it in under ``path``."""
