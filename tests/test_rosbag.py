@@ -340,3 +340,16 @@ def test_the_documented_point_fields_are_the_bag_fields(enu_pass):
     cloud = topics["/points"][0][1]
     assert documented == [(f.name, kinds[f.datatype]) for f in cloud.fields]
     assert f"`point_step` {cloud.point_step} bytes" in page
+
+
+def test_passes_sharing_one_bag_folder_are_refused(tmp_path):
+    """Many passes (a campaign, a coverage study) with one ``output.rosbag.dir`` would each replace the bag before:
+    refused in one line before any pass runs."""
+    from scanner_sim.config import ConfigError
+    from scanner_sim.runs.jobs import check_jobs
+    from scanner_sim.runs.tasks import PassJob
+
+    config = load_scene("cable_survey").with_overrides({"output.rosbag.dir": str(tmp_path / "bag")})
+    jobs = [PassJob(f"seed{s}", config.with_overrides({"survey.seed": s})) for s in (1, 2)]
+    with pytest.raises(ConfigError, match=r"output.rosbag.dir = .*the 2 passes would each replace"):
+        check_jobs(jobs)
