@@ -353,3 +353,14 @@ def test_passes_sharing_one_bag_folder_are_refused(tmp_path):
     jobs = [PassJob(f"seed{s}", config.with_overrides({"survey.seed": s})) for s in (1, 2)]
     with pytest.raises(ConfigError, match=r"output.rosbag.dir = .*the 2 passes would each replace"):
         check_jobs(jobs)
+
+
+def test_scan_line_is_a_revolution_a_sweep_or_a_period():
+    """By hand: a continuous mirror at 20 Hz starts a line every 50 ms; an oscillating one at 8 Hz every 62.5 ms
+    (each half period, both directions); a static one every period of its scan rate."""
+    from scanner_sim.motion.scanner import Scanner
+
+    t = np.array([0.0, 0.0499, 0.0501, 0.0624, 0.0626, 0.1249, 0.1251])
+    np.testing.assert_array_equal(Scanner(mode="continuous", scan_rate_hz=20.0).line_index(t), [0, 0, 1, 1, 1, 2, 2])
+    np.testing.assert_array_equal(Scanner(mode="oscillating", scan_rate_hz=8.0).line_index(t), [0, 0, 0, 0, 1, 1, 2])
+    np.testing.assert_array_equal(Scanner(mode="static", scan_rate_hz=8.0).line_index(t), [0, 0, 0, 0, 0, 0, 1])
