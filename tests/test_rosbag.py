@@ -280,19 +280,30 @@ def test_bag_folder_holding_other_files_is_refused(tmp_path):
     assert (tmp_path / "bag" / "notes.txt").read_text() == "mine"
 
 
+def test_float32_keeps_every_millimetre_count_within_16384_m():
+    """The bag's claim, checked on 1,000,000 random LAS counts up to 2**14 m: float32 of count * 1 mm rounds back
+    to the count; just past it, float32's 1.95 mm steps lose about half of them."""
+    rng = np.random.default_rng(7)
+    limit = int(rosbag.MAX_FLOAT32_EXACT_M * 1000)
+    for counts, exact in ((rng.integers(-limit, limit + 1, 1_000_000), True),
+                          (rng.integers(limit + 1, 2 * limit, 10_000), False)):
+        back = np.rint((counts * 0.001).astype(np.float32).astype(np.float64) / 0.001)
+        assert np.all(back == counts) == exact
+
+
 def test_points_beyond_float32_millimetres_are_refused(tmp_path):
-    """float32 keeps 1 mm only within 4,096 m of the local origin: a point farther is refused, not rounded."""
+    """float32 keeps 1 mm only within 16,384 m of the local origin: a point farther is refused, not rounded."""
     from scanner_sim.survey.point_records import PointRecords
 
     n = 2
-    records = PointRecords(gps_time_s=np.zeros(n), xyz=np.array([[10.0, 0, 0], [5000.0, 0, 0]]),
+    records = PointRecords(gps_time_s=np.zeros(n), xyz=np.array([[10.0, 0, 0], [20000.0, 0, 0]]),
                            intensity=np.zeros(n, np.uint16), return_number=np.ones(n, np.uint8),
                            number_of_returns=np.ones(n, np.uint8), classification=np.zeros(n, np.uint8),
                            scan_angle_deg=np.zeros(n), channel=np.ones(n, np.uint8), amplitude_lsb=np.zeros(n),
                            snr=np.zeros(n), saturated=np.zeros(n, bool), true_range_m=np.zeros(n),
                            range_error_m=np.zeros(n), incidence_deg=np.zeros(n), object_id=np.zeros(n, np.int32),
                            leg=np.ones(n, np.uint16), pulse_index=np.arange(n))
-    with pytest.raises(ValueError, match="5,000 m"), rosbag.RosbagWriter(tmp_path / "bag") as bag:
+    with pytest.raises(ValueError, match="20,000 m"), rosbag.RosbagWriter(tmp_path / "bag") as bag:
         bag.write_line(records, 0)
     assert not (tmp_path / "bag").exists()
 

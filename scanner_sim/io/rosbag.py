@@ -37,9 +37,10 @@ __all__ = ["BAG_FRAMES", "BAG_STORAGES", "PASS_START_UNIX_NS", "POINT_FIELDS", "
 #: Unix time [ns] of the pass start: GPS second 1e9 (LAS ``gps_time`` 0, ``docs/outputs.md``), 1980-01-06 being
 #: Unix second 315,964,800 and GPS time 15 s ahead of UTC in September 2011: 2011-09-14 01:46:25 UTC.
 PASS_START_UNIX_NS = (315_964_800 + 1_000_000_000 - 15) * 1_000_000_000
-#: Farthest a point may lie from the local origin [m] along any axis: float32 steps there are 0.49 mm, under half
-#: the LAS's 1 mm, so the bag's float32 rounds back to the LAS's millimetre.
-MAX_FLOAT32_EXACT_M = 4096.0
+#: Farthest a point may lie from the local origin [m] along any axis: below 2**14 m float32's step is at most
+#: 0.98 mm, so its rounding error (half a step, 0.49 mm) stays under half the LAS's 1 mm and the bag's float32
+#: rounds back to the LAS's millimetre count.
+MAX_FLOAT32_EXACT_M = 16384.0
 #: rosbag2 storages: name -> suffix of the storage file.
 BAG_STORAGES = {"mcap": ".mcap", "sqlite3": ".db3"}
 #: The file that makes a bag folder complete (written last by rosbags).
@@ -65,6 +66,7 @@ def typestore():
 def _msg(kind: str, **fields):
     """A message of ROS type ``kind`` (``std_msgs/msg/Header``) with ``fields``."""
     return typestore().types[kind](**fields)
+
 
 #: sensor_msgs/msg/PointField datatype constants.
 _UINT8, _INT32, _UINT32, _FLOAT32 = 2, 5, 6, 7
