@@ -28,7 +28,7 @@ from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.render import viz
 from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
-from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup
+from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup, check_pass_arguments
 from scanner_sim.world.scene import Scene
 
 
@@ -74,10 +74,11 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     """
     if out_dir is not None and not isinstance(out_dir, (str, os.PathLike)):
         raise TypeError(f"out_dir must be a folder path (str or Path) or None, not {type(out_dir).__name__} {out_dir!r}")
+    check_pass_arguments(config, options, scene)
+    check_bag_dir(config.output.rosbag, Path(out_dir or config.output_dir))  # before the slow set-up
     t_setup = time.perf_counter()
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
-    check_bag_dir(setup.config.output.rosbag, Path(out_dir or setup.config.output_dir))
     run_dir = RunDirectory(out_dir or setup.config.output_dir).open()  # locked; written in a hidden sibling
     compile_s = warm_up(setup, options)
     summary = stream_to_files(setup, run_dir.path, pass_chunks(setup, options), options, setup_s, compile_s=compile_s)
