@@ -237,6 +237,7 @@ def test_rosbag_dir_inside_the_output_folder_is_refused(tmp_path, capsys):
                  "--max-pulses", "10", "--quiet"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "output.rosbag.dir" in err
+    assert list(tmp_path.iterdir()) == []  # refused before any lock made a folder
 
 
 def test_interrupted_bag_leaves_the_previous_bag_whole(tmp_path, monkeypatch):

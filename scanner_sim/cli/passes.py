@@ -182,7 +182,7 @@ def _cmd_run(args) -> int:
 
     from scanner_sim.config import load_scene
     from scanner_sim.io.run_dir import hold_output
-    from scanner_sim.survey.pipeline import run_pass
+    from scanner_sim.survey.pipeline import check_bag_dir, run_pass
     from scanner_sim.survey.setup import PassOptions
 
     config = load_scene(args.scene)
@@ -192,6 +192,7 @@ def _cmd_run(args) -> int:
                           render=not args.no_render)
     out = Path(args.out or config.output_dir)
     bag = config.output.rosbag
+    check_bag_dir(bag, out)  # before the bag's lock would create its parent folder
     with hold_output(out), (hold_output(bag.dir) if bag and bag.dir else contextlib.nullcontext()):
         # taken before the pass is built, so a second writer is refused at once
         compiling = _first_run_notice()
