@@ -376,3 +376,24 @@ def test_scan_line_is_a_revolution_a_sweep_or_a_period():
     np.testing.assert_array_equal(Scanner(mode="continuous", scan_rate_hz=20.0).line_index(t), [0, 0, 1, 1, 1, 2, 2])
     np.testing.assert_array_equal(Scanner(mode="oscillating", scan_rate_hz=8.0).line_index(t), [0, 0, 0, 0, 1, 1, 2])
     np.testing.assert_array_equal(Scanner(mode="static", scan_rate_hz=8.0).line_index(t), [0, 0, 0, 0, 0, 0, 1])
+
+
+def test_bag_metadata_names_frame_origin_epoch_and_pass(enu_pass):
+    """metadata.yaml's custom_data holds what docs/outputs.md lists: the frame, the local origin (the LAS offset),
+    the coordinate scale, the pass start and the pass's metadata (scene, seed...)."""
+    import json
+
+    import yaml
+
+    out, topics, las = enu_pass
+    info = yaml.safe_load((out / "rosbag" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    custom = info["custom_data"]
+    assert custom["muls_scanner.frame"] == "enu"
+    np.testing.assert_array_equal(json.loads(custom["muls_scanner.local_origin_m"]), las.header.offsets)
+    assert float(custom["muls_scanner.coordinate_scale_m"]) == las.header.scales[0] == 0.001
+    assert int(custom["muls_scanner.pass_start_unix_ns"]) == 1_315_964_785_000_000_000
+    meta = json.loads(custom["muls_scanner.pass_metadata"])
+    assert meta["scene"] == "cable_survey" and meta["seed"] == load_scene("cable_survey").survey.seed
+    counts = {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
+    assert counts == {topic: len(messages) for topic, messages in topics.items()}
+    assert info["version"] == 9 and info["storage_identifier"] == "mcap"
