@@ -397,3 +397,26 @@ def test_bag_metadata_names_frame_origin_epoch_and_pass(enu_pass):
     counts = {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
     assert counts == {topic: len(messages) for topic, messages in topics.items()}
     assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+
+
+@pytest.mark.parametrize(("frame", "pitch_sign"), [("enu", -1.0), ("ned", 1.0)])
+def test_odometry_angular_rate_is_the_roll_and_pitch_rates_by_hand(tmp_path, frame, pitch_sign):
+    """The vehicle heads east (yaw 0) and rolls 5 deg every 2 s and pitches 3 deg every 3 s (no terrain pitch):
+    R = Ry(-p) Rx(r), so the angular rate in the vehicle frame is (r', -p' cos r, p' sin r) in x forward, y left,
+    z up, and (r', p' cos r, -p' sin r) in x forward, y starboard, z down (roll starboard-down and pitch nose-up
+    positive about the FRD axes). The central difference over 0.1 s keeps sin(w h)/(w h) > 0.995 of the rate."""
+    attitude = {"roll_amplitude_deg": 5.0, "roll_period_s": 2.0, "pitch_amplitude_deg": 3.0, "pitch_period_s": 3.0,
+                "follow_terrain_pitch": False}
+    config = load_scene("cable_survey").with_overrides({"output.rosbag": {"frame": frame}, "platform.attitude": attitude})
+    out = tmp_path / frame
+    run_pass(config, out, PassOptions(max_pulses=5000, progress=False, render=False, write_scene=False))
+    odometry = _read_bag(out / "rosbag")["/ground_truth/odometry"]
+    assert len(odometry) == 11
+    for stamp, message in odometry:
+        t = (stamp - rosbag.PASS_START_UNIX_NS) / 1e9
+        r = np.radians(5.0) * np.sin(np.pi * t)
+        r_rate, p_rate = np.radians(5.0) * np.pi * np.cos(np.pi * t), np.radians(3.0) * 2 * np.pi / 3 * np.cos(
+            2 * np.pi * t / 3)
+        w = message.twist.twist.angular
+        expected = [r_rate, pitch_sign * p_rate * np.cos(r), -pitch_sign * p_rate * np.sin(r)]
+        np.testing.assert_allclose([w.x, w.y, w.z], expected, rtol=0, atol=2e-3)

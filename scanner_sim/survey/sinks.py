@@ -176,10 +176,10 @@ class RosbagSink(RosbagWriter):
         for truth, (now, before, after) in zip((True, False), zip(self.poses_at(t), self.poses_at(t0),
                                                                    self.poses_at(t1))):
             velocity = (after.position - before.position) / dt
+            # R^T dR/dt is the skew matrix of the angular rate in the vehicle frame
             spin = np.einsum("nji,njk->nik", now.rotation, (after.rotation - before.rotation) / dt[:, :, None])
             angular = 0.5 * np.c_[spin[:, 2, 1] - spin[:, 1, 2], spin[:, 0, 2] - spin[:, 2, 0],
                                   spin[:, 1, 0] - spin[:, 0, 1]]
-            # R^T dR/dt is the skew matrix of the angular rate in the vehicle frame
             self.write_poses(t, now.position, now.rotation, velocity, angular, truth)
         self._next_tick = last_tick + 1
 
