@@ -317,6 +317,18 @@ class SurveyConfig(StrictModel):
                                             else self.multiple_scattering))
 
 
+class RosbagConfig(StrictModel):
+    """A ROS 2 bag of the pass (``docs/outputs.md``): scan lines as PointCloud2, odometry, tf."""
+
+    frame: Choice("enu", "ned") = "enu"
+    """Axes: enu (REP 103: world x east, y north, z up; vehicle x forward, y left, z up) or ned (world x north,
+    y east, z down; vehicle x forward, y starboard, z down)."""
+    storage: Choice("mcap", "sqlite3") = "mcap"
+    """rosbag2 storage: one .mcap file or one SQLite .db3 file."""
+    dir: str | None = None
+    """The bag's folder; default rosbag/ inside the output folder."""
+
+
 class OutputConfig(StrictModel):
     """What a pass writes, and where."""
 
@@ -332,3 +344,5 @@ class OutputConfig(StrictModel):
     """Write the full records of every n-th fired pulse to waveforms.npz; 0 = none."""
     split_legs: bool = False
     """One point cloud and one trajectory per survey leg (leg001_points.las, leg001_trajectory.csv...)."""
+    rosbag: RosbagConfig | None = None
+    """Also write the pass as a ROS 2 bag (``rosbag: {}`` for the defaults); none when absent."""

@@ -8,6 +8,8 @@
 - :mod:`~scanner_sim.io.summary`: ``summary.json``.
 - :mod:`~scanner_sim.io.tables`: ``trajectory.csv``, ``waveforms.npz``, ``coverage_grid.npz``, text files.
 - :mod:`~scanner_sim.io.gis`: Cloud-Optimized GeoTIFF and GeoJSON in a map CRS (a scene with a ``crs``).
+- :mod:`~scanner_sim.io.rosbag`: a pass as a ROS 2 bag folder, streamed by :class:`~scanner_sim.io.rosbag.RosbagWriter`
+  (not re-exported: import it from its module).
 """
 
 from scanner_sim.io.atomic import atomic_path

@@ -55,6 +55,7 @@ def write_pass(folder: Path, files: PassFiles) -> dict:
     with contextlib.suppress(FileNotFoundError):
         (folder / "summary.json").unlink()
     for name, data in sorted(files.files.items(), key=lambda item: item[0] == "summary.json"):
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)  # a file in a sub-folder: a bag's
         with io.atomic_path(folder / name) as tmp:
             tmp.write_bytes(data)
     return json.loads(files.files["summary.json"])
@@ -92,9 +93,14 @@ def check_jobs(jobs: Sequence[PassJob]) -> None:
     track (:func:`~scanner_sim.survey.budget.check_pass_budget`), and its built track against the water surface, the
     seabed and the objects (:func:`~scanner_sim.survey.setup.checked_trajectory`). Raises the first refusal as a
     ConfigError naming the pass; a set-up error is then never met in a task, where it would be retried and
-    reported only when its pass started."""
+    reported only when its pass started. Passes that would all write one bag folder (``output.rosbag.dir``) are
+    refused: each would replace the one before."""
     for job in jobs:
         config = job.config.with_overrides(job.options.scene_overrides())
+        bag = config.output.rosbag
+        if len(jobs) > 1 and bag is not None and bag.dir is not None:
+            raise ConfigError(f"output.rosbag.dir = {bag.dir!r}: the {len(jobs)} passes would each replace the one "
+                              "bag there; leave dir out, so that each pass writes rosbag/ in its own folder")
         try:
             checked_trajectory(config, cached_scene(job.config))
         except ConfigError as exc:

@@ -45,7 +45,7 @@ class PassJob:
 
 
 class PassFiles(NamedTuple):
-    """A pass's output files by name, bytes and all (summary.json among them)."""
+    """A pass's output files by their path in its folder, bytes and all (summary.json among them)."""
 
     files: dict[str, bytes]
 
@@ -72,7 +72,9 @@ def cached_scene(config: SceneConfig) -> Scene:
 
 
 def _read_files(folder: Path) -> PassFiles:
-    return PassFiles({p.name: p.read_bytes() for p in sorted(folder.iterdir()) if p.is_file()})
+    """Every file of the pass's folder, by its path in the folder (``rosbag/metadata.yaml`` for a bag's)."""
+    return PassFiles({p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*"))
+                      if p.is_file()})
 
 
 def pass_files(config: SceneConfig, options: PassOptions) -> PassFiles:

@@ -24,12 +24,13 @@ from tqdm import tqdm
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.config.crs import crs_label
+from scanner_sim.io.rosbag import ROSBAG_NAME
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.render import viz
 from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.gis_products import write_gis_products
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
-from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup
+from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup, check_pass_arguments
 from scanner_sim.world.scene import Scene
 
 
@@ -75,6 +76,8 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     """
     if out_dir is not None and not isinstance(out_dir, (str, os.PathLike)):
         raise TypeError(f"out_dir must be a folder path (str or Path) or None, not {type(out_dir).__name__} {out_dir!r}")
+    check_pass_arguments(config, options, scene)
+    check_bag_dir(config.output.rosbag, Path(out_dir or config.output_dir))  # before the slow set-up
     t_setup = time.perf_counter()
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
@@ -236,6 +239,32 @@ def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOption
     return stats, coverage, time.perf_counter() - started
 
 
+def check_bag_dir(bag, final: Path) -> None:
+    """Refuse (ValueError, one line) a bag folder ``bag.dir`` in the run's folder ``final`` or holding it: the run
+    replaces its folder whole."""
+    if bag is None or bag.dir is None:
+        return
+    there, run = Path(os.path.abspath(bag.dir)), Path(os.path.abspath(final))
+    if there == run or run in there.parents or there in run.parents:
+        raise ValueError(f"output.rosbag.dir = {bag.dir!r}: lies in the output folder {str(final)!r} or holds it, "
+                         f"which a run replaces whole; leave it out to write the bag as {str(final / ROSBAG_NAME)!r}")
+
+
+def bag_sinks(setup: PassSetup, out: Path, facts: sinks.PassFacts) -> list:
+    """The ROS 2 bag the scene's ``output.rosbag`` asks for (none when absent), in ``out/rosbag`` or its own ``dir``."""
+    bag, trajectory = setup.config.output.rosbag, setup.trajectory
+    if bag is None:
+        return []
+
+    def poses_at(times_s):
+        truth = trajectory.poses(times_s)
+        return truth, trajectory.estimate_of(truth)
+
+    return [sinks.RosbagSink(Path(bag.dir) if bag.dir else out / ROSBAG_NAME, bag, setup.scene.local_origin,
+                             setup.scanner.line_index, poses_at, (0.0, trajectory.duration_s), setup.scanner.pulse_rate_hz,
+                             setup.scanner.mount_position_m, facts.metadata())]
+
+
 def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, setup_s: float,
                     earlier_wall_s: float = 0.0, compile_s: float = 0.0) -> dict:
     """``chunks`` of the pass streamed into the files of its plan in ``out`` (what the scene's ``output`` asks
@@ -247,6 +276,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     with ExitStack() as stack:
         clouds = [stack.enter_context(sink) for sink in
                   sinks.point_cloud_sinks(output, out, setup.scene.local_origin, facts.metadata(), setup.scene.crs)]
+        clouds += [stack.enter_context(sink) for sink in bag_sinks(setup, out, facts)]
         dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
         waveforms = sinks.WaveformSink(setup.model.instrument.digitizer, facts.channels)
         sample = sinks.CloudSample()

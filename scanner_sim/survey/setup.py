@@ -23,6 +23,7 @@ from muls.waveform import OpticalModel, PulseBatch
 from scanner_sim.config import SceneConfig
 from scanner_sim.config.unit_slips import warn_unit_slips
 from scanner_sim.fidelity import FidelityLevel
+from scanner_sim.io.rosbag import ROSBAG_NAME, bag_files
 from scanner_sim.metrics.coverage import CoverageSettings, Footprint, nominal_footprint
 from scanner_sim.motion.scanner import Scanner
 from scanner_sim.motion.track_checks import build_trajectory
@@ -137,6 +138,8 @@ class PassPlan:
         files += ["render.png"] if options.render and clouds else []
         files += ["coverage_map.png"] if options.render and coverage else []
         files += gis_files(coverage) if config.crs is not None else []
+        if output.rosbag is not None and output.rosbag.dir is None:  # a bag elsewhere is no file of the folder
+            files += bag_files(ROSBAG_NAME, output.rosbag.storage)
         return cls(level or config.survey.level, coverage, (*files, "summary.json"))
 
 

@@ -1,8 +1,9 @@
 """Where a pass's chunks go, and the files written once it is done. Each sink receives what it writes and
 nothing else: no sink reads the pass's set-up or calls back into the pipeline.
 
-Chunk sinks have ``add(chunk)`` (a :class:`scanner_sim.survey.setup.Chunk`): :class:`LasSink`, :class:`LegLasSink`
-and :class:`DropoutSink` stream to disk (atomically: a file appears under its final name only when complete),
+Chunk sinks have ``add(chunk)`` (a :class:`scanner_sim.survey.setup.Chunk`): :class:`LasSink`, :class:`LegLasSink`,
+:class:`DropoutSink` and :class:`RosbagSink` (a ROS 2 bag, line by line) stream to disk (atomically: a file appears
+under its final name only when complete),
 :class:`PassStats` keeps the summary's running figures, :class:`CoverageSink` tallies coverage,
 :class:`WaveformSink` keeps the whole records of the pulses the pass keeps, :class:`CloudSample` a decimated copy
 of the points for the picture. After the chunks, :func:`pass_summary` assembles the summary from
@@ -18,6 +19,7 @@ import numpy as np
 
 from muls.ranging import DROPOUT_CAUSES
 from scanner_sim import io
+from scanner_sim.io.rosbag import RosbagWriter
 from scanner_sim.metrics.coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
 from scanner_sim.render import viz
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
@@ -128,6 +130,72 @@ def point_cloud_sinks(output, out: Path, local_origin: np.ndarray, metadata: dic
     if output.split_legs:
         return [LegLasSink(out, s, local_origin, metadata, wkt) for s in suffixes]
     return [LasSink(out / f"points{s}", local_origin, metadata, crs_wkt=wkt) for s in suffixes]
+
+
+#: Rate of the bag's odometry and transforms [Hz] (the trajectory table's).
+ODOMETRY_RATE_HZ = 10.0
+
+
+class RosbagSink(RosbagWriter):
+    """The pass as a ROS 2 bag (:class:`~scanner_sim.io.rosbag.RosbagWriter`): each scan line's points as one
+    message once the chunks have passed the line's end, and the navigation's and the true poses on a
+    :data:`ODOMETRY_RATE_HZ` grid from the first pulse up to the tick after the last.
+
+    line_of: times (n,) [s] -> scan line (n,) int; poses_at: times (n,) [s] -> (true, estimated)
+    :class:`~scanner_sim.motion.trajectory.Poses`, on the track from ``track_s`` (start, end) [s]; pulse_rate_hz:
+    slot k fires at k / pulse_rate_hz."""
+
+    def __init__(self, path: Path, settings, local_origin: np.ndarray, line_of, poses_at, track_s: tuple,
+                 pulse_rate_hz: float, lidar_offset_m, metadata: dict | None = None):
+        super().__init__(path, frame=settings.frame, storage=settings.storage, offset_m=local_origin,
+                         lidar_offset_m=lidar_offset_m, metadata=metadata)
+        self.line_of, self.poses_at, self.track_s, self.pulse_rate_hz = line_of, poses_at, track_s, pulse_rate_hz
+        self._pending = PointRecords.empty()
+        self._next_tick: int | None = None
+        self._last_s: float | None = None
+
+    def add(self, chunk) -> None:
+        times = chunk.slots / self.pulse_rate_hz
+        if times.size == 0:
+            return
+        points = PointRecords.concatenate([self._pending, chunk.points])
+        done = self.line_of(points.gps_time_s) < self.line_of(times[-1:])[0]  # later pulses start a later line
+        self._write_lines(points.select(done))
+        self._pending = points.select(~done)
+        if self._next_tick is None:
+            self._next_tick = int(np.floor(times[0] * ODOMETRY_RATE_HZ))
+        self._last_s = float(times[-1])
+        self._write_ticks(int(np.floor(times[-1] * ODOMETRY_RATE_HZ)))
+
+    def _write_lines(self, points: PointRecords) -> None:
+        lines = self.line_of(points.gps_time_s)
+        for line in np.unique(lines):
+            self.write_line(points.select(lines == line), int(line))
+
+    def _write_ticks(self, last_tick: int) -> None:
+        """Poses at ticks ``_next_tick`` .. ``last_tick``; the twist from the poses half a tick either side (one side
+        at the track's ends, where the vehicle stands still)."""
+        ticks = np.arange(self._next_tick, last_tick + 1)
+        if ticks.size == 0:
+            return
+        t, h = ticks / ODOMETRY_RATE_HZ, 0.5 / ODOMETRY_RATE_HZ
+        t0, t1 = np.clip(t - h, *self.track_s), np.clip(t + h, *self.track_s)
+        dt = np.where(t1 > t0, t1 - t0, np.inf)[:, None]  # no time on the track: no motion
+        for truth, (now, before, after) in zip((True, False), zip(self.poses_at(t), self.poses_at(t0),
+                                                                   self.poses_at(t1))):
+            velocity = (after.position - before.position) / dt
+            # R^T dR/dt is the skew matrix of the angular rate in the vehicle frame
+            spin = np.einsum("nji,njk->nik", now.rotation, (after.rotation - before.rotation) / dt[:, :, None])
+            angular = 0.5 * np.c_[spin[:, 2, 1] - spin[:, 1, 2], spin[:, 0, 2] - spin[:, 2, 0],
+                                  spin[:, 1, 0] - spin[:, 0, 1]]
+            self.write_poses(t, now.position, now.rotation, velocity, angular, truth)
+        self._next_tick = last_tick + 1
+
+    def close(self) -> None:
+        if self._last_s is not None:
+            self._write_lines(self._pending)
+            self._write_ticks(int(np.ceil(self._last_s * ODOMETRY_RATE_HZ)))
+        super().close()
 
 
 class DropoutSink(io.DropoutWriter):
