@@ -69,11 +69,24 @@ def scene_folder(index: int, count: int) -> str:
     return f"scene_{index:0{max(4, len(str(count - 1)))}d}"
 
 
-def _with(config: SceneConfig, overrides: dict, where: str) -> SceneConfig:
+def _with(config: SceneConfig, overrides: dict, spec: DatasetSpec, name: str, templates: list[int] = ()) -> SceneConfig:
+    """``config`` with ``overrides``; an error on a key of the spec's ``set`` or ``draw`` is named as the spec's key
+    (``draw.seabed.depth_m = -2.0: must be a number >= 0 (scene_0003)``), or of a template's (``templates``: the
+    template of each placed object); any other names the scene."""
     try:
         return config.with_overrides(overrides)
     except ConfigError as exc:
-        raise ConfigError(f"{where}: {exc}") from None
+        message = str(exc)
+        for where, keys in (("draw", spec.draw), ("set", spec.set)):
+            if any(message.startswith((f"{key} ", f"{key}:", f"{key}.", f"{key}[")) for key in keys):
+                raise ConfigError(f"{where}.{message} ({name})") from None
+        for k, t in enumerate(templates):  # a drawn object's key: named in its template
+            template = spec.objects[t]
+            for where, keys in (("draw", template.draw), ("set", template.set)):
+                if any(message.startswith(f"objects[{k}].{key}") for key in keys):
+                    raise ConfigError(f"objects[{t}].{where}.{message.removeprefix(f'objects[{k}].')} ({name}, "
+                                      f"object {k})") from None
+        raise ConfigError(f"{name}: {message}") from None
 
 
 def draw_scene(spec: DatasetSpec, base: SceneConfig, index: int) -> DrawnScene:
@@ -84,32 +97,36 @@ def draw_scene(spec: DatasetSpec, base: SceneConfig, index: int) -> DrawnScene:
     name = scene_folder(index, spec.scenes)
     drawn: dict[str, Any] = {key: distribution.draw(rng) for key, distribution in spec.draw.items()}
     overrides = {**spec.set, **drawn, "survey.seed": survey_seed, "survey.max_pulses": spec.max_pulses, **OUTPUT_KEYS}
-    config = _with(base, overrides, f"{name} (draw, set)")
+    config = _with(base, overrides, spec, name)
     if config.seabed is None:
         seabed_seed = None
     else:
         overrides["seabed.seed"] = seabed_seed
+    templates: list[int] = []
     if spec.objects is not None:
-        drawn["objects"] = place_objects(spec, config, rng, name)
+        drawn["objects"], templates = place_objects(spec, config, rng, name)
         overrides["objects"] = drawn["objects"]
-    config = _with(base, overrides, name)
+    config = _with(base, overrides, spec, name, templates)
     return DrawnScene(index, name, survey_seed, seabed_seed, drawn, split_of(spec.seed, index, spec.splits.model_dump()),
                       config)
 
 
-def place_objects(spec: DatasetSpec, config: SceneConfig, rng: np.random.Generator, name: str) -> list[dict]:
+def place_objects(spec: DatasetSpec, config: SceneConfig, rng: np.random.Generator,
+                  name: str) -> tuple[list[dict], list[int]]:
     """The objects of every template, as scene-file mappings, placed uniformly in the object area (centred on the
-    seabed's centre) and turned to a uniform heading by default."""
+    seabed's centre) and turned to a uniform heading by default; and the template of each."""
     if spec.object_area_m is None and config.seabed is None:
         raise ConfigError(f"{name}: object_area_m: missing; the base scene has no seabed to place objects on")
     centre = np.array(config.seabed.center_m if config.seabed is not None else (0.0, 0.0))
     size = np.array(spec.object_area_m if spec.object_area_m is not None else config.seabed.size_m)
     low, high = centre - size / 2, centre + size / 2
     objects: list[dict] = []
-    for template in spec.objects:
+    templates: list[int] = []
+    for t, template in enumerate(spec.objects):
         for _ in range(template.count.draw(rng)):
             objects.append(_placed(template, len(objects), low, high, rng))
-    return objects
+            templates.append(t)
+    return objects, templates
 
 
 def _placed(template: ObjectTemplate, number: int, low: np.ndarray, high: np.ndarray,
