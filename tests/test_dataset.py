@@ -138,11 +138,17 @@ BAD_SPECS = {
     "splits_not_whole": ({"splits": {"train": 0.5, "validation": 0.2, "test": 0.2}}, "splits = "),
     "one_of_empty": ({"draw": {"water": {"one_of": []}}}, "draw.water.one_of = []: must be a non-empty list"),
     "range_without_max": ({"draw": {"seabed.depth_m": {"min": 10}}}, "draw.seabed.depth_m.max: give min and max"),
+    "set_up_refused": ({"set": small_spec()["set"] | {"survey.start_s": 1000.0}},
+                       "pass scene_0000: survey.start_s = 1000.0: at or after the end of the track"),
 }
 
 
 @pytest.mark.parametrize("case", BAD_SPECS)
 def test_bad_spec_is_one_line_naming_the_key_exit_2(case, tmp_path, capsys):
+    """A bad spec is one line naming the key, exit 2, and leaves no folder. ``set_up_refused`` pins a failure: a scene
+    whose set-up is refused (its track) was refused after the dataset's spec.json was written, since run_jobs checked
+    the set-ups only once called, leaving a folder that looked like a started dataset; the set-ups are now checked
+    before the folder changes."""
     changes, expected = BAD_SPECS[case]
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(small_spec(3) | changes))

@@ -24,7 +24,7 @@ from scanner_sim.config import SceneConfig, load_scene
 from scanner_sim.io.run_dir import hold_output
 from scanner_sim.runs.dataset_draw import SPLITS, DrawnScene, draw_scene
 from scanner_sim.runs.dataset_spec import DatasetSpec, parse_dataset_spec, read_spec_data
-from scanner_sim.runs.jobs import run_jobs
+from scanner_sim.runs.jobs import check_jobs, run_jobs
 from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassJob
 from scanner_sim.survey.setup import PassOptions
 from scanner_sim.world.materials import CLASS_NAMES
@@ -138,11 +138,13 @@ def run_dataset(dataset: Dataset, out_dir: str | Path, client=None, *, retries: 
     with hold_output(out):
         record = dataset.record()
         _check_folder(out, record)
+        jobs = dataset.jobs
+        check_jobs(jobs)  # every scene's set-up, before the folder changes
         out.mkdir(parents=True, exist_ok=True)
         with contextlib.suppress(FileNotFoundError):
             (out / MANIFEST).unlink()  # an interrupted rerun must not look complete
         io.write_summary_json(out / SPEC_RECORD, record)
-        outcomes = run_jobs(dataset.jobs, out / SCENES_DIR, client, retries=retries, redo=redo, progress=progress)
+        outcomes = run_jobs(jobs, out / SCENES_DIR, client, retries=retries, redo=redo, progress=progress, checked=True)
         failed = [{"scene": o.job.name, "error": o.error} for o in outcomes if o.status == "failed"]
         if failed:
             return {"failed": failed}
