@@ -254,6 +254,22 @@ def test_example_spec_prints_scenes_points_classes_splits(tmp_path):
     assert {"seabed", "mine", "cable", "rock"} <= set(result["classes"])
     manifest = json.loads((tmp_path / "example" / MANIFEST).read_text())
     assert manifest["points"] == result["points"]
+    # the reading example of docs/outputs.md runs on it and finds the mines the manifest counts
+    page = (Path(__file__).parents[1] / "docs" / "outputs.md").read_text()
+    snippet = page.split("Reading the training split with numpy and laspy:\n\n```python\n")[1].split("```")[0]
+    printed = stdio.StringIO()
+    with contextlib.redirect_stdout(printed):
+        exec(snippet.replace('Path("out/datasets/example")', f"Path({str(tmp_path / 'example')!r})"), {})
+    lines = printed.getvalue().splitlines()
+    train = [s for s in manifest["scenes"] if s["split"] == "train"]
+    assert len(lines) == len(train) > 0
+    for line, scene in zip(lines, train):
+        assert line.startswith(f"{scene['dir']} {scene['points']} points, {scene['classes'].get('mine', 0)} on mines")
+
+
+def test_datasets_page_shows_the_example_spec():
+    page = (Path(__file__).parents[1] / "docs" / "datasets.md").read_text()
+    assert f"```yaml\n{EXAMPLE.read_text()}```" in page
 
 
 def test_config_error_is_raised_for_a_drawn_scene_the_scene_format_refuses():
