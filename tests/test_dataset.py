@@ -237,6 +237,12 @@ def test_rerun_resumes_the_same_spec_and_refuses_another(two_worker_run, tmp_pat
         (out / "scenes" / "scene_0003" / "points.las").read_bytes()
     with pytest.raises(ValueError, match="holds the dataset of another spec .seed = 11 there, 12 here"):
         run_dataset(parse_dataset(small_spec(seed=12)), folder, progress=False)
+    with pytest.raises(ValueError, match="another spec .scenes = 20 there, 19 here; a dataset may only grow"):
+        run_dataset(parse_dataset(small_spec(19)), folder, progress=False)
+    # grown by 3 scenes: the 20 are kept as they were, in the manifest too
+    grown = run_dataset(parse_dataset(small_spec(23)), folder, progress=False)
+    assert (folder / "scenes" / "scene_0004" / "points.las").stat().st_mtime_ns == kept
+    assert grown["scenes"][:20] == manifest["scenes"] and grown["scene_count"] == 23
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "notes.txt").write_text("mine")
     with pytest.raises(ValueError, match="holds notes.txt but no dataset"):

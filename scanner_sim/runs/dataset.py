@@ -4,8 +4,9 @@ manifest of every scene's drawn values, seeds, objects, split and class counts.
 
 The folder ``--out DIR`` is locked while the dataset runs (:func:`~scanner_sim.io.run_dir.hold_output`). Its
 ``spec.json`` (the spec as checked) is written first and ``manifest.json`` last, so a folder with a manifest holds
-the whole dataset. A run into a folder that holds the same spec resumes it: the manifest is removed first, complete
-scenes are kept and the others run. A folder holding another spec, or other files, is refused.
+the whole dataset. A run into a folder that holds the same spec, or the same with fewer scenes, resumes it: the
+manifest is removed first, complete scenes are kept and the others run. A folder holding another spec, or other
+files, is refused.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 from scanner_sim import io
 from scanner_sim.config import SceneConfig, load_scene
 from scanner_sim.io.run_dir import hold_output
-from scanner_sim.runs.dataset_draw import SPLITS, DrawnScene, draw_scene
+from scanner_sim.runs.dataset_draw import SPLITS, DrawnScene, draw_scene, scene_folder
 from scanner_sim.runs.dataset_spec import DatasetSpec, parse_dataset_spec, read_spec_data
 from scanner_sim.runs.jobs import check_jobs, run_jobs
 from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassJob
@@ -109,7 +110,8 @@ def object_table(scene: DrawnScene) -> list[dict]:
 
 
 def _check_folder(out: Path, record: dict) -> None:
-    """Refuse a folder that holds anything but this spec's dataset (complete or not)."""
+    """Refuse a folder that holds anything but this spec's dataset (complete or not), or the same spec with fewer
+    scenes named alike (a dataset grows: its scenes stay what they were)."""
     if not out.exists():
         return
     if not out.is_dir():
@@ -122,11 +124,18 @@ def _check_folder(out: Path, record: dict) -> None:
     except (OSError, ValueError):
         raise ValueError(f"--out {str(out)!r}: holds {', '.join(held[:3])}{', ...' if len(held) > 3 else ''} but no "
                          f"dataset ({SPEC_RECORD}); give an empty or new folder") from None
-    if earlier.get("spec") != record["spec"]:
-        old, new = earlier.get("spec") or {}, record["spec"]
-        key = next((k for k in new if old.get(k) != new[k]), next(iter(old), "spec"))
+    old, new = earlier.get("spec") or {}, record["spec"]
+    key = next((k for k in new if k != "scenes" and old.get(k) != new[k]), None)
+    if key is None and old.get("scenes") != new["scenes"]:
+        count = old.get("scenes")
+        if isinstance(count, int) and count < new["scenes"] and \
+                scene_folder(count - 1, count) == scene_folder(count - 1, new["scenes"]):
+            return
+        key = "scenes"
+    if key is not None:
         raise ValueError(f"--out {str(out)!r}: holds the dataset of another spec ({key} = {old.get(key)!r} there, "
-                         f"{new.get(key)!r} here); give another folder, or remove it to start again")
+                         f"{new.get(key)!r} here; a dataset may only grow); give another folder, or remove it to "
+                         "start again")
 
 
 def run_dataset(dataset: Dataset, out_dir: str | Path, client=None, *, retries: int = DEFAULT_RETRIES,
