@@ -15,9 +15,11 @@ import laspy
 import numpy as np
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from scanner_sim.cli import main
-from scanner_sim.config import SCENES_DIR, ConfigError
+from scanner_sim.config import SCENES_DIR, ConfigError, build
 from scanner_sim.runs.cluster import dask_client
 from scanner_sim.runs.dataset import MANIFEST, SPEC_RECORD, load_dataset, parse_dataset, run_dataset
 from scanner_sim.runs.dataset_draw import cable_points, split_of
@@ -110,6 +112,23 @@ def test_distribution_draws_each_value_of_its_kind():
     assert {names.draw(rng) for _ in range(200)} == {"a", "b", "c"}
     uniform = [Distribution(min=1.0, max=1.5).draw(rng) for _ in range(2000)]
     assert 1.0 <= min(uniform) < 1.01 and 1.49 < max(uniform) <= 1.5 and abs(np.mean(uniform) - 1.25) < 0.01
+
+
+FINITE = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False)
+
+
+@settings(max_examples=200, derandomize=True, deadline=None)
+@given(a=FINITE, b=FINITE, integer=st.booleans(), seed=st.integers(0, 2**32))
+def test_a_range_is_refused_naming_max_below_min_or_draws_within_it(a, b, integer, seed):
+    if integer:
+        a, b = float(round(a)), float(round(b))
+    data = {"min": a, "max": b, "integer": integer}
+    if b < a:
+        with pytest.raises(ConfigError, match=rf"^max = {b!r}: must be >= min \({a!r}\)$"):
+            build(Distribution, data)
+        return
+    value = build(Distribution, data).draw(np.random.default_rng(seed))
+    assert a <= value <= b and (type(value) is int) == integer
 
 
 @pytest.mark.parametrize("heading_deg", [0.0, 30.0, 90.0, 135.0, 271.0])
