@@ -21,8 +21,9 @@ from typing import Any
 import numpy as np
 
 from scanner_sim import io
-from scanner_sim.config import SceneConfig, load_scene
+from scanner_sim.config import SceneConfig
 from scanner_sim.io.run_dir import hold_output
+from scanner_sim.runs.campaign import load_base_scene
 from scanner_sim.runs.dataset_draw import SPLITS, DrawnScene, draw_scene, scene_folder
 from scanner_sim.runs.dataset_spec import DatasetSpec, parse_dataset_spec, read_spec_data
 from scanner_sim.runs.jobs import check_jobs, run_jobs
@@ -69,10 +70,7 @@ def parse_dataset(data: Any, base_dir: Path | None = None, name: str = "dataset"
                   source_path: Path | None = None) -> Dataset:
     """A spec mapping checked, its base scene loaded and every scene drawn and validated (before any runs)."""
     spec = parse_dataset_spec(data, name)
-    scene_path = Path(spec.scene)
-    if base_dir is not None and not scene_path.is_absolute() and (base_dir / scene_path).is_file():
-        scene_path = base_dir / scene_path
-    base = load_scene(scene_path if scene_path.suffix in (".yaml", ".yml") else spec.scene)
+    base = load_base_scene(spec.scene, base_dir)
     return Dataset(spec, base, [draw_scene(spec, base, i) for i in range(spec.scenes)], source_path)
 
 
