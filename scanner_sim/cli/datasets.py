@@ -46,6 +46,7 @@ def _cmd_dataset(args) -> int:
     if not quiet:
         splits = ", ".join(f"{name} {len(dirs)}" for name, dirs in result["splits"].items())
         classes = ", ".join(f"{name} {count:,}" for name, count in result["classes"].items())
-        print(f"{result['scene_count']} scenes, {result['points']:,} points ({classes}); splits: {splits}")
+        count = result["scene_count"]
+        print(f"{count} scene{'s' * (count != 1)}, {result['points']:,} points ({classes}); splits: {splits}")
     print(out / MANIFEST)
     return 0
