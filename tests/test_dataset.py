@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from scanner_sim.cli import main
-from scanner_sim.config import SCENES_DIR, ConfigError, build
+from scanner_sim.config import SCENES_DIR, ConfigError, build, load_scene
 from scanner_sim.runs.cluster import dask_client
 from scanner_sim.runs.dataset import MANIFEST, SPEC_RECORD, load_dataset, parse_dataset, run_dataset
 from scanner_sim.runs.dataset_draw import cable_points, split_of
@@ -223,6 +223,9 @@ def test_manifest_class_counts_and_object_ids_are_those_of_the_files(two_worker_
         assert {k: v for k, v in counted.items() if v} == scene["classes"]
         summary = json.loads((out / scene["dir"] / "summary.json").read_text())
         assert sum(scene["classes"].values()) == summary["points"] == scene["points"] == len(las.points)
+        # the pass's provenance holds the whole draw: the base scene with its overrides is the scene again
+        again = load_scene("mine_field").with_overrides(summary["provenance"]["overrides"])
+        assert again.model_dump() == parse_dataset(small_spec()).scenes[scene["index"]].config.model_dump()
         for name, count in scene["classes"].items():
             totals[name] = totals.get(name, 0) + count
         # every point of an object carries the object's class; the ids are those of the built scene
