@@ -157,6 +157,9 @@ BAD_SPECS = {
     "splits_not_whole": ({"splits": {"train": 0.5, "validation": 0.2, "test": 0.2}}, "splits = "),
     "one_of_empty": ({"draw": {"water": {"one_of": []}}}, "draw.water.one_of = []: must be a non-empty list"),
     "range_without_max": ({"draw": {"seabed.depth_m": {"min": 10}}}, "draw.seabed.depth_m.max: give min and max"),
+    "count_too_large": ({"objects": [{"type": "cone_mine", "count": {"min": 0, "max": 10**6, "integer": True}}]},
+                        "objects[0].count = {'integer': True, 'max': 1000000.0, 'min': 0.0}: must be a whole number "
+                        "from 0 to 1000"),
     "set_up_refused": ({"set": small_spec()["set"] | {"survey.start_s": 1000.0}},
                        "pass scene_0000: survey.start_s = 1000.0: at or after the end of the track"),
 }

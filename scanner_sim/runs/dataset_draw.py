@@ -123,7 +123,7 @@ def place_objects(spec: DatasetSpec, config: SceneConfig, rng: np.random.Generat
     objects: list[dict] = []
     templates: list[int] = []
     for t, template in enumerate(spec.objects):
-        for _ in range(template.count.draw(rng)):
+        for _ in range(int(template.count.draw(rng))):
             objects.append(_placed(template, len(objects), low, high, rng))
             templates.append(t)
     return objects, templates

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any
 
+import numpy as np
 from pydantic import BeforeValidator, model_validator
 
 from scanner_sim.config import ConfigError, build
@@ -30,7 +31,7 @@ FORMAT_VERSION = 1
 #: Scene keys the dataset sets itself (the seeds from the scene's index, the pulses from ``max_pulses``, the
 #: objects from ``objects``, the files it reads): a spec may neither set nor draw them.
 OWN_KEYS = ("survey.seed", "seabed.seed", "survey.max_pulses", "objects", "output")
-#: Object types the dataset can place: the key it draws the place into, and whether ``heading_deg`` turns it.
+#: Object types the dataset can place, and the key it writes the place into.
 PLACED_TYPES = {"cable": "points_m", "cylinder_mine": "position_m", "cone_mine": "position_m",
                 "moored_mine": "position_m"}
 #: Most scenes in one dataset (the folder names carry at least four digits).
@@ -72,7 +73,7 @@ class Distribution(StrictModel):
                           else "max", value=self.min if not self.min.is_integer() else self.max)
         return self
 
-    def draw(self, rng) -> Any:
+    def draw(self, rng: np.random.Generator) -> Any:
         """One value from ``rng`` (a ``numpy.random.Generator``): always exactly one draw of it."""
         if self.one_of is not None:
             return self.one_of[int(rng.integers(len(self.one_of)))]
@@ -88,20 +89,19 @@ def _count(value: Any) -> Any:
     return value
 
 
-def _draws(value: Any) -> Any:
-    if not isinstance(value, Mapping) or not all(isinstance(k, str) and k.strip() for k in value):
-        raise invalid("must be a mapping of dotted scene keys to {min, max} or {one_of: [...]}", value=value)
-    return value
+def _scene_keys(allowed: str):
+    """``check(value)``: a mapping whose keys are non-blank text (dotted scene keys, or an object type's keys)."""
+
+    def check(value: Any) -> Any:
+        if not isinstance(value, Mapping) or not all(isinstance(k, str) and k.strip() for k in value):
+            raise invalid(f"must be a mapping of {allowed}", value=value)
+        return value
+
+    return check
 
 
-def _fixed(value: Any) -> Any:
-    if not isinstance(value, Mapping) or not all(isinstance(k, str) and k.strip() for k in value):
-        raise invalid("must be a mapping of dotted scene keys to values", value=value)
-    return value
-
-
-Draws = Annotated[dict[str, Distribution], BeforeValidator(_draws)]
-Fixed = Annotated[dict[str, Any], BeforeValidator(_fixed)]
+Draws = Annotated[dict[str, Distribution], BeforeValidator(_scene_keys("keys to {min, max} or {one_of: [...]}"))]
+Fixed = Annotated[dict[str, Any], BeforeValidator(_scene_keys("keys to values"))]
 
 
 class ObjectTemplate(StrictModel):
@@ -140,8 +140,12 @@ class ObjectTemplate(StrictModel):
         both = set(self.set) & set(self.draw)
         if both:
             raise invalid("is both set and drawn; give it in one place", key=f"draw.{sorted(both)[0]}")
-        if not (self.count.integer or self.count.one_of is not None):
-            raise invalid("must be a whole number or a range with integer: true", key="count")
+        count = self.count
+        values = count.one_of if count.one_of is not None else (count.min, count.max) if count.integer else None
+        if values is None or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and float(v).is_integer()
+                                     and 0 <= v <= MAX_COUNT for v in values):
+            raise invalid(f"must be a whole number from 0 to {MAX_COUNT}, or a range of them with integer: true (or "
+                          "one_of a list of them)", key="count", value=count.model_dump(exclude_defaults=True))
         return self
 
 
