@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -69,7 +70,7 @@ def scene_folder(index: int, count: int) -> str:
     return f"scene_{index:0{max(4, len(str(count - 1)))}d}"
 
 
-def _with(config: SceneConfig, overrides: dict, spec: DatasetSpec, name: str, templates: list[int] = ()) -> SceneConfig:
+def _with(config: SceneConfig, overrides: dict, spec: DatasetSpec, name: str, templates: Sequence[int] = ()) -> SceneConfig:
     """``config`` with ``overrides``; an error on a key of the spec's ``set`` or ``draw`` is named as the spec's key
     (``draw.seabed.depth_m = -2.0: must be a number >= 0 (scene_0003)``), or of a template's (``templates``: the
     template of each placed object); any other names the scene."""
