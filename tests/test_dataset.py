@@ -210,7 +210,7 @@ def test_dataset_on_two_workers_is_byte_identical_to_one_worker(two_worker_run, 
         run_dataset(parse_dataset(small_spec()), tmp_path / "one", client, progress=False)
     assert manifest["scene_count"] == 20 and len(list((out / "scenes").iterdir())) == 20
     for scene in manifest["scenes"]:
-        for name in ("points.las", "dropouts.npz", "scene.ply"):
+        for name in ("points.las", "dropouts.npz", "scene.ply", "trajectory.csv", "coverage_grid.npz"):
             assert (out / scene["dir"] / name).read_bytes() == (tmp_path / "one" / scene["dir"] / name).read_bytes()
     assert (out / MANIFEST).read_bytes() == (tmp_path / "one" / MANIFEST).read_bytes()
 
