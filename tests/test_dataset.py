@@ -90,6 +90,33 @@ def test_drawn_values_stay_in_their_ranges_and_objects_in_the_area():
     assert min(headings) < 60 and max(headings) > 300  # uniform over the compass by default
 
 
+def segment_distance_m(p, a, b) -> float:
+    """Plan distance from p to the segment ab, by the closest of 1,001 points along it (a second method)."""
+    t = np.linspace(0.0, 1.0, 1001)[:, None]
+    return float(np.min(np.linalg.norm(np.asarray(a) + t * (np.asarray(b) - np.asarray(a)) - p, axis=1)))
+
+
+def test_min_spacing_keeps_mines_apart_and_off_the_cables():
+    spacing = 1.2
+    templates = [{"type": "cylinder_mine", "count": 3}, {"type": "cone_mine", "count": 1},
+                 {"type": "cable", "count": 1, "wander_m": 0.0}]
+    dataset = parse_dataset(small_spec(30, object_area_m=[8, 6], objects=templates, min_spacing_m=spacing))
+    closest = []
+    for scene in dataset.scenes:
+        mines = [np.array(o.position_m) for o in scene.config.objects if o.type != "cable"]
+        (cable,) = [np.array(o.points_m) for o in scene.config.objects if o.type == "cable"]
+        assert len(mines) == 4
+        for i, p in enumerate(mines):
+            to_cable = min(segment_distance_m(p, a, b) for a, b in zip(cable[:-1], cable[1:]))
+            closest.append(min([to_cable] + [float(np.linalg.norm(p - q)) for q in mines[:i]]))
+    assert min(closest) >= spacing - 1e-3 and min(closest) < 1.5  # kept, and the rule is what binds
+    free = parse_dataset(small_spec(30, object_area_m=[8, 6], objects=templates))
+    assert min(min(float(np.linalg.norm(np.array(a.position_m) - np.array(b.position_m)))
+                   for a, b in zip(s.config.objects[:3], s.config.objects[1:4])) for s in free.scenes) < spacing
+    with pytest.raises(ConfigError, match=r"^min_spacing_m = 5.0: scene_0000 could not place its cylinder_mine_"):
+        parse_dataset(small_spec(1, objects=[{"type": "cylinder_mine", "count": 9}], min_spacing_m=5.0))
+
+
 def test_split_follows_the_documented_hash_rule_and_the_fractions():
     fractions = {"train": 0.7, "validation": 0.2, "test": 0.1}
     counts = {"train": 0, "validation": 0, "test": 0}

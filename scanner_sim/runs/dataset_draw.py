@@ -112,10 +112,15 @@ def draw_scene(spec: DatasetSpec, base: SceneConfig, index: int) -> DrawnScene:
                       config)
 
 
+#: Tries at placing one object at ``min_spacing_m`` from those placed before it.
+PLACING_TRIES = 100
+
+
 def place_objects(spec: DatasetSpec, config: SceneConfig, rng: np.random.Generator,
                   name: str) -> tuple[list[dict], list[int]]:
     """The objects of every template, as scene-file mappings, placed uniformly in the object area (centred on the
-    seabed's centre) and turned to a uniform heading by default; and the template of each."""
+    seabed's centre) and turned to a uniform heading by default; and the template of each. An object closer than
+    ``min_spacing_m`` to one placed before it (:func:`_spaced`) is drawn again, heading, place and keys."""
     if spec.object_area_m is None and config.seabed is None:
         raise ConfigError(f"{name}: object_area_m: missing; the base scene has no seabed to place objects on")
     centre = np.array(config.seabed.center_m if config.seabed is not None else (0.0, 0.0))
@@ -125,9 +130,41 @@ def place_objects(spec: DatasetSpec, config: SceneConfig, rng: np.random.Generat
     templates: list[int] = []
     for t, template in enumerate(spec.objects):
         for _ in range(int(template.count.draw(rng))):
-            objects.append(_placed(template, len(objects), low, high, rng))
+            for _ in range(PLACING_TRIES):
+                obj = _placed(template, len(objects), low, high, rng)
+                if _spaced(obj, objects, spec.min_spacing_m):
+                    break
+            else:
+                raise ConfigError(f"min_spacing_m = {spec.min_spacing_m!r}: {name} could not place its "
+                                  f"{obj['name']} that far from the {len(objects)} objects before it in "
+                                  f"{PLACING_TRIES} tries; give a larger object_area_m, fewer objects or a smaller "
+                                  "spacing")
+            objects.append(obj)
             templates.append(t)
     return objects, templates
+
+
+def _spaced(obj: dict, placed: list[dict], spacing_m: float) -> bool:
+    """Whether ``obj`` keeps ``spacing_m`` in plan from every object in ``placed``: a mine's centre from the other
+    mines' centres and from the cables' lines, a cable's line from the mines' centres (cables may cross)."""
+    if spacing_m <= 0.0:
+        return True
+    if "position_m" in obj:
+        centre = np.array(obj["position_m"][:2])
+        return all(_distance_m(centre, other) >= spacing_m for other in placed)
+    line = np.array(obj["points_m"])[:, :2]
+    return all(_distance_m(np.array(other["position_m"][:2]), {"points_m": line}) >= spacing_m
+               for other in placed if "position_m" in other)
+
+
+def _distance_m(point: np.ndarray, other: dict) -> float:
+    """Plan distance [m] from ``point`` (2,) to an object's centre, or to the nearest segment of a cable's line."""
+    if "position_m" in other:
+        return float(np.hypot(*(point - np.array(other["position_m"][:2]))))
+    line = np.asarray(other["points_m"], float)[:, :2]
+    a, ab = line[:-1], np.diff(line, axis=0)
+    t = np.clip(np.einsum("ij,ij->i", point - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0.0, 1.0)
+    return float(np.hypot(*(a + t[:, None] * ab - point).T).min())
 
 
 def _placed(template: ObjectTemplate, number: int, low: np.ndarray, high: np.ndarray,

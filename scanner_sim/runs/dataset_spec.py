@@ -196,6 +196,9 @@ class DatasetSpec(StrictModel):
     object_area_m: Vector(2, element=Positive) | None = None
     """Size [x, y] of the rectangle, centred on the seabed's centre, the objects are placed in [m]; default the
     seabed's size."""
+    min_spacing_m: NonNegative = 0.0
+    """Least plan distance of a mine's centre from every other mine's centre and every cable's line [m]; 0 places
+    every object independently."""
     objects: Annotated[tuple[ObjectTemplate, ...], BeforeValidator(_templates)] | None = None
     """Templates of the objects placed per scene; without it, every scene keeps the base scene's objects."""
 
