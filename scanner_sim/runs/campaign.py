@@ -179,10 +179,7 @@ def parse_campaign(data: Any, base_dir: Path | None = None, name: str = "campaig
     """A campaign mapping checked, its scene loaded and every combination's scene validated.
     Raises :class:`ConfigError` (one line naming the dotted key)."""
     config = build(CampaignConfig, data)
-    scene_path = Path(config.scene)
-    if base_dir is not None and not scene_path.is_absolute() and (base_dir / scene_path).is_file():
-        scene_path = base_dir / scene_path
-    base = load_scene(scene_path if scene_path.suffix in (".yaml", ".yml") else config.scene)
+    base = load_base_scene(config.scene, base_dir)
     opts = config.options
     fixed = {key: getattr(opts, option) for option, key in OPTION_KEYS.items() if getattr(opts, option) is not None}
     options = PassOptions(progress=False, render=opts.render, waveforms=opts.waveforms,
@@ -206,6 +203,15 @@ def parse_campaign(data: Any, base_dir: Path | None = None, name: str = "campaig
         names[name] = combo
         jobs.append(PassJob(name, scene, options, opts.segments))
     return Campaign(config, config.name or name, base, values, jobs, source_path)
+
+
+def load_base_scene(scene: str, base_dir: Path | None) -> SceneConfig:
+    """The base scene of a campaign or dataset file: a shipped scene's name, or a scene file's path (relative to
+    ``base_dir``, the file's folder, where it lies there)."""
+    scene_path = Path(scene)
+    if base_dir is not None and not scene_path.is_absolute() and (base_dir / scene_path).is_file():
+        scene_path = base_dir / scene_path
+    return load_scene(scene_path if scene_path.suffix in (".yaml", ".yml") else scene)
 
 
 def load_campaign(path: str | Path) -> Campaign:

@@ -108,8 +108,9 @@ def check_jobs(jobs: Sequence[PassJob]) -> None:
 
 
 def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retries: int = DEFAULT_RETRIES,
-             redo: bool = False, progress: bool = True) -> list[PassOutcome]:
-    """Run ``jobs`` into ``out_dir/JOB.name/`` and return their outcomes in the order of ``jobs``.
+             redo: bool = False, progress: bool = True, checked: bool = False) -> list[PassOutcome]:
+    """Run ``jobs`` into ``out_dir/JOB.name/`` and return their outcomes in the order of ``jobs``; their set-ups are
+    checked first (:func:`check_jobs`) unless the caller did (``checked``).
 
     Passes already complete there are skipped (unless ``redo``). With a Dask ``client``, every other pass
     is submitted at once and written as it finishes; a pass whose task fails (after ``retries``) is
@@ -120,7 +121,8 @@ def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retri
     names = [job.name for job in jobs]
     if len(set(names)) != len(names):
         raise ValueError(f"passes: folder names repeat ({sorted({n for n in names if names.count(n) > 1})})")
-    check_jobs(jobs)
+    if not checked:
+        check_jobs(jobs)
     outcomes: dict[int, PassOutcome] = {}
     todo = []
     for k, job in enumerate(jobs):
