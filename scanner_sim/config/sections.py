@@ -163,8 +163,8 @@ class LawnmowerConfig(StrictModel):
 
     center_m: Vector(2) = (0.0, 0.0)
     """Centre of the rectangle [x, y] [m]."""
-    size_m: Vector(2, element=Positive)
-    """Extent along the lines and across them [m]."""
+    size_m: Vector(2, element=Positive) | None = None
+    """Extent along the lines and across them [m]; null (over a raster seabed): the raster's valid extent."""
     heading_deg: Real = 0.0
     """Compass direction of the first line [deg]."""
     line_spacing_m: Positive = 4.0

@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass
 
 from muls.memory import MEMORY_SHARE, available_memory_bytes, gb
+from scanner_sim.config import SeabedConfig
 from scanner_sim.config.errors import ConfigError, config_value
 from scanner_sim.motion.track_checks import track_length_m, track_span_s
 from scanner_sim.motion.trajectory import PATH_STEP_M
@@ -58,7 +59,7 @@ class PassEstimate:
 def estimate_pass(config) -> PassEstimate:
     """Duration, pulses and memory of the scene's pass, by arithmetic on its keys (before allocating)."""
     p, sv, sc = config.platform, config.survey, config.scanner
-    length_m, _ = track_length_m(p)
+    length_m, _ = track_length_m(p, config.seabed)
     rate = sc.pulse_rate_hz or config.instrument_model().transmitter.repetition_rate_hz
     active = sc.sector_deg / 360.0 if sc.mode == "continuous" else 1.0
     if p.mode == "static":
@@ -86,7 +87,7 @@ def estimate_pass(config) -> PassEstimate:
     if config.output.waveform_every_n_pulses:
         memory["output.waveform_every_n_pulses"] = (min(slots, pulses) * WAVEFORM_BYTES_PER_PULSE,
                                                     f"the list of {pulses:,} pulses to sample")
-    if config.seabed is not None:
+    if isinstance(config.seabed, SeabedConfig):  # a raster's window is known once read
         cells = math.prod(math.ceil(s / COVERAGE_CELL_M) for s in config.seabed.size_m)
         memory["seabed.size_m"] = (cells * COVERAGE_BYTES_PER_CELL, f"coverage over {cells:,} cells")
     return PassEstimate(track_s, pass_s, time_key, rate, active, pulses,
@@ -100,7 +101,7 @@ def check_pass_budget(config, available_bytes: int | None = None) -> PassEstimat
     :class:`ConfigError` names the key that drives the figure. Returns the estimate."""
     est = estimate_pass(config)
     p, sv = config.platform, config.survey
-    _, legs = track_length_m(p)
+    _, legs = track_length_m(p, config.seabed)
     if legs > MAX_LEGS:
         key = "platform.lawnmower.line_spacing_m" if p.mode == "lawnmower" else "platform.waypoints_m"
         raise ConfigError(f"{key} = {config_value(config, key)}: gives a track of {legs:,} legs, more than the "

@@ -57,13 +57,15 @@ class PassFacts:
     provenance: dict
     gate_delay_ns: float | None = None
     gate_width_ns: float | None = None
+    seabed: dict | None = None  # a raster's or a mesh's seabed: source, CRS, sign, datum, synthetic relief
 
     def metadata(self) -> dict:
         """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file, and the
         pass's provenance as point clouds carry it (:func:`~scanner_sim.survey.provenance.point_cloud_provenance`)."""
         return {"scene": self.scene, "water": self.water, "instrument": self.instrument, "fidelity": self.fidelity,
                 "seed": self.seed, "muls_scanner_version": __version__, "scene_file": self.scene_file,
-                "provenance": point_cloud_provenance(self.provenance)}
+                "provenance": point_cloud_provenance(self.provenance),
+                **({"seabed": self.seabed} if self.seabed is not None else {})}
 
     @property
     def label(self) -> str:
@@ -273,6 +275,7 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
             "gate_width_ns": facts.gate_width_ns,
         },
         "provenance": facts.provenance,
+        **({"seabed": facts.seabed} if facts.seabed is not None else {}),
     }
 
 
