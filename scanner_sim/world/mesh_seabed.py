@@ -60,7 +60,8 @@ def seabed_of_meshes(objects, meshes: dict) -> tuple[HeightField, dict]:
     except ParameterError as exc:
         first = next(iter(meshes))
         raise ConfigError(f"objects[{first}] ({objects[first].name!r}): {exc}") from None
-    return hf, {"source": [objects[i].file for i in meshes], "kind": "mesh", "node_spacing_m": hf.spacing_m,
+    sources = [objects[i].file if isinstance(objects[i].file, str) else "in memory" for i in meshes]
+    return hf, {"source": sources, "kind": "mesh", "node_spacing_m": hf.spacing_m,
                 "valid_cell_fraction": float(hf.valid.mean()) if hf.valid is not None else 1.0}
 
 

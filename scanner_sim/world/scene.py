@@ -403,7 +403,8 @@ def build_scene(config) -> Scene:
         if not (np.abs(v) <= MAX_COORDINATE_M).all():  # NaN included
             raise ConfigError(f"objects[{index}] ({obj.name!r}): its sizes and position give coordinates that are not "
                               f"finite or beyond +-{MAX_COORDINATE_M:.0e} m; check them (metres)")
-        parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline, one_surface=index in seabed_meshes))
+        kind = "seabed" if index in seabed_meshes else obj.type  # a mesh seabed is the background, as the procedural
+        parts.append(Part(obj.name, kind, v, f, label, refl, centreline, one_surface=index in seabed_meshes))
     return Scene(parts, hf, seabed_info=info)
 
 
@@ -434,7 +435,7 @@ def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]
 
     where = f"objects[{index}].file = {obj.file!r} (object {obj.name!r})"
     try:
-        mesh = trimesh.load(obj.resolved_path, force="mesh", process=False)
+        mesh = obj.file if obj.resolved_path is None else trimesh.load(obj.resolved_path, force="mesh", process=False)
         v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), float)
         f = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))))
     except Exception as exc:  # trimesh raises whatever its parser meets: ValueError, IndexError, KeyError...
