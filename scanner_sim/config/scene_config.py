@@ -7,6 +7,7 @@ from typing import Annotated, Any
 from pydantic import Discriminator, PrivateAttr, Tag, model_validator
 
 from scanner_sim.config.base import Choice, StrictModel, choice_check
+from scanner_sim.config.crs import Crs
 from scanner_sim.config.errors import ConfigError, build, checked_at, invalid
 from scanner_sim.config.geometry import Objects, SeabedConfig
 from scanner_sim.config.raster_seabed import RasterSeabedConfig
@@ -44,6 +45,9 @@ class SceneConfig(StrictModel):
     platform: PlatformConfig
     description: str = ""
     """Its first line is what ``scanner-sim scenes`` prints."""
+    crs: Crs | None = None
+    """The projected CRS (metres) whose map coordinates the world frame is in: an EPSG code (32631 or
+    'EPSG:32631') or WKT; none: a local frame."""
     water: WaterSection = WaterConfig(preset="coastal_ocean")
     instrument: InstrumentConfig = InstrumentConfig()
     seabed: SeabedSection | None = None

@@ -23,6 +23,7 @@ from tqdm import tqdm
 
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
+from scanner_sim.config.crs import crs_label
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.render import viz
 from scanner_sim.survey import provenance, sinks
@@ -133,7 +134,7 @@ def pass_facts(setup: PassSetup, options: PassOptions) -> sinks.PassFacts:
         attenuation_model=setup.model.water.attenuation_model, multiple_scattering=setup.model.multiple_scattering,
         chunk_pulses=setup.chunk_slots, max_pulses=setup.max_pulses,
         scene_file=str(config.source_path) if config.source_path else None, altitude_m=config.platform.altitude_m,
-        gate_delay_ns=gate[0], gate_width_ns=gate[1], seabed=setup.scene.seabed_info,
+        gate_delay_ns=gate[0], gate_width_ns=gate[1], crs=crs_label(config.crs), seabed=setup.scene.seabed_info,
         provenance=provenance.pass_provenance(config, setup.model.water, setup.model.instrument, level, fingerprint))
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from muls.water import PHASE_FUNCTION, RANGE_DEPENDENT_MODELS, Water
 from scanner_sim.config import SceneConfig
+from scanner_sim.config.crs import crs_provenance
 from scanner_sim.config.geometry import MeshObject
 from scanner_sim.fidelity import FidelityLevel
 from scanner_sim.io.summary import jsonable
@@ -63,6 +64,7 @@ def pass_provenance(config: SceneConfig, water: Water, instrument, level: Fideli
         "inputs_fingerprint": fingerprint,
         "scene_file": str(config.source_path) if config.source_path else None,
         "overrides": jsonable(dict(sorted(config.overrides.items()))),
+        "crs": crs_provenance(config.crs),
         "water": water_provenance(config, water),
         "instrument": jsonable(instrument),
         "fidelity": jsonable(level),

@@ -57,6 +57,7 @@ class PassFacts:
     provenance: dict
     gate_delay_ns: float | None = None
     gate_width_ns: float | None = None
+    crs: str | None = None  # the scene's CRS by its code ('EPSG:32631'), None for a local frame
     seabed: dict | None = None  # a raster's or a mesh's seabed: source, CRS, sign, datum, synthetic relief
 
     def metadata(self) -> dict:
@@ -273,6 +274,7 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
             "scene_file": facts.scene_file,
             "gate_delay_ns": facts.gate_delay_ns,
             "gate_width_ns": facts.gate_width_ns,
+            "crs": facts.crs,
         },
         "provenance": facts.provenance,
         **({"seabed": facts.seabed} if facts.seabed is not None else {}),

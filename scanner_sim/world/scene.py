@@ -30,6 +30,7 @@ from scanner_sim.config import (
     SceneConfig,
     reflectance_of,
 )
+from scanner_sim.config.crs import to_crs
 from scanner_sim.config.raster_seabed import RasterSeabedConfig
 from scanner_sim.io.ply import ply_element_counts
 from scanner_sim.world.materials import LABELS
@@ -78,11 +79,12 @@ class Scene:
     int32 (:func:`smooth_surfaces`: which smooth surface of the scene the face belongs to); face_label (n_f,)
     int16 (LAS code); face_reflectance (n_f,) float64; face_normal (n_f, 3) float64 unit (right-hand winding);
     local_origin (3,) float64 world [m]; heightfield: the seabed's, or None; objects: list of SceneObject;
-    seabed_info: what the outputs report about a seabed read from a raster or a mesh (JSON-ready), or None.
+    seabed_info: what the outputs report about a seabed read from a raster or a mesh (JSON-ready), or None;
+    crs: the :class:`pyproj.CRS` whose map coordinates the world frame is in, or None (a local frame).
     """
 
     def __init__(self, parts: list[Part], heightfield: HeightField | None = None,
-                 local_origin: np.ndarray | None = None, seabed_info: dict | None = None):
+                 local_origin: np.ndarray | None = None, crs=None, seabed_info: dict | None = None):
         if not parts:
             raise ParameterError("scene: no geometry (give a seabed or at least one object)")
         verts = [np.asarray(p.vertices, float) for p in parts]
@@ -110,6 +112,7 @@ class Scene:
         self.objects = [SceneObject(i, p.name, p.kind, p.label, p.reflectance, int(ends[i - 1]) if i else 0,
                                     int(ends[i]), p.centreline) for i, p in enumerate(parts)]
         self.heightfield = heightfield
+        self.crs = crs
         self.seabed_info = seabed_info
         self.local_extent_m = float(np.abs(local).max())
 
@@ -405,7 +408,7 @@ def build_scene(config) -> Scene:
                               f"finite or beyond +-{MAX_COORDINATE_M:.0e} m; check them (metres)")
         kind = "seabed" if index in seabed_meshes else obj.type  # a mesh seabed is the background, as the procedural
         parts.append(Part(obj.name, kind, v, f, label, refl, centreline, one_surface=index in seabed_meshes))
-    return Scene(parts, hf, seabed_info=info)
+    return Scene(parts, hf, crs=to_crs(config.crs), seabed_info=info)
 
 
 def placed_mesh(obj: MeshObject, index: int, hf: HeightField | None) -> tuple[np.ndarray, np.ndarray]:
