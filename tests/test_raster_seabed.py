@@ -72,6 +72,16 @@ def test_utm_geotiff_becomes_a_scene_and_the_points_lie_on_it(tmp_path):
     assert "coverage" in result.summary
 
 
+def test_raster_crs_must_be_the_scene_crs(tmp_path):
+    """With crs: 32631 the UTM 31N raster is the world frame; with crs: 32632 (the next zone, 6 degrees east) its
+    coordinates would land hundreds of km away: refused in one line naming seabed.raster and both CRSs."""
+    write_raster(tmp_path / "site.tif", bathymetry())
+    assert build_scene(scene(tmp_path, {"raster": "site.tif"}, crs=32631)).crs.to_epsg() == 32631
+    with pytest.raises(ConfigError, match=r"^seabed\.raster = 'site\.tif': its CRS \(WGS 84 / UTM zone 31N\) is not "
+                       r"the scene's crs \(WGS 84 / UTM zone 32N\)"):
+        build_scene(scene(tmp_path, {"raster": "site.tif"}, crs=32632))
+
+
 def test_refined_heights_are_bilinear_between_pixel_centres(tmp_path):
     """The refined height field at its nodes equals scipy's bilinear interpolation of the pixel centres, and a node
     on a pixel centre takes the pixel's value; k = ceil(cell / resolution_m) = 3 nodes per cell."""

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from scanner_sim.config import ConfigError, reflectance_of
+from scanner_sim.config.crs import horizontal_crs as horizontal_of
 from scanner_sim.config.geometry import MAX_SEABED_TRIANGLES
 from scanner_sim.config.raster_seabed import check_grid, open_raster
 from scanner_sim.world.terrain import HeightField, RasterGrid, fractal_relief
@@ -71,11 +72,29 @@ def vertical_datum(crs) -> str | None:
 
 
 def horizontal_crs(crs):
-    """The horizontal part of a CRS (a compound CRS's first component) as a pyproj CRS."""
+    """The horizontal part of a CRS (rasterio's, pyproj's, or anything pyproj reads) as a pyproj CRS."""
     from pyproj import CRS
 
-    c = CRS.from_user_input(crs.to_wkt() if hasattr(crs, "to_wkt") else crs)
-    return c.sub_crs_list[0] if c.is_compound else c
+    return horizontal_of(CRS.from_user_input(crs.to_wkt() if hasattr(crs, "to_wkt") else crs))
+
+
+#: [m] Two CRSs are the same frame when a point near the raster's centre moves less than this between them.
+SAME_FRAME_M = 1e-3
+
+
+def check_same_frame(raster_crs, scene_crs, x_m: float, y_m: float, key: str, source: str) -> None:
+    """Refuse a raster whose CRS is not the scene's ``crs`` (a point at (x, y) [m] of the raster moving by
+    :data:`SAME_FRAME_M` or more between them): its map coordinates would not be the world's."""
+    from pyproj import Transformer
+
+    if scene_crs is None:
+        return
+    a, b = horizontal_crs(raster_crs), horizontal_crs(scene_crs)
+    x, y = Transformer.from_crs(a, b, always_xy=True).transform(x_m, y_m)
+    if not math.hypot(x - x_m, y - y_m) < SAME_FRAME_M:
+        raise ConfigError(f"{key} = {source!r}: its CRS ({a.name}) is not the scene's crs ({b.name}); a point of the "
+                          f"raster moves {math.hypot(x - x_m, y - y_m):,.1f} m between them: give the raster's CRS as "
+                          "crs, or reproject the raster (gdalwarp -t_srs)")
 
 
 def plan_bounds(config) -> tuple[float, float, float, float] | None:
@@ -132,9 +151,10 @@ def lawnmower_area(lawnmower, section) -> tuple[tuple[float, float], tuple[float
     return (float(center[0]), float(center[1])), (float(max(a1 - a0, 1e-3)), float(max(l1 - l0, 1e-3)))
 
 
-def load_raster_seabed(section, bounds, key: str = "seabed.raster") -> RasterSeabed:
+def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raster") -> RasterSeabed:
     """The :class:`RasterSeabed` of a raster seabed section (``scanner_sim.config.RasterSeabedConfig``) over
-    ``bounds`` (x_min, x_max, y_min, y_max) [m] widened by its ``margin_m``, or the whole raster (None)."""
+    ``bounds`` (x_min, x_max, y_min, y_max) [m] widened by its ``margin_m``, or the whole raster (None); its CRS
+    must be the scene's ``scene_crs`` (the ``crs`` key's value) where the scene has one."""
     grid = section.raster
     if isinstance(grid, RasterGrid):
         heights = np.asarray(grid.heights, float)
@@ -157,6 +177,8 @@ def load_raster_seabed(section, bounds, key: str = "seabed.raster") -> RasterSea
             nodata = section.nodata if section.nodata is not None else ds.nodatavals[section.band - 1]
             sign, reason = vertical_sign(ds, section.band, section.vertical)
             transform, crs, source, driver = ds.transform, ds.crs, section.raster, ds.driver
+    centre = transform @ (cols.start + 0.5 * (cols.stop - cols.start), rows.start + 0.5 * (rows.stop - rows.start))
+    check_same_frame(crs, scene_crs, *centre, key, str(source))
     valid = np.isfinite(values)
     if nodata is not None:
         valid &= values != nodata
@@ -171,7 +193,9 @@ def load_raster_seabed(section, bounds, key: str = "seabed.raster") -> RasterSea
                           f"({reason}), which puts the seabed above the water surface (z = 0); if they are depths, "
                           "set vertical: depth_down")
     hf, node_valid = _refine(values, valid, transform, rows, cols, section, key)
-    info = {"source": str(source), "driver": driver, "crs": horizontal_crs(crs).to_string(),
+    code = horizontal_crs(crs).to_authority()
+    info = {"source": str(source), "driver": driver,
+            "crs": f"{code[0]}:{code[1]}" if code else horizontal_crs(crs).name,
             "vertical": sign, "vertical_rule": reason, "vertical_datum": vertical_datum(crs),
             "cell_m": [abs(transform.a), abs(transform.e)], "nodata": nodata,
             "window": {"col_off": cols.start, "row_off": rows.start, "width": cols.stop - cols.start,
@@ -263,9 +287,7 @@ def _cell_reflectance(classes, hf: HeightField, crs, key: str, default: float) -
     yc = hf.y0_m + hf.spacing_m * (np.arange(ny - 1) + 0.5)
     gx, gy = np.meshgrid(xc, yc)
     with open_raster(classes.resolved_raster, f"{key}.raster", classes.band) as ds:
-        if horizontal_crs(ds.crs) != horizontal_crs(crs):
-            raise ConfigError(f"{key}.raster = {classes.raster!r}: its CRS ({horizontal_crs(ds.crs).name}) is not "
-                              f"the bathymetry's ({horizontal_crs(crs).name})")
+        check_same_frame(ds.crs, crs, float(gx.mean()), float(gy.mean()), f"{key}.raster", classes.raster)
         codes = ds.read(classes.band)
         col, row = (~ds.transform) @ (gx, gy)
         col, row = np.floor(col).astype(np.int64), np.floor(row).astype(np.int64)

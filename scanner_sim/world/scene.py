@@ -336,7 +336,7 @@ def build_scene(config) -> Scene:
     hf, info = None, None
     sb = config.seabed
     if isinstance(sb, RasterSeabedConfig):
-        raster = load_raster_seabed(sb, plan_bounds(config))
+        raster = load_raster_seabed(sb, plan_bounds(config), config.crs)
         hf, info = raster.heightfield, raster.info
         v, f = hf.mesh()
         cell = raster.cell_reflectance
