@@ -10,6 +10,7 @@ from scanner_sim.config.base import Choice, StrictModel, choice_check
 from scanner_sim.config.crs import Crs
 from scanner_sim.config.errors import ConfigError, build, checked_at, invalid
 from scanner_sim.config.geometry import Objects, SeabedConfig
+from scanner_sim.config.map_inputs import restore_given, to_map
 from scanner_sim.config.raster_seabed import RasterSeabedConfig
 from scanner_sim.config.sections import (
     InstrumentConfig,
@@ -48,6 +49,9 @@ class SceneConfig(StrictModel):
     crs: Crs | None = None
     """The projected CRS (metres) whose map coordinates the world frame is in: an EPSG code (32631 or
     'EPSG:32631') or WKT; none: a local frame."""
+    lonlat: bool = False
+    """Plan positions (waypoints, lawnmower centre, static position, objects) are [longitude, latitude] in
+    degrees, WGS 84, converted to ``crs``."""
     water: WaterSection = WaterConfig(preset="coastal_ocean")
     instrument: InstrumentConfig = InstrumentConfig()
     seabed: SeabedSection | None = None
@@ -59,11 +63,13 @@ class SceneConfig(StrictModel):
     _source_path: Path | None = PrivateAttr(None)
     _base_dir: Path | None = PrivateAttr(None)
     _overrides: dict[str, Any] = PrivateAttr(default_factory=dict)
+    _given_positions: dict[tuple, Any] = PrivateAttr(default_factory=dict)
 
     def model_post_init(self, context: Any) -> None:
         context = context or {}
         self._source_path, self._base_dir = context.get("source_path"), context.get("base_dir")
         self._overrides = dict(context.get("overrides") or {})
+        self._given_positions = dict(context.get("given_positions") or {})
 
     @model_validator(mode="before")
     @classmethod
@@ -130,7 +136,7 @@ class SceneConfig(StrictModel):
         if not isinstance(overrides, Mapping) or not all(isinstance(key, str) for key in overrides):
             raise TypeError(f"overrides must be a mapping of dotted scene keys (str) to values, "
                             f"not {type(overrides).__name__} {overrides!r:.60}")
-        data = self.model_dump(exclude_unset=True)
+        data = restore_given(self.model_dump(exclude_unset=True), self._given_positions)
         for key, value in overrides.items():
             *sections, last = key.split(".")
             node = data
@@ -151,8 +157,11 @@ def parse_scene(data: Mapping, base_dir: Path | None = None, source_path: Path |
                 overrides: Mapping[str, Any] | None = None) -> SceneConfig:
     """Validate a scene mapping. Mesh files are resolved against ``base_dir`` (default: the working
     directory) and must exist; ``overrides``: the values given on top of it by dotted key
-    (:attr:`SceneConfig.overrides`). Raises :class:`ConfigError` (one line)."""
+    (:attr:`SceneConfig.overrides`). Longitude/latitude positions and a line plan are converted to map
+    coordinates first (:mod:`scanner_sim.config.map_inputs`). Raises :class:`ConfigError` (one line)."""
+    data, given_positions = to_map(data, base_dir)
     return build(SceneConfig, data, context={"base_dir": base_dir, "source_path": source_path,
+                                             "given_positions": given_positions,
                                              "overrides": overrides})
 
 

@@ -209,6 +209,9 @@ class PlatformConfig(StrictModel):
     speed_m_s: Positive = 1.0
     waypoints_m: Points(2) | None = None
     """[x, y] points of the track (mode waypoints) [m]."""
+    line_plan: str | None = None
+    """Survey lines from a GeoJSON (lon/lat) or CSV (line, x, y or line, lon, lat) file, in place of waypoints_m;
+    path relative to the scene file."""
     lawnmower: LawnmowerConfig | None = None
     """The pattern (mode lawnmower)."""
     position_m: Vector(2, 3) | None = None
