@@ -228,8 +228,12 @@ def test_bad_raster_is_one_line_naming_the_key_exit_2(tmp_path, case):
 def test_lawnmower_with_no_area_covers_the_rasters_valid_extent(tmp_path):
     """A lawnmower naming no area, heading east, over a raster whose 10 western columns and 5 southern rows are
     nodata: its lines run from the first to the last valid pixel centre in x (X0 + 10.5 to X0 + 59.5) and its
-    first and last lines lie on the valid rows' extreme centres in y (Y0 + 5.5 to Y0 + 39.5, 8 m apart)."""
-    from scanner_sim.motion.trajectory import trajectory_of
+    first and last lines lie on the valid rows' extreme centres in y (Y0 + 5.5 to Y0 + 39.5), all of it over the
+    seabed (no set-up warning of a track off it)."""
+    import warnings
+
+    from scanner_sim.config.errors import SetupWarning
+    from scanner_sim.motion.track_checks import build_trajectory
 
     values = bathymetry()
     values[:, :10] = -9999.0
@@ -238,8 +242,10 @@ def test_lawnmower_with_no_area_covers_the_rasters_valid_extent(tmp_path):
     cfg = scene(tmp_path, {"raster": "site.tif"}, platform={
         "mode": "lawnmower", "altitude_m": 4.0, "turn_length_m": 0.0,
         "lawnmower": {"heading_deg": 90.0, "line_spacing_m": 8.5}})
-    path = trajectory_of(cfg, build_scene(cfg))._xy
-    assert path[:, 0].min() == pytest.approx(X0 + 10.5, abs=1e-6) and path[:, 0].max() == pytest.approx(X0 + 59.5, abs=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SetupWarning)
+        path = build_trajectory(cfg, build_scene(cfg))._xy
+    assert path[:, 0].min() == pytest.approx(X0 + 10.5, abs=1e-5) and path[:, 0].max() == pytest.approx(X0 + 59.5, abs=1e-5)
     # 34 m across at 8.5 m spacing: 5 lines, centred on the valid rows' middle (Y0 + 22.5)
-    assert path[:, 1].max() - path[:, 1].min() == pytest.approx(34.0, abs=1e-6)
-    assert 0.5 * (path[:, 1].max() + path[:, 1].min()) == pytest.approx(Y0 + 22.5, abs=1e-6)
+    assert path[:, 1].max() - path[:, 1].min() == pytest.approx(34.0, abs=1e-5)
+    assert 0.5 * (path[:, 1].max() + path[:, 1].min()) == pytest.approx(Y0 + 22.5, abs=1e-5)

@@ -148,7 +148,8 @@ def lawnmower_area(lawnmower, section) -> tuple[tuple[float, float], tuple[float
     a0, a1, l0, l1 = along.min(), along.max(), left.min(), left.max()
     ca, cl = 0.5 * (a0 + a1), 0.5 * (l0 + l1)
     center = (ca * math.cos(yaw) - cl * math.sin(yaw), ca * math.sin(yaw) + cl * math.cos(yaw))
-    return (float(center[0]), float(center[1])), (float(max(a1 - a0, 1e-3)), float(max(l1 - l0, 1e-3)))
+    inset = 1e-6  # [m] off the line length, so that rounding keeps the line ends over the seabed, not a hair off it
+    return (float(center[0]), float(center[1])), (float(max(a1 - a0 - inset, 1e-3)), float(max(l1 - l0, 1e-3)))
 
 
 def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raster") -> RasterSeabed:
