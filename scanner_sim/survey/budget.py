@@ -13,6 +13,7 @@ from scanner_sim.config import SeabedConfig
 from scanner_sim.config.errors import ConfigError, config_value
 from scanner_sim.motion.track_checks import track_length_m, track_span_s
 from scanner_sim.motion.trajectory import PATH_STEP_M
+from scanner_sim.world.raster import seabed_plan_size_m
 
 #: Bytes a chunk holds per pulse slot and sub-ray (rays, hits, echoes), and per pulse slot for its records by
 #: record mode, with the chunks a pass keeps in flight (one per worker and one more): the growth of peak RSS of
@@ -87,9 +88,11 @@ def estimate_pass(config) -> PassEstimate:
     if config.output.waveform_every_n_pulses:
         memory["output.waveform_every_n_pulses"] = (min(slots, pulses) * WAVEFORM_BYTES_PER_PULSE,
                                                     f"the list of {pulses:,} pulses to sample")
-    if isinstance(config.seabed, SeabedConfig):  # a raster's window is known once read
-        cells = math.prod(math.ceil(s / COVERAGE_CELL_M) for s in config.seabed.size_m)
-        memory["seabed.size_m"] = (cells * COVERAGE_BYTES_PER_CELL, f"coverage over {cells:,} cells")
+    size = seabed_plan_size_m(config.seabed)  # a raster's whole extent: its window is at most that
+    if size is not None:
+        cells = math.prod(math.ceil(s / COVERAGE_CELL_M) for s in size)
+        key = "seabed.size_m" if isinstance(config.seabed, SeabedConfig) else "seabed.raster"
+        memory[key] = (cells * COVERAGE_BYTES_PER_CELL, f"coverage over {cells:,} cells")
     return PassEstimate(track_s, pass_s, time_key, rate, active, pulses,
                         {k: (int(b), what) for k, (b, what) in memory.items()})
 

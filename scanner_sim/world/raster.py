@@ -123,6 +123,22 @@ def plan_bounds(config) -> tuple[float, float, float, float] | None:
     return float(a[:, 0].min()), float(a[:, 0].max()), float(a[:, 1].min()), float(a[:, 1].max())
 
 
+def seabed_plan_size_m(section) -> tuple[float, float] | None:
+    """(x, y) extent [m] of a seabed section's plan before it is built: a procedural seabed's size, a raster's
+    whole extent from its metadata (the window read is at most that), None for no seabed section."""
+    if section is None:
+        return None
+    if not hasattr(section, "raster"):
+        return tuple(section.size_m)
+    grid = section.raster
+    if isinstance(grid, RasterGrid):
+        (ny, nx), t = np.shape(grid.heights), grid.transform
+    else:
+        with open_raster(section.resolved_raster, "seabed.raster", section.band) as ds:
+            (ny, nx), t = (ds.height, ds.width), ds.transform
+    return abs(t.a) * nx, abs(t.e) * ny
+
+
 def lawnmower_area(lawnmower, section) -> tuple[tuple[float, float], tuple[float, float]]:
     """(center_m, size_m) of a lawnmower: its own, or where it names no area, the rectangle along its heading
     around the centres of the raster's valid pixels (a raster seabed ``section``), so the lines cover them."""
