@@ -70,3 +70,16 @@ def test_bad_line_plan_is_one_line(tmp_path):
         scene(tmp_path, {"line_plan": "points.geojson"}, crs=32631)
     with pytest.raises(ConfigError, match=r"^platform\.line_plan = 'missing\.csv': file not found"):
         scene(tmp_path, {"line_plan": "missing.csv"})
+
+
+def test_lonlat_places_the_seabed_and_objects_too(tmp_path):
+    """The procedural seabed's centre and an object's position are plan positions: converted with the waypoints
+    (zone 31's central meridian: easting 500,000 m; 0.00025 deg east of it: 0.00025 x DEG_EAST_M further)."""
+    cfg = parse_scene({"format_version": 1, "name": "chart", "crs": 32631, "lonlat": True,
+                       "seabed": {"size_m": [60.0, 20.0], "center_m": [3.00025, 50.5], "depth_m": 20.0},
+                       "objects": [{"type": "cone_mine", "position_m": [3.0, 50.5]}],
+                       "platform": {"altitude_m": 4.0, "waypoints_m": [[3.0, 50.5], [3.0005, 50.5]]}},
+                      base_dir=tmp_path)
+    assert cfg.objects[0].position_m[0] == pytest.approx(500_000.0, abs=1e-6)
+    assert cfg.seabed.center_m[0] == pytest.approx(500_000.0 + 0.00025 * DEG_EAST_M, abs=0.05)
+    assert cfg.objects[0].position_m[1] == pytest.approx(cfg.platform.waypoints_m[0][1])

@@ -249,3 +249,15 @@ def test_lawnmower_with_no_area_covers_the_rasters_valid_extent(tmp_path):
     # 34 m across at 8.5 m spacing: 5 lines, centred on the valid rows' middle (Y0 + 22.5)
     assert path[:, 1].max() - path[:, 1].min() == pytest.approx(34.0, abs=1e-5)
     assert 0.5 * (path[:, 1].max() + path[:, 1].min()) == pytest.approx(Y0 + 22.5, abs=1e-5)
+
+
+def test_south_up_raster_gives_the_same_seabed(tmp_path):
+    """A grid stored south-up (rows running north, transform e > 0) is the same seabed as the north-up one: the
+    height at every pixel centre is the same pixel's value."""
+    values = bathymetry()
+    write_raster(tmp_path / "north_up.tif", values)
+    write_raster(tmp_path / "south_up.tif", values[::-1], transform=Affine(CELL, 0.0, X0, 0.0, CELL, Y0))
+    a = build_scene(scene(tmp_path, {"raster": "north_up.tif"})).heightfield
+    b = build_scene(scene(tmp_path, {"raster": "south_up.tif"})).heightfield
+    assert (a.x0_m, a.y0_m, a.spacing_m) == (b.x0_m, b.y0_m, b.spacing_m)
+    assert np.array_equal(a.heights_m, b.heights_m)

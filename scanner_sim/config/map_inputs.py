@@ -3,8 +3,9 @@
 
 - ``lonlat: true`` (needs ``crs``): every plan position of the file is [longitude, latitude] in degrees, WGS 84,
   longitude first (GeoJSON's order): ``platform.waypoints_m``, ``platform.position_m``,
-  ``platform.lawnmower.center_m`` and the objects' ``position_m``, ``points_m``, ``center_m`` and ``translate_m``
-  (a third number, z, stays metres). pyproj converts them to the ``crs``'s eastings and northings.
+  ``platform.lawnmower.center_m``, ``seabed.center_m`` and the objects' ``position_m``, ``points_m``,
+  ``center_m`` and ``translate_m`` (a third number, z, stays metres). pyproj converts them to the
+  ``crs``'s eastings and northings.
 - ``platform.line_plan`` (mode ``waypoints``, in place of ``waypoints_m``): the survey lines, run in the file's
   order, each from its first point to its last, with a straight transit from one line's end to the next one's
   start. GeoJSON: LineString or MultiLineString features, in longitude/latitude (WGS 84, as RFC 7946 has it)
@@ -47,7 +48,7 @@ def to_map(data: Any, base_dir: Path | None) -> tuple[Any, dict]:
     project = _projector(data.get("crs")) if data.get("crs") is not None else None
     if lonlat:
         places = [(("platform", "waypoints_m"), True), (("platform", "position_m"), False),
-                  (("platform", "lawnmower", "center_m"), False)]
+                  (("platform", "lawnmower", "center_m"), False), (("seabed", "center_m"), False)]
         places += [(("objects", i, key), many) for i, obj in enumerate(data.get("objects") or ())
                    if isinstance(obj, Mapping) for key, many in OBJECT_POSITIONS.items() if key in obj]
         for path, many in places:

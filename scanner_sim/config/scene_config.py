@@ -50,8 +50,8 @@ class SceneConfig(StrictModel):
     """The projected CRS (metres) whose map coordinates the world frame is in: an EPSG code (32631 or
     'EPSG:32631') or WKT; none: a local frame."""
     lonlat: bool = False
-    """Plan positions (waypoints, lawnmower centre, static position, objects) are [longitude, latitude] in
-    degrees, WGS 84, converted to ``crs``."""
+    """Plan positions (waypoints, lawnmower and seabed centres, static position, objects) are [longitude,
+    latitude] in degrees, WGS 84, converted to ``crs``."""
     water: WaterSection = WaterConfig(preset="coastal_ocean")
     instrument: InstrumentConfig = InstrumentConfig()
     seabed: SeabedSection | None = None
