@@ -56,6 +56,9 @@ def test_trimesh_in_memory_is_a_seabed(tmp_path):
 
     surface = slope_mesh(tmp_path / "seabed.ply")
     mesh = trimesh.load(tmp_path / "seabed.ply", force="mesh")
-    built = build_scene(mesh_scene(tmp_path, file=mesh))
+    cfg = mesh_scene(tmp_path, file=mesh)
+    built = build_scene(cfg)
     assert built.heightfield.height(20.0, 5.0) == pytest.approx(surface(20.0, 5.0), abs=0.01)
     assert built.objects[0].kind == "seabed"
+    result = scanner_sim.simulate_pass(cfg, scanner_sim.PassOptions(max_pulses=500, progress=False))
+    assert result.summary["seabed"]["source"] == ["in memory"] and len(result.points.xyz) > 400

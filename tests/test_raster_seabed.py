@@ -192,11 +192,32 @@ def test_class_raster_gives_each_cell_its_material(tmp_path):
 
 
 def test_in_memory_grid_is_a_seabed(tmp_path):
-    """The Python API takes a height grid with its affine transform in place of a file."""
+    """The Python API takes a height grid with its affine transform in place of a file, through a whole pass
+    (overrides and the provenance's fingerprint included): its points lie where the file's pass puts them."""
     values = bathymetry()
     grid = RasterGrid(values, from_origin(X0, Y0 + 40, CELL, CELL), "EPSG:32631")
-    hf = build_scene(scene(tmp_path, {"raster": grid})).heightfield
+    cfg = scene(tmp_path, {"raster": grid})
+    hf = build_scene(cfg).heightfield
     assert hf.height(X0 + 10.5, Y0 + 40 - 5.5) == pytest.approx(values[5, 10])
+    options = scanner_sim.PassOptions(max_pulses=500, progress=False)
+    in_memory = scanner_sim.simulate_pass(cfg, options)
+    write_raster(tmp_path / "site.tif", values)
+    from_file = scanner_sim.simulate_pass(scene(tmp_path, {"raster": "site.tif"}), options)
+    assert np.allclose(in_memory.points.xyz, from_file.points.xyz, atol=1e-5)
+
+
+def test_the_rasters_bytes_are_in_the_pass_fingerprint(tmp_path):
+    """Two rasters at one path with other values: the same scene, other inputs (the provenance's fingerprint
+    differs), as for mesh files."""
+    from scanner_sim.survey.provenance import inputs_fingerprint
+
+    level = None
+    prints = []
+    for offset in (0.0, 0.5):
+        write_raster(tmp_path / "site.tif", bathymetry() - offset)
+        cfg = scene(tmp_path, {"raster": "site.tif"})
+        prints.append(inputs_fingerprint(cfg, scanner_sim.PassOptions(), level or cfg.survey.level))
+    assert prints[0] != prints[1]
 
 
 BAD = {

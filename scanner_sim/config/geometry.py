@@ -12,6 +12,7 @@ from typing import Annotated, Any, ClassVar, Literal
 from pydantic import (
     BeforeValidator,
     Field,
+    PlainSerializer,
     PrivateAttr,
     ValidationInfo,
     WithJsonSchema,
@@ -250,8 +251,21 @@ def _path_or_mesh(value: Any) -> Any:
                   value=value)
 
 
+def _mesh_json(value: Any) -> Any:
+    """A mesh source as JSON: the path, or a mesh's digest (its vertices' and faces' bytes)."""
+    if isinstance(value, str):
+        return value
+    import hashlib
+
+    import numpy as np
+
+    digest = hashlib.sha256(np.ascontiguousarray(value.vertices, np.float64).tobytes())
+    digest.update(np.ascontiguousarray(value.faces, np.int64).tobytes())
+    return {"in_memory_mesh_sha256": digest.hexdigest()}
+
+
 #: A mesh file's path, or (from Python) a trimesh.Trimesh.
-MeshSource = Annotated[Any, BeforeValidator(_path_or_mesh),
+MeshSource = Annotated[Any, BeforeValidator(_path_or_mesh), PlainSerializer(_mesh_json, when_used="json"),
                        WithJsonSchema({"type": "string", "description": "Path relative to the scene file."})]
 
 

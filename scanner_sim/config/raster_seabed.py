@@ -8,7 +8,8 @@ the scene is built (:mod:`scanner_sim.world.raster`), which refuses a window of 
 from pathlib import Path
 from typing import Annotated, Any
 
-from pydantic import BeforeValidator, PrivateAttr, ValidationInfo, WithJsonSchema, model_validator
+import numpy as np
+from pydantic import BeforeValidator, PlainSerializer, PrivateAttr, ValidationInfo, WithJsonSchema, model_validator
 
 from scanner_sim.config.base import Choice, Integer, NonNegative, Positive, StrictModel
 from scanner_sim.config.errors import ConfigError, invalid
@@ -50,14 +51,27 @@ def open_raster(path: Path, key: str, band: int = 1):
 
 
 def _path_or_grid(value: Any) -> Any:
+    if isinstance(value, dict) and set(value) == set(RasterGrid.__dataclass_fields__):
+        value = RasterGrid(**value)  # a grid dumped by with_overrides, back to itself
     if not isinstance(value, (str, RasterGrid)):
         raise invalid("must be a path to a raster file (relative to the scene file) or, from Python, a "
                       "scanner_sim.world.terrain.RasterGrid", value=value)
     return value
 
 
+def _grid_json(value: Any) -> Any:
+    """A raster source as JSON: the path, or a grid's digest (its heights' bytes, transform, CRS, nodata, sign)."""
+    if not isinstance(value, RasterGrid):
+        return value
+    import hashlib
+
+    digest = hashlib.sha256(np.ascontiguousarray(value.heights, np.float64).tobytes())
+    digest.update(repr((tuple(value.transform)[:6], str(value.crs), value.nodata, value.vertical)).encode())
+    return {"in_memory_grid_sha256": digest.hexdigest()}
+
+
 #: A raster file's path, or (from Python) a grid in memory.
-RasterSource = Annotated[Any, BeforeValidator(_path_or_grid),
+RasterSource = Annotated[Any, BeforeValidator(_path_or_grid), PlainSerializer(_grid_json, when_used="json"),
                          WithJsonSchema({"type": "string", "description": "Path relative to the scene file."})]
 
 
