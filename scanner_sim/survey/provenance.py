@@ -110,12 +110,14 @@ def inputs_fingerprint(config: SceneConfig, options, level: FidelityLevel) -> st
         "overrides": jsonable(dict(sorted(config.overrides.items()))),
         "meshes": [_file_sha256(o.resolved_path) for o in config.objects
                    if isinstance(o, MeshObject) and o.resolved_path is not None],
-        "rasters": [_file_sha256(path) for path in raster_files(config)],
         "water": jsonable(config.water_model()),
         "instrument": jsonable(config.instrument_model()),
         "fidelity": jsonable(level),
         "options": {"waveforms": options.waveforms, "render": options.render, "render_size": options.render_size,
                     "write_scene": options.write_scene, "coverage": jsonable(options.coverage)},
     }
+    rasters = raster_files(config)
+    if rasters:  # only then: the fingerprints of scenes without rasters stay as they were
+        inputs["rasters"] = [_file_sha256(path) for path in rasters]
     text = json.dumps(jsonable(inputs), sort_keys=True, ensure_ascii=True, allow_nan=False)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
