@@ -282,3 +282,25 @@ def test_south_up_raster_gives_the_same_seabed(tmp_path):
     b = build_scene(scene(tmp_path, {"raster": "south_up.tif"})).heightfield
     assert (a.x0_m, a.y0_m, a.spacing_m) == (b.x0_m, b.y0_m, b.spacing_m)
     assert np.array_equal(a.heights_m, b.heights_m)
+
+
+def test_coverage_map_draws_cells_without_seabed_data_apart(tmp_path):
+    """coverage_map.png paints the cells with no seabed data in their own colour, and only where given."""
+    import matplotlib.image as mpimg
+
+    from scanner_sim.metrics.coverage import GAP_CAUSES
+    from scanner_sim.render.viz import COVERAGE_COLOURS, NO_SEABED_COLOUR, plot_coverage_map
+
+    def colours(no_seabed):
+        plot_coverage_map(tmp_path / "m.png", state, (0, 20, 0, 10), GAP_CAUSES, no_seabed=no_seabed)
+        rgb = (mpimg.imread(tmp_path / "m.png")[..., :3] * 255).round().astype(int)
+        return {tuple(c) for c in rgb.reshape(-1, 3)}
+
+    def rgb_of(hex_colour):
+        return tuple(int(hex_colour[i:i + 2], 16) for i in (1, 3, 5))
+
+    state = np.full((40, 80), -1)
+    mask = np.zeros(state.shape, bool)
+    mask[10:20, 10:30] = True
+    assert rgb_of(NO_SEABED_COLOUR) in colours(mask) and rgb_of(COVERAGE_COLOURS["covered"]) in colours(mask)
+    assert rgb_of(NO_SEABED_COLOUR) not in colours(None)

@@ -313,4 +313,4 @@ def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts:
     title = (f"{facts.label}\ncovered {fraction:.1%} of {figures['reached_area_m2']:.0f} m² reached"
              if fraction is not None else f"{facts.label}\nthe scan reaches no seabed cell")
     viz.plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
-                          markers=markers, title=title)
+                          markers=markers, title=title, no_seabed=coverage.no_seabed)
