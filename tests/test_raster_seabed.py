@@ -304,3 +304,25 @@ def test_coverage_map_draws_cells_without_seabed_data_apart(tmp_path):
     mask[10:20, 10:30] = True
     assert rgb_of(NO_SEABED_COLOUR) in colours(mask) and rgb_of(COVERAGE_COLOURS["covered"]) in colours(mask)
     assert rgb_of(NO_SEABED_COLOUR) not in colours(None)
+
+
+def test_a_window_beyond_the_triangle_budget_is_refused_before_its_pixels_are_read(tmp_path, monkeypatch):
+    """A 2,000 x 2,000 raster of 1 m cells read 1 km around the track: the window is columns 0 to 1,050 (x up to
+    50 + 1,000 m, one more pixel) and rows 979 to 1,999 (y from 20 - 1,000 to 20 + 1,000 m): 1,051 x 1,021 pixels,
+    refined 4 nodes a metre to 4,201 x 4,081 nodes, 2 x 4,200 x 4,080 = 34,272,000 triangles. Refused naming
+    seabed.resolution_m before any pixel is read (rasterio's read is never called)."""
+    import rasterio.io
+
+    path = tmp_path / "big.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=2000, height=2000, count=1, dtype="float32",
+                       crs="EPSG:32631", transform=from_origin(X0, Y0 + 2000, 1.0, 1.0), sparse_ok=True) as ds:
+        ds.write(np.full((1, 10, 10), -12.0, "float32"), window=((0, 10), (0, 10)))
+    cfg = scene(tmp_path, {"raster": "big.tif", "margin_m": 1000.0})
+    reads = []
+    original = rasterio.io.DatasetReader.read
+    monkeypatch.setattr(rasterio.io.DatasetReader, "read",
+                        lambda self, *a, **k: reads.append(k) or original(self, *a, **k))
+    with pytest.raises(ConfigError, match=r"^seabed\.resolution_m = 0\.25: refines the raster's 1051 x 1021 window to "
+                       r"34,272,000 triangles, more than the 2,000,000 allowed"):
+        build_scene(cfg)
+    assert reads == []

@@ -146,11 +146,10 @@ def lawnmower_area(lawnmower, section) -> tuple[tuple[float, float], tuple[float
         return tuple(lawnmower.center_m), tuple(lawnmower.size_m)
     grid = section.raster
     if isinstance(grid, RasterGrid):
-        values, transform, nodata = np.asarray(grid.heights, float), grid.transform, grid.nodata
+        values, transform, nodata = np.asarray(grid.heights), grid.transform, grid.nodata
     else:
         with open_raster(section.resolved_raster, "seabed.raster", section.band) as ds:
-            values, transform, nodata = ds.read(section.band).astype(float), ds.transform, ds.nodatavals[
-                section.band - 1]
+            values, transform, nodata = ds.read(section.band), ds.transform, ds.nodatavals[section.band - 1]
     nodata = section.nodata if section.nodata is not None else nodata
     valid = np.isfinite(values) & ((values != nodata) if nodata is not None else True)
     if not valid.any():
@@ -182,6 +181,8 @@ def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raste
         sign, reason = (section.vertical, "the scene's vertical key") if section.vertical != "auto" else (
             grid.vertical, "the grid's own vertical sign")
         rows, cols = _window(grid.transform, heights.shape[1], heights.shape[0], bounds, section.margin_m, key)
+        node_grid(rows.stop - rows.start, cols.stop - cols.start, grid.transform.a, grid.transform.e,
+                  section.resolution_m, key)
         values = heights[rows, cols]
         transform, crs, source, driver = grid.transform, grid.crs, grid.source, "in memory"
     else:
@@ -189,6 +190,8 @@ def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raste
 
         with open_raster(section.resolved_raster, key, section.band) as ds:
             rows, cols = _window(ds.transform, ds.width, ds.height, bounds, section.margin_m, key)
+            node_grid(rows.stop - rows.start, cols.stop - cols.start, ds.transform.a, ds.transform.e,
+                      section.resolution_m, key)  # refused before the pixels are read
             window = Window(cols.start, rows.start, cols.stop - cols.start, rows.stop - rows.start)
             values = ds.read(section.band, window=window).astype(float)
             nodata = section.nodata if section.nodata is not None else ds.nodatavals[section.band - 1]
@@ -247,6 +250,23 @@ def _window(transform, width: int, height: int, bounds, margin_m: float, key: st
     return slice(r0, r1), slice(c0, c1)
 
 
+def node_grid(nr: int, nc: int, dx: float, dy: float, resolution_m: float, key: str) -> tuple[float, int, int]:
+    """(spacing s [m], nx, ny) of the refined nodes over ``nr`` x ``nc`` pixels of ``dx`` x ``dy`` [m]: s = c / k,
+    c = min(dx, dy), k = ceil(c / resolution_m); refused beyond the seabed's triangle budget (before any read)."""
+    dx, dy = abs(dx), abs(dy)
+    cell = min(dx, dy)
+    s = cell / max(1, math.ceil(cell / resolution_m - 1e-9))
+    nx, ny = int((nc - 1) * dx / s + 1e-9) + 1, int((nr - 1) * dy / s + 1e-9) + 1
+    triangles = 2 * (nx - 1) * (ny - 1)
+    if triangles > MAX_SEABED_TRIANGLES:
+        raise ConfigError(f"{key.rpartition('.')[0]}.resolution_m = {resolution_m!r}: refines the raster's "
+                          f"{nc} x {nr} window to {triangles:,} triangles, more than the {MAX_SEABED_TRIANGLES:,} "
+                          "allowed; use a coarser resolution_m or a smaller margin_m")
+    if nx < 2 or ny < 2:
+        raise ConfigError(f"{key}: the window read holds a single row or column of pixels; widen margin_m")
+    return s, nx, ny
+
+
 def _refine(values, valid, transform, rows: slice, cols: slice, section, key: str):
     """The refined :class:`HeightField` of a window's ``values`` (rows, cols) with their ``valid`` mask."""
     from scipy import ndimage
@@ -264,17 +284,7 @@ def _refine(values, valid, transform, rows: slice, cols: slice, section, key: st
         row0 = rows.start
     xc0, yc0 = transform @ (col0 + 0.5, row0 + 0.5)  # the first pixel's centre after the flips
     nr, nc = values.shape
-    cell = min(dx, dy)
-    k = max(1, math.ceil(cell / section.resolution_m - 1e-9))
-    s = cell / k
-    nx, ny = int((nc - 1) * dx / s + 1e-9) + 1, int((nr - 1) * dy / s + 1e-9) + 1
-    triangles = 2 * (nx - 1) * (ny - 1)
-    if triangles > MAX_SEABED_TRIANGLES:
-        raise ConfigError(f"{key.rpartition('.')[0]}.resolution_m = {section.resolution_m!r}: refines the raster's "
-                          f"{nc} x {nr} window to {triangles:,} triangles, more than the {MAX_SEABED_TRIANGLES:,} "
-                          "allowed; use a coarser resolution_m or a smaller margin_m")
-    if nx < 2 or ny < 2:
-        raise ConfigError(f"{key}: the window read holds a single row or column of pixels; widen margin_m")
+    s, nx, ny = node_grid(nr, nc, dx, dy, section.resolution_m, key)
     nearest = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
     filled = values[tuple(nearest)]
     fx, fy = np.arange(nx) * s / dx, np.arange(ny) * s / dy
