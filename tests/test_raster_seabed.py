@@ -326,3 +326,14 @@ def test_a_window_beyond_the_triangle_budget_is_refused_before_its_pixels_are_re
                        r"34,272,000 triangles, more than the 2,000,000 allowed"):
         build_scene(cfg)
     assert reads == []
+
+
+@pytest.mark.parametrize("driver, suffix", [("GTiff", "tif"), ("BAG", "bag")])
+def test_vertical_datum_is_read_from_a_compound_crs(tmp_path, driver, suffix):
+    """A raster in UTM 31N + NAP height (EPSG:32631+5709, the Dutch datum) names its vertical datum: the seabed block
+    reports it, and the scene's crs 32631 is its horizontal frame."""
+    from rasterio.crs import CRS
+
+    write_raster(tmp_path / f"nap.{suffix}", bathymetry(), driver=driver, crs=CRS.from_user_input("EPSG:32631+5709"))
+    info = build_scene(scene(tmp_path, {"raster": f"nap.{suffix}"}, crs=32631)).seabed_info
+    assert info["vertical_datum"] == "Normaal Amsterdams Peil" and info["crs"] == "EPSG:32631"
