@@ -200,10 +200,11 @@ def _check_cell_memory(args, config) -> None:
 
     from muls.memory import check_memory
     from scanner_sim.survey.budget import COVERAGE_BYTES_PER_CELL
+    from scanner_sim.world.raster import seabed_plan_size_m
 
-    if config.seabed is None:  # the study refuses the scene itself
+    size = seabed_plan_size_m(config.seabed)
+    if size is None:  # the study refuses the scene itself (or measures a mesh seabed, sized once built)
         return
-    size = config.seabed.size_m
     cells = math.prod(math.ceil(s / args.cell_m) for s in size)
     workers = _workers(args)
     at_once = 1 if args.scheduler or workers == 0 else workers

@@ -163,8 +163,8 @@ class LawnmowerConfig(StrictModel):
 
     center_m: Vector(2) = (0.0, 0.0)
     """Centre of the rectangle [x, y] [m]."""
-    size_m: Vector(2, element=Positive)
-    """Extent along the lines and across them [m]."""
+    size_m: Vector(2, element=Positive) | None = None
+    """Extent along the lines and across them [m]; null (over a raster seabed): the raster's valid extent."""
     heading_deg: Real = 0.0
     """Compass direction of the first line [deg]."""
     line_spacing_m: Positive = 4.0
@@ -209,6 +209,9 @@ class PlatformConfig(StrictModel):
     speed_m_s: Positive = 1.0
     waypoints_m: Points(2) | None = None
     """[x, y] points of the track (mode waypoints) [m]."""
+    line_plan: str | None = None
+    """Survey lines from a GeoJSON (lon/lat) or CSV (line, x, y or line, lon, lat) file, in place of waypoints_m;
+    path relative to the scene file."""
     lawnmower: LawnmowerConfig | None = None
     """The pattern (mode lawnmower)."""
     position_m: Vector(2, 3) | None = None

@@ -202,6 +202,12 @@ class CoverageAccumulator:
         self.settings = settings
         x0, x1, y0, y1 = scene.heightfield.extent_m
         self.grid = PlanGrid.over((x0, x1), (y0, y1), settings.cell_m)
+        cx0, cx1, cy0, cy1 = self.grid.extent_m
+        ny, nx = self.grid.shape
+        gx, gy = np.meshgrid(np.linspace(cx0, cx1, nx + 1)[:-1] + 0.5 * settings.cell_m,
+                             np.linspace(cy0, cy1, ny + 1)[:-1] + 0.5 * settings.cell_m)
+        #: (ny, nx) bool: plan cells whose centre has no seabed (a raster's nodata, a mesh seabed's holes).
+        self.no_seabed = ~scene.heightfield.covers(gx, gy)
         self.cells = BinTally(self.grid.size)
         self.objects = BinTally(len(scene.objects))
         self.cables = [(obj, CableBins(obj.centreline, settings.cell_m)) for obj in scene.objects
@@ -256,6 +262,7 @@ class CoverageAccumulator:
             "holes": {"count": int(n_holes), "largest_m2": float(hole_cells.max() * cell_area) if n_holes else 0.0,
                       "total_m2": float(hole_cells.sum() * cell_area)},
             "gaps_m2": _by_cause(state[missed], cell_area),
+            "no_seabed_data_m2": float(self.no_seabed.sum() * cell_area),
             "cables": [self._cable_figures(cable, bins, tally) for (cable, bins), tally in
                        zip(self.cables, self.cable_tallies)],
             "objects": self._object_figures(),

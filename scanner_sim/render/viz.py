@@ -570,6 +570,8 @@ COVERAGE_COLOURS: dict[str, str] = {
     "out_of_tolerance": "#e56b9f",
     "other_surface": "#495057",
 }
+#: Plan cells with no seabed (a raster's nodata, where a mesh seabed does not reach) on a coverage map.
+NO_SEABED_COLOUR = "#1d3557"
 
 #: Curve colour per water preset in coverage charts (others take the matplotlib cycle).
 WATER_COLOURS: dict[str, str] = {"clean_ocean": "#1f77b4", "coastal_ocean": "#2ca02c", "turbid_harbor": "#8c564b",
@@ -578,13 +580,14 @@ _INSTRUMENT_STYLES = {"mul2023": ("-", "o"), "single_channel": ("--", "s"), "coa
 
 
 def plot_coverage_map(path_png, state, extent_m, gap_causes: Sequence[str], *, lines=(), markers=(),
-                      title: str | None = None) -> None:
+                      title: str | None = None, no_seabed=None) -> None:
     """Plan map of coverage cells to a PNG.
 
     state : (ny, nx) int, row = y: -2 not reached, -1 covered, k >= 0 missed for ``gap_causes[k]``.
     extent_m : (x_min, x_max, y_min, y_max) [m] of the grid.
     lines : [(name, (n, 2) xy [m])] drawn over the cells (cable centrelines).
     markers : [(name, (2,) xy [m])] marked and named (mines, objects).
+    no_seabed : (ny, nx) bool or None: cells with no seabed data, drawn in :data:`NO_SEABED_COLOUR` over the rest.
     The legend lists covered and every cause present, with its area share of the reached cells.
     """
     from matplotlib.colors import ListedColormap
@@ -605,6 +608,10 @@ def plot_coverage_map(path_png, state, extent_m, gap_causes: Sequence[str], *, l
     ax = fig.add_subplot()
     ax.imshow(codes, origin="lower", extent=(x0, x1, y0, y1), cmap=ListedColormap([COVERAGE_COLOURS[n] for n in names]),
               vmin=-0.5, vmax=len(names) - 0.5, interpolation="nearest")
+    gaps = np.asarray(no_seabed, bool) if no_seabed is not None else np.zeros(state.shape, bool)
+    if gaps.any():
+        ax.imshow(np.ma.masked_where(~gaps, np.ones(state.shape)), origin="lower", extent=(x0, x1, y0, y1),
+                  cmap=ListedColormap([NO_SEABED_COLOUR]), interpolation="nearest")
     for name, xy in lines:
         xy = np.asarray(xy, float)
         ax.plot(xy[:, 0], xy[:, 1], color="black", lw=0.8, alpha=0.8)
@@ -617,6 +624,8 @@ def plot_coverage_map(path_png, state, extent_m, gap_causes: Sequence[str], *, l
     handles = [Patch(facecolor=COVERAGE_COLOURS[n], edgecolor="grey", label=f"{n.replace('_', ' ')} "
                      f"{counts[k] / reached:.1%}") for k, n in enumerate(names) if k == 1 or (k >= 2 and counts[k])]
     handles.append(Patch(facecolor=COVERAGE_COLOURS["not_reached"], edgecolor="grey", label="not reached by the scan"))
+    if gaps.any():
+        handles.append(Patch(facecolor=NO_SEABED_COLOUR, edgecolor="grey", label="no seabed data"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     ax.set_xlabel("x east [m]")
     ax.set_ylabel("y north [m]")

@@ -351,7 +351,7 @@ def campaign_charts(campaign: Campaign) -> list[ChartConfig]:
     if campaign.config.charts is not None:
         return list(campaign.config.charts)
     sweep = campaign.config.sweep
-    y = "covered_fraction" if campaign.scene.seabed is not None else "points_per_pulse"
+    y = "covered_fraction" if campaign.scene.has_seabed else "points_per_pulse"
     numeric = [axis for axis, values in sweep.items() if all(_is_number(v) for v in values)]
     along = numeric or list(sweep)[:1]
     return [ChartConfig(x=x, lines=tuple(a for a in sweep if a != x), y=y) for x in along]

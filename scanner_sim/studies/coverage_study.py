@@ -120,9 +120,9 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     from scanner_sim import io
     from scanner_sim.render import report
 
-    if config.seabed is None:
+    if not config.has_seabed:
         raise ParameterError(f"scene '{config.name}': coverage is measured over the seabed's plan area; the "
-                             "scene has no seabed section")
+                             "scene has no seabed section (nor a mesh labelled seabed)")
     combos = list(plan.combinations(config))
     # every combination is built (and so checked) before any pass runs
     jobs = [PassJob(combination_name(water, altitude, instrument),

@@ -127,7 +127,7 @@ class PassPlan:
            ) -> PassPlan:
         """The plan of ``config`` with ``options`` applied (or already applied: they are idempotent)."""
         config = config.with_overrides(options.scene_overrides())
-        output, coverage = config.output, config.seabed is not None
+        output, coverage = config.output, config.has_seabed
         clouds = [s for s, on in ((".las", output.las), (".laz", output.laz)) if on]
         files = [] if output.split_legs else [f"points{s}" for s in clouds]
         files += ["dropouts.npz"]

@@ -60,13 +60,15 @@ class PassFacts:
     gate_delay_ns: float | None = None
     gate_width_ns: float | None = None
     crs: str | None = None  # the scene's CRS by its code ('EPSG:32631'), None for a local frame
+    seabed: dict | None = None  # a raster's or a mesh's seabed: source, CRS, sign, datum, synthetic relief
 
     def metadata(self) -> dict:
         """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file, and the
         pass's provenance as point clouds carry it (:func:`~scanner_sim.survey.provenance.point_cloud_provenance`)."""
         return {"scene": self.scene, "water": self.water, "instrument": self.instrument, "fidelity": self.fidelity,
                 "seed": self.seed, "muls_scanner_version": __version__, "scene_file": self.scene_file,
-                "provenance": point_cloud_provenance(self.provenance)}
+                "provenance": point_cloud_provenance(self.provenance),
+                **({"seabed": self.seabed} if self.seabed is not None else {})}
 
     @property
     def label(self) -> str:
@@ -350,6 +352,7 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
             "crs": facts.crs,
         },
         "provenance": facts.provenance,
+        **({"seabed": facts.seabed} if facts.seabed is not None else {}),
     }
 
 
@@ -385,4 +388,4 @@ def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts:
     title = (f"{facts.label}\ncovered {fraction:.1%} of {figures['reached_area_m2']:.0f} m² reached"
              if fraction is not None else f"{facts.label}\nthe scan reaches no seabed cell")
     viz.plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
-                          markers=markers, title=title)
+                          markers=markers, title=title, no_seabed=coverage.no_seabed)
