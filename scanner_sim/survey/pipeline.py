@@ -24,6 +24,7 @@ from tqdm import tqdm
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
+from scanner_sim.metrics.planned_swath import planned_swath
 from scanner_sim.render import viz
 from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
@@ -224,7 +225,10 @@ def _finished(chunk: Future, bar) -> Chunk:
 def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):
     """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally.
     Returns (stats, coverage sink or None, wall seconds)."""
-    coverage = sinks.CoverageSink(setup.scene, options.coverage) if setup.plan.measures_coverage else None
+    coverage = None
+    if setup.plan.measures_coverage:
+        planned = planned_swath(setup.config, setup.trajectory, setup.scanner.pulse_rate_hz)
+        coverage = sinks.CoverageSink(setup.scene, options.coverage, planned)
     stats = sinks.PassStats(len(setup.model.instrument.channels))
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
     started = time.perf_counter()

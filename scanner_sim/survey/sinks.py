@@ -158,21 +158,28 @@ class CoverageSink(CoverageAccumulator):
 
 
 class PassStats:
-    """Pulses, points per channel and a streaming histogram of |range error| [m] (median and 95th percentile)."""
+    """Pulses, points per channel and streaming histograms of the range error [m]: of |error| (median and 95th
+    percentile) and of the signed error (its median, the bias, and the share of points ranged short)."""
 
     def __init__(self, n_channels: int):
         self.pulses = 0
         self.points = 0
         self.channels = np.zeros(n_channels + 1, np.int64)
         self.error_counts = np.zeros(int(ERROR_MAX_M / ERROR_BIN_M) + 1, np.int64)
+        self.signed_counts = np.zeros(2 * self.error_counts.size, np.int64)  # bins of ERROR_BIN_M from -ERROR_MAX_M
+        self.short = 0
 
     def add(self, chunk) -> None:
         self.pulses += chunk.slots.size
         self.points += len(chunk.points)
         self.channels += np.bincount(chunk.points.channel, minlength=self.channels.size)
-        e = np.abs(chunk.points.range_error_m)
-        e = e[np.isfinite(e)]
+        signed = chunk.points.range_error_m[np.isfinite(chunk.points.range_error_m)].astype(np.float64)
+        e = np.abs(signed)
         np.add.at(self.error_counts, np.minimum((e / ERROR_BIN_M).astype(np.int64), self.error_counts.size - 1), 1)
+        half = self.error_counts.size
+        k = np.clip(np.floor(signed / ERROR_BIN_M).astype(np.int64) + half, 0, self.signed_counts.size - 1)
+        np.add.at(self.signed_counts, k, 1)
+        self.short += int((signed < 0).sum())
 
     def error_quantile_m(self, q: float) -> float | None:
         total = self.error_counts.sum()
@@ -180,6 +187,19 @@ class PassStats:
             return None
         k = int(np.searchsorted(np.cumsum(self.error_counts), q * total))
         return round((k + 0.5) * ERROR_BIN_M, 7)  # the bin's centre, without float noise in summary.json
+
+    def signed_median_m(self) -> float | None:
+        """Median signed range error [m] (negative: ranged short), to the histogram's bin."""
+        total = self.signed_counts.sum()
+        if total == 0:
+            return None
+        k = int(np.searchsorted(np.cumsum(self.signed_counts), 0.5 * total))
+        return round((k - self.error_counts.size + 0.5) * ERROR_BIN_M, 7)
+
+    def share_short(self) -> float | None:
+        """Share of the points with a truth whose range error is negative (ranged short)."""
+        total = self.error_counts.sum()
+        return round(float(self.short / total), 6) if total else None
 
 
 class WaveformSink:
@@ -258,7 +278,8 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
         "setup_s": round(setup_s, 3),
         "compile_s": round(compile_s, 3),
         "pulses_per_s": round(stats.pulses / wall_s, 1) if wall_s > 0 else None,
-        "range_error_m": {"median": stats.error_quantile_m(0.5), "p95": stats.error_quantile_m(0.95)},
+        "range_error_m": {"median": stats.error_quantile_m(0.5), "p95": stats.error_quantile_m(0.95),
+                          "median_signed": stats.signed_median_m(), "share_short": stats.share_short()},
         "settings": {
             "instrument": facts.instrument,
             "record_mode": facts.record_mode,
