@@ -157,6 +157,9 @@ def _add_coverage(sub):
                    help="valid points a cell needs (default: %(default)s)")
     p.add_argument("--tolerance-m", type=positive_float("tolerance_m"), default=CoverageSettings.tolerance_m,
                    help="largest |range error| of a valid point [m] (default: %(default)s, IHO S-44 Exclusive Order)")
+    p.add_argument("--order-min-soundings", type=positive_int("order_min_soundings"),
+                   default=CoverageSettings.order_min_soundings,
+                   help="soundings a cell needs to comply with an S-44 order (default: %(default)s, S-44 Annex D)")
     p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /coverage)")
     p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), help="fidelity level (default: the scene's)")
     p.add_argument("--seed", type=seed(), help="seed of every pass (default: the scene's survey.seed)")
@@ -180,7 +183,7 @@ def _cmd_coverage(args) -> int:
     _check_cell_memory(args, config)
     plan = StudyPlan(tuple(args.waters), tuple(args.altitudes_m) if args.altitudes_m else (None,),
                      tuple(args.instruments), args.gate)
-    settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m)
+    settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m, args.order_min_soundings)
     out = Path(args.out or Path(config.output_dir) / "coverage")
     with hold_output(out):  # taken before the passes are built, so a second writer is refused at once
         study = run_study(config, plan, out, settings=settings, fidelity=args.fidelity, seed=args.seed,

@@ -20,6 +20,7 @@ from muls.errors import ParameterError
 from muls.presets import instrument_preset, water_preset
 from scanner_sim.config import SceneConfig
 from scanner_sim.io.run_dir import hold_output
+from scanner_sim.metrics import s44
 from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.runs.cluster import maybe_client
 from scanner_sim.runs.jobs import run_jobs
@@ -150,7 +151,10 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
             "study": {"waters": list(plan.waters),
                       "altitudes_m": [a if a is not None else config.platform.altitude_m for a in plan.altitudes_m],
                       "instruments": list(plan.instruments), "gate": plan.gate, "cell_m": settings.cell_m,
-                      "min_points": settings.min_points, "tolerance_m": settings.tolerance_m},
+                      "min_points": settings.min_points, "tolerance_m": settings.tolerance_m,
+                      "order_min_soundings": settings.order_min_soundings},
+            "s44_orders": s44.orders_table(),
+            "s44_source": s44.SOURCE,
             "wall_s": round(time.perf_counter() - started, 1),
             "records": records,
         }
@@ -168,7 +172,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
 def study_record(config: SceneConfig, summary: dict, water: str, altitude_m, instrument: str, name: str) -> dict:
     """One coverage.json record: the combination, its settings, pass counts and coverage figures."""
     figures = dict(summary["coverage"])
-    settings = {key: figures.pop(key) for key in ("cell_m", "min_points", "tolerance_m")}
+    settings = {key: figures.pop(key) for key in ("cell_m", "min_points", "tolerance_m", "order_min_soundings")}
     used = summary["settings"]
     settings.update(gate_delay_ns=used["gate_delay_ns"], gate_width_ns=used["gate_width_ns"], fidelity=summary["fidelity"],
                     seed=summary["seed"], max_pulses=summary["settings"]["max_pulses"],
