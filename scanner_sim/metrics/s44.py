@@ -83,7 +83,8 @@ def soundings_meeting(depth_m, vertical_error_m, horizontal_error_m, tvu_m=None,
     """(len(ORDERS), n) bool: which orders each of n soundings meets.
 
     depth_m (n,): true depth below the surface [m]; vertical_error_m, horizontal_error_m (n,): the sounding's
-    true errors [m] (NaN: unknown, meets none); tvu_m, thu_m (n,) or None: its predicted 95 % uncertainties [m].
+    true errors [m] (NaN: unknown, meets none); tvu_m, thu_m (n,) or None: its predicted 95 % uncertainties [m]
+    (NaN where the pass predicts none).
     """
     d = np.asarray(depth_m, float)
     dz = np.abs(np.asarray(vertical_error_m, float))
@@ -93,10 +94,10 @@ def soundings_meeting(depth_m, vertical_error_m, horizontal_error_m, tvu_m=None,
         for k, order in enumerate(ORDERS):
             tvu, thu = order.tvu_max_m(d), order.thu_max_m(d)
             ok = (dz <= tvu) & (dh <= thu)
-            if tvu_m is not None:
-                ok &= np.asarray(tvu_m, float) <= tvu
-            if thu_m is not None:
-                ok &= np.asarray(thu_m, float) <= thu
+            for predicted, limit in ((tvu_m, tvu), (thu_m, thu)):
+                if predicted is not None:  # NaN: not predicted for this sounding, its true error decides
+                    predicted = np.asarray(predicted, float)
+                    ok &= np.isnan(predicted) | (predicted <= limit)
             out[k] = ok
     return out
 
