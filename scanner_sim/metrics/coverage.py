@@ -252,6 +252,10 @@ class CoverageAccumulator:
         rule = s44.ComplianceRule(self.settings.order_min_soundings)
         return rule.complies(self.orders.soundings, self.orders.meeting)
 
+    def strictest_orders(self) -> np.ndarray:
+        """(ny, nx) int16: the strictest S-44 order each cell complies with (index into s44.ORDERS), or s44.NO_ORDER."""
+        return s44.strictest_order(self.order_compliance()).reshape(self.grid.shape)
+
     def planned_cells(self) -> np.ndarray | None:
         """(cells,) bool: cells in the swath the plan promised over the stretch flown, or None without a plan swath."""
         if self.planned is None or self.slot_span[0] is None:

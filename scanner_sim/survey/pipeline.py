@@ -269,5 +269,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
         sinks.render_points(out / "render.png", sample, setup.scene, facts, options.render_size)
     if "coverage_map.png" in files:
         sinks.render_coverage_map(out / "coverage_map.png", coverage, setup.scene, facts, summary["coverage"])
+    if "s44_map.png" in files:
+        sinks.render_order_map(out / "s44_map.png", coverage, facts, summary["coverage"])
     io.write_summary_json(out / "summary.json", summary)  # last: a complete pass is one with a summary
     return summary

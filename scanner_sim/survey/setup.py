@@ -136,7 +136,7 @@ class PassPlan:
         files += ["scene.ply"] if options.write_scene else []
         files += ["waveforms.npz"] if options.waveforms or output.waveform_every_n_pulses else []
         files += ["render.png"] if options.render and clouds else []
-        files += ["coverage_map.png"] if options.render and coverage else []
+        files += ["coverage_map.png", "s44_map.png"] if options.render and coverage else []
         return cls(level or config.survey.level, coverage, (*files, "summary.json"))
 
 

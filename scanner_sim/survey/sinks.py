@@ -153,7 +153,8 @@ class CoverageSink(CoverageAccumulator):
         super().add(chunk.slots, chunk.footprint, chunk.points, chunk.dropouts)
 
     def write(self, path: Path) -> dict:
-        io.write_coverage_grid_npz(path, self.grid, self.cell_states(), self.cells.reaching, self.cells.valid)
+        io.write_coverage_grid_npz(path, self.grid, self.cell_states(), self.cells.reaching, self.cells.valid,
+                                   s44_order=self.strictest_orders(), planned=self.planned_cells())
         return self.figures()
 
 
@@ -330,3 +331,15 @@ def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts:
              if fraction is not None else f"{facts.label}\nthe scan reaches no seabed cell")
     viz.plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
                           markers=markers, title=title)
+
+
+def render_order_map(path: Path, coverage: CoverageAccumulator, facts: PassFacts, figures: dict) -> None:
+    """s44_map.png: the strictest S-44 order each plan cell complies with, the planned swath outlined."""
+    from scanner_sim.metrics.s44 import ORDER_NAMES
+    from scanner_sim.render.s44_map import plot_order_map
+
+    planned = coverage.planned_cells()
+    plot_order_map(path, coverage.strictest_orders(), coverage.cell_states(),
+                   None if planned is None else planned.reshape(coverage.grid.shape), coverage.grid.extent_m,
+                   ORDER_NAMES, figures, title=f"{facts.label}\nIHO S-44 orders (Ed. 6.0.0), "
+                   f"{figures['order_min_soundings']} soundings a cell, 95 % within the order's TVU and THU")
