@@ -22,3 +22,14 @@ def test_render_legend_ends_inside_the_window(tmp_path):
     assert np.abs(right_edge - background).max() <= 8, "legend text reaches the window's right edge"
     # and the legend is there: coloured text in the right quarter of its rows
     assert (np.abs(legend_rows[:, 720:] - background).sum(axis=2) > 100).sum() > 500
+
+
+def test_coverage_chart_keeps_mul2023_visible_under_single_channel():
+    """At 100 % both instruments of a water sat at the same x with the same marker size, and single_channel's
+    squares, drawn last, hid mul2023's circles. Root cause: curves were set apart per water only."""
+    keys = [(w, i) for w in ("clean_ocean", "coastal_ocean") for i in ("mul2023", "single_channel")]
+    layout = viz.curve_layout(keys, span=3.0)
+    offsets = [layout[k][0] for k in keys]
+    assert len(set(offsets)) == len(keys)  # no two curves at the same x
+    for earlier, later in zip(keys, keys[1:]):  # each drawn on top of the one before, smaller
+        assert layout[later][3] > layout[earlier][3] and layout[later][2] < layout[earlier][2]

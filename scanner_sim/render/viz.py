@@ -637,13 +637,22 @@ def plot_coverage_map(path_png, state, extent_m, gap_causes: Sequence[str], *, l
     _figure_to_png(fig, path_png)
 
 
+def curve_layout(keys: Sequence[tuple], span: float) -> dict[tuple, tuple[float, float, float, int]]:
+    """Per curve key, in drawing order: (x offset, line width, marker size, z-order). Every curve is drawn a little
+    apart along x (2 % of ``span``, at least 0.02, between neighbours) and thinner, with smaller markers, than
+    the one before, on top of it: curves of equal values (two instruments both at 100 %) all stay visible."""
+    step = 0.02 * max(span, 1.0)
+    n = len(keys)
+    return {key: ((j - 0.5 * (n - 1)) * step, max(3.6 - 0.5 * j, 1.0), max(10.0 - 1.2 * j, 4.0), 2 + j)
+            for j, key in enumerate(keys)}
+
+
 def plot_coverage_vs_altitude(path_png, records: Sequence[Mapping], *, title: str | None = None) -> None:
     """Covered fraction [%] against altitude [m], one curve per water type and instrument.
 
     records: mappings with ``water``, ``instrument``, ``altitude_m`` and ``covered_fraction`` (0..1 or None).
-    Colour tells the water, line style and marker the instrument. Where waters give equal coverage (clean and
-    coastal at 100 %), their curves stay visible: each water is drawn a little apart along the altitude axis
-    and thinner than the one before, on top of it.
+    Colour tells the water, line style and marker the instrument. Where curves give equal coverage (clean and
+    coastal at 100 %, or both instruments of one water), they stay visible (:func:`curve_layout`).
     """
     from matplotlib.figure import Figure
 
@@ -655,16 +664,15 @@ def plot_coverage_vs_altitude(path_png, records: Sequence[Mapping], *, title: st
     ax = fig.add_subplot()
     cycle = iter(f"C{i}" for i in range(3, 100))
     colours: dict[str, str] = {}
-    waters = list(dict.fromkeys(water for water, _ in curves))
     altitudes = [a for pts in curves.values() for a, _ in pts]
-    dodge = 0.02 * max(max(altitudes) - min(altitudes), 1.0) if altitudes else 0.0
+    layout = curve_layout(list(curves), max(altitudes) - min(altitudes) if altitudes else 0.0)
     for (water, instrument), pts in curves.items():
         colour = colours.setdefault(water, WATER_COLOURS.get(water) or next(cycle))
         line, marker = _INSTRUMENT_STYLES.get(instrument, ("-.", "D"))
         alt, frac = np.array(sorted(pts)).T
-        k = waters.index(water)
-        ax.plot(alt + (k - 0.5 * (len(waters) - 1)) * dodge, frac, line, marker=marker, color=colour,
-                lw=max(3.6 - 1.2 * k, 1.0), ms=max(9.0 - 2.0 * k, 4.0), zorder=2 + k, label=f"{water}, {instrument}")
+        dx, lw, ms, z = layout[(water, instrument)]
+        ax.plot(alt + dx, frac, line, marker=marker, color=colour, lw=lw, ms=ms, zorder=z,
+                label=f"{water}, {instrument}")
     ax.set_xlabel("altitude [m]")
     ax.set_ylabel("covered fraction of the reached area [%]")
     ax.set_ylim(-2, 102)
