@@ -65,3 +65,19 @@ def test_a_cube_too_big_for_the_swath_is_refused_in_one_line(tmp_path, capsys):
     assert main(["features", "cable_survey", "--cubes-m", "20", "--max-pulses", "1000", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cubes_m" in err[0]
+
+
+def test_coverage_study_gains_feature_detection_per_size(tmp_path):
+    from scanner_sim.studies.coverage_study import CubePlan, StudyPlan, run_study
+
+    study = run_study(load_scene("cable_survey"), StudyPlan(waters=("clean_ocean",), instruments=("mul2023",)),
+                      tmp_path / "study", max_pulses=PULSES, render=False, progress=False,
+                      cubes=CubePlan((1.0, 2.0), 2, 5))
+    assert [c["size_m"] for c in study["cubes"]] == [2.0, 2.0, 1.0, 1.0]
+    (record,) = study["records"]
+    assert list(record["features"]) == ["1", "2"]
+    by_name = {o["name"]: o for o in record["objects"]}
+    for size, row in record["features"].items():
+        cubes = [by_name[c["name"]] for c in study["cubes"] if f"{c['size_m']:g}" == size]
+        assert row["placed"] == 2 and row["detected"] == sum(o["valid_points"] >= 5 for o in cubes)
+    assert "## Feature detection" in (tmp_path / "study" / "coverage.md").read_text()

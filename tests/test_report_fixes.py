@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from scanner_sim.metrics.coverage import GAP_CAUSES
 from scanner_sim.render import viz
 
 
@@ -33,3 +34,19 @@ def test_coverage_chart_keeps_mul2023_visible_under_single_channel():
     assert len(set(offsets)) == len(keys)  # no two curves at the same x
     for earlier, later in zip(keys, keys[1:]):  # each drawn on top of the one before, smaller
         assert layout[later][3] > layout[earlier][3] and layout[later][2] < layout[earlier][2]
+
+
+def test_near_zero_combination_is_explained_in_words():
+    """A turbid combination read 0.0 % covered and nothing on the page said why. Root cause: the report listed gap
+    areas by cause name only; a planner needs the cause's meaning."""
+    from scanner_sim.render import report
+
+    def record(name, fraction, gaps):
+        return {"dir": name, "covered_fraction": fraction, "reached_area_m2": 100.0, "gaps_m2": gaps}
+
+    study = {"records": [record("turbid-12m", 0.0, {"below_threshold": 99.0, "out_of_tolerance": 1.0}),
+                         record("clean-12m", 0.99, {"out_of_tolerance": 1.0})]}
+    (note,) = report.near_zero_notes(study)
+    assert note.startswith("turbid-12m: 0.0 % covered; below threshold takes 99.0 % of the reached area")
+    assert report.CAUSE_MEANINGS["below_threshold"] in note
+    assert set(report.CAUSE_MEANINGS) == set(GAP_CAUSES)  # every cause has its sentence

@@ -38,6 +38,15 @@ STUDY_RENDER_SIZE = (960, 600)
 
 
 @dataclass(frozen=True)
+class CubePlan:
+    """Cubes for feature detection: edge sizes [m], how many of each, the seed of their positions."""
+
+    sizes_m: tuple[float, ...]
+    count: int
+    seed: int
+
+
+@dataclass(frozen=True)
 class StudyPlan:
     """The combinations: every water x altitude [m] (None: the scene's) x instrument preset."""
 
@@ -105,7 +114,8 @@ def combination_name(water: str, altitude_m: float | None, instrument: str) -> s
 def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
               settings: CoverageSettings = CoverageSettings(), fidelity: str | None = None, seed: int | None = None,
               max_pulses: int | None = None, render: bool = True, progress: bool = True, client=None,
-              workers: int | None = None, scheduler: str | None = None, redo: bool = False) -> dict:
+              workers: int | None = None, scheduler: str | None = None, redo: bool = False,
+              cubes: CubePlan | None = None) -> dict:
     """Run every combination of ``plan`` and write the study's files into ``out_dir``.
 
     Per combination, a sub-directory with the pass's outputs (points.las, summary.json, coverage_map.png,
@@ -115,7 +125,9 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     The study is a campaign (docs/campaigns.md): its passes run as Dask tasks on ``client``, or on the
     scheduler at ``scheduler``, or on a local cluster of ``workers`` processes; with none of them (or
     ``workers=0``), one after another in this process. The results are the same bits either way. Passes
-    already complete in ``out_dir`` are kept, unless ``redo``. The folder is locked while the study runs: a
+    already complete in ``out_dir`` are kept, unless ``redo``. ``cubes``: cubes placed once for the whole study
+    across the swath of its lowest altitude (the narrowest), each record gaining ``features`` (per size placed,
+    detected, fraction; :mod:`scanner_sim.studies.features`). The folder is locked while the study runs: a
     second writer is refused (:func:`~scanner_sim.io.run_dir.hold_output`).
     """
     from scanner_sim import io
@@ -124,6 +136,16 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     if config.seabed is None:
         raise ParameterError(f"scene '{config.name}': coverage is measured over the seabed's plan area; the "
                              "scene has no seabed section")
+    out = Path(out_dir)
+    placed: list[dict] = []
+    if cubes is not None:
+        from scanner_sim.studies import features
+
+        lowest = min(a for _, a, _ in plan.combinations(config))
+        narrowest = combination_config(config, SCENE_WATER, lowest, plan.instruments[0], plan.gate)
+        placed = features.cube_positions(narrowest, cubes.sizes_m, cubes.count, cubes.seed, max_pulses, "cube_count")
+        out.mkdir(parents=True, exist_ok=True)
+        config = features.with_cubes(config, placed, (out / features.CUBE_FILE).resolve())
     combos = list(plan.combinations(config))
     # every combination is built (and so checked) before any pass runs
     jobs = [PassJob(combination_name(water, altitude, instrument),
@@ -132,7 +154,6 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
                                 max_pulses=max_pulses, progress=False,
                                 render=render, render_size=STUDY_RENDER_SIZE, write_scene=False, coverage=settings))
             for water, altitude, instrument in combos]
-    out = Path(out_dir)
     with hold_output(out):  # one writer at a time (io/run_dir.py)
         out.mkdir(parents=True, exist_ok=True)
         started = time.perf_counter()
@@ -146,6 +167,11 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
                                "the others are complete in the output folder: run the study again to redo only these")
         records = [study_record(job.config, o.summary, water, altitude, instrument, job.name)
                    for (water, altitude, instrument), job, o in zip(combos, jobs, outcomes)]
+        if placed:
+            from scanner_sim.studies.features import detection_table
+
+            for record in records:
+                record["features"] = detection_table(record["objects"], placed)
         study = {
             "scene": config.name,
             "study": {"waters": list(plan.waters),
@@ -154,6 +180,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
                       "min_points": settings.min_points, "tolerance_m": settings.tolerance_m,
                       "order_min_soundings": settings.order_min_soundings},
             "s44_orders": s44.orders_table(),
+            "cubes": placed,
             "s44_source": s44.SOURCE,
             "wall_s": round(time.perf_counter() - started, 1),
             "records": records,

@@ -47,8 +47,28 @@ def place_cubes(config: SceneConfig, sizes_m, count: int, seed: int, mesh_path: 
     """``config`` with ``count`` cubes of each size [m] added at seeded random plan positions inside the swath the
     pass flies (kept whole inside it and apart from each other), as ``mesh`` objects of the unit cube at
     ``mesh_path``; and the placements (name, size_m, x_m, y_m, heading_deg)."""
-    import shapely
+    placed = cube_positions(config, sizes_m, count, seed, max_pulses)
+    return with_cubes(config, placed, mesh_path), placed
+
+
+def with_cubes(config: SceneConfig, placed: list[dict], mesh_path: Path) -> SceneConfig:
+    """``config`` with the cubes ``placed`` added as ``mesh`` objects of a unit cube written to ``mesh_path``."""
     import trimesh
+
+    trimesh.creation.box(extents=(1.0, 1.0, 1.0)).export(mesh_path)
+    objects = [o.model_dump(exclude_unset=True) for o in config.objects]
+    objects += [{"type": "mesh", "name": p["name"], "file": str(mesh_path), "scale": p["size_m"],
+                 "translate_m": [p["x_m"], p["y_m"]], "rotate_deg": [0.0, 0.0, p["heading_deg"]],
+                 "label": "object"} for p in placed]
+    return config.with_overrides({"objects": objects})
+
+
+def cube_positions(config: SceneConfig, sizes_m, count: int, seed: int, max_pulses: int | None = None,
+                   count_key: str = "count") -> list[dict]:
+    """Seeded random placements (name, size_m, x_m, y_m, heading_deg) of ``count`` cubes of each size [m] inside the
+    swath a pass of ``config`` flies (its first ``max_pulses``), whole inside it and apart from each other;
+    ``count_key``: the option's name in messages."""
+    import shapely
 
     from scanner_sim.motion.trajectory import trajectory_of
     from scanner_sim.world.scene import build_scene
@@ -57,8 +77,7 @@ def place_cubes(config: SceneConfig, sizes_m, count: int, seed: int, mesh_path: 
     if not sizes or len(set(sizes)) != len(sizes) or any(not (math.isfinite(s) and s > 0) for s in sizes):
         raise ParameterError(f"cubes_m = {list(sizes_m)}: give distinct finite sizes > 0 [m]")
     if not (isinstance(count, int) and count >= 1):
-        raise ParameterError(f"count = {count!r}: must be an integer >= 1")
-    trimesh.creation.box(extents=(1.0, 1.0, 1.0)).export(mesh_path)
+        raise ParameterError(f"{count_key} = {count!r}: must be an integer >= 1")
     scene = build_scene(config)
     trajectory = trajectory_of(config, scene)
     rate = config.scanner.pulse_rate_hz or config.instrument_model().transmitter.repetition_rate_hz
@@ -87,15 +106,11 @@ def place_cubes(config: SceneConfig, sizes_m, count: int, seed: int, mesh_path: 
                         for p in placed):
                     break
             else:
-                raise ParameterError(f"count = {count}: {count} cubes of each size do not fit apart inside the swath "
+                raise ParameterError(f"{count_key} = {count}: {count} cubes of each size do not fit apart inside the swath "
                                      f"flown ({area.area:.1f} m²); give fewer or a longer pass")
             placed.append({"name": cube_name(size, k), "size_m": size, "x_m": float(x), "y_m": float(y),
                            "heading_deg": float(rng.uniform(0.0, 90.0))})
-    objects = [o.model_dump(exclude_unset=True) for o in config.objects]
-    objects += [{"type": "mesh", "name": p["name"], "file": str(mesh_path), "scale": p["size_m"],
-                 "translate_m": [p["x_m"], p["y_m"]], "rotate_deg": [0.0, 0.0, p["heading_deg"]],
-                 "label": "object"} for p in placed]
-    return config.with_overrides({"objects": objects}), placed
+    return placed
 
 
 def detection_table(objects: list[dict], placed: list[dict]) -> dict:
