@@ -142,7 +142,8 @@ def test_a_false_alarm_takes_no_hit_of_another_pulse(hits):
                          true_range_m=np.full(2, np.nan), first_surface=np.full(2, -1), scan_angle_deg=np.zeros(2),
                          time_s=np.array([0.0, 2e-4]), slot=np.array([10, 11]), leg=np.ones(2, np.uint16),
                          platform_m=np.zeros((2, 3)), attitude_rad=np.zeros((2, 3)))
-    ranging_table = tabulate(np.zeros(20), np.full(20, 3), np.full(20, 10.0), np.zeros(20, bool), 3, (3.0,))
+    ranging_table = tabulate(np.zeros(20), np.full(20, 3), np.full(20, 10.0), np.zeros(20, bool), np.zeros(20, bool),
+                             np.zeros(20, np.int64), 3, (3.0,))
     points = georeference(ranging, hits, sight, TpuModel(ranging_table, NavigationSigmas(), 0.01, 0.004))
     assert len(points) == 1 and points.pulse_index[0] == 10
     assert points.classification[0] == NOISE_CLASS and points.object_id[0] == NO_OBJECT

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 
 from muls.command import OneLineParser, checked_types, package_version, parse_guarded, run_guarded
-from scanner_sim.cli import clouds, features, passes, perf, studies  # noqa: F401  each registers its subcommands
+from scanner_sim.cli import clouds, features, passes, perf, studies, uncertainty  # noqa: F401  each registers its subcommands
 from scanner_sim.cli.registry import SUBCOMMANDS
 
 #: The order ``scanner-sim --help`` lists the subcommands in: the main job first.

@@ -109,7 +109,7 @@ def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight, tpu: TpuMode
     xyz = sight.origin_m[pulse] + r.range_m[:, None] * sight.direction[pulse]
     incidence_deg = np.degrees(of_hit(hits.incidence_rad, np.nan))
     thu, tvu = tpu(xyz - sight.platform_m[pulse], sight.direction[pulse], sight.attitude_rad[pulse], r.channel, r.snr,
-                   r.saturated, r.range_m, incidence_deg)
+                   r.saturated, ranging.return_number > 1, r.range_m, incidence_deg)
     return PointRecords(
         gps_time_s=sight.time_s[pulse], xyz=xyz,
         intensity=intensity_from_power(r.peak_power_w), return_number=ranging.return_number,

@@ -25,6 +25,7 @@ from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.metrics.planned_swath import planned_swath
+from scanner_sim.metrics.tpu_calibration import UncertaintySink
 from scanner_sim.render import viz
 from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
@@ -92,11 +93,12 @@ def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), sce
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
     compile_s = warm_up(setup, options)
-    memory = sinks.MemorySink()
-    stats, coverage, wall_s = stream_pass(setup, pass_chunks(setup, options), [memory], options)
+    memory, uncertainty = sinks.MemorySink(), UncertaintySink(setup)
+    stats, coverage, wall_s = stream_pass(setup, pass_chunks(setup, options), [memory, uncertainty], options)
     dropouts = memory.dropouts()
     summary = sinks.pass_summary(pass_facts(setup, options), stats, stats.points, dropouts.counts_by_cause(), wall_s,
                                  setup_s, compile_s)
+    summary["uncertainty"] = uncertainty.figures()
     if coverage is not None:
         summary["coverage"] = coverage.figures()
     return PassResult(summary, None, memory.points(), dropouts, trajectory_table(setup))
@@ -251,11 +253,12 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
                   sinks.point_cloud_sinks(output, out, setup.scene.local_origin, facts.metadata())]
         dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
         waveforms = sinks.WaveformSink(setup.model.instrument.digitizer, facts.channels)
-        sample = sinks.CloudSample()
-        stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts, waveforms]
+        sample, uncertainty = sinks.CloudSample(), UncertaintySink(setup)
+        stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts, waveforms, uncertainty]
                                               + ([sample] if render else []), options)
     summary = sinks.pass_summary(facts, stats, stats.points, dropouts.counts_by_cause(), wall_s + earlier_wall_s,
                                  setup_s, compile_s)
+    summary["uncertainty"] = uncertainty.figures()
     if coverage is not None:
         summary["coverage"] = coverage.write(out / "coverage_grid.npz")
     if "scene.ply" in files:

@@ -5,11 +5,13 @@ the beam filling them) through its own physics (the same instrument, gate, water
 processing as its pulses): :data:`SHOTS` shots at each of the ranges its survey gives (quantiles of its sampled
 echo delays, :func:`scanner_sim.survey.gate.echo_span`) and each of :data:`REFLECTANCES`, so that the echoes span
 the signal-to-noise ratios and the clipping the pass meets. Each return the panel's echo explains is binned by the
-channel the instrument chose, whether that channel clipped, and its SNR; a bin holds the mean of its range errors
-about the truth (the ranging's systematic part: the echo spread's late shift, a weak echo's early lean) and their
-standard deviation about that mean (its random part). A bin with fewer than :data:`MIN_SHOTS` returns takes the
-nearest bin of its row (channel and clipping) that has them; a row without any takes the pooled figures of all
-returns of its clipping state, and of all returns when none clipped.
+channel the instrument chose, whether that channel clipped, whether it was the pulse's first return or a later one (a
+later return inside one broad, multiply scattered echo lies far behind), the nearest panel range (the echo spread's
+late shift grows with range) and its SNR. A bin holds the mean of its range errors about the truth (the ranging's
+systematic part: the echo spread's late shift, a weak echo's early lean) and their standard deviation about that
+mean (its random part). A bin with fewer than :data:`MIN_SHOTS` returns takes the nearest bin in SNR of its row that
+has them, a row without any the nearest panel range's row, and a state (clipped, later) without any on a channel
+the figures of that state pooled over channels and ranges, else of every return.
 """
 
 from __future__ import annotations
@@ -37,41 +39,63 @@ FIRST_SHOT_ID = 1 << 40
 
 @dataclass(frozen=True)
 class RangingPrecision:
-    """Range error [m] per (channel 1..k, clipped 0/1, SNR bin): ``bias_m`` its mean and ``sigma_m`` its standard
-    deviation, each (k + 1, 2, bins) (row 0 unused); ``snr_edges`` (bins + 1,) the bins' SNR edges, ``count``
-    (k + 1, 2, bins) the returns measured in each bin, and the ranges [m] and reflectances the panels stood at."""
+    """Range error [m] per (channel 1..k, clipped 0/1, later return 0/1, panel range, SNR bin): ``bias_m`` its mean
+    and ``std_m`` its standard deviation, each (k + 1, 2, 2, ranges, bins) (channel 0 unused); ``count`` the returns
+    measured in each bin; ``snr_edges`` (bins + 1,) the bins' SNR edges; ``ranges_m`` the panel ranges [m]."""
 
     bias_m: np.ndarray
     std_m: np.ndarray
-    snr_edges: np.ndarray
     count: np.ndarray
+    snr_edges: np.ndarray
     ranges_m: tuple[float, ...]
-    reflectances: tuple[float, ...] = REFLECTANCES
 
-    def of(self, channel: np.ndarray, snr: np.ndarray, saturated: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def of(self, channel, snr, saturated, later, range_m) -> tuple[np.ndarray, np.ndarray]:
         """(bias, standard deviation) [m], each (n,), of the range of returns on ``channel`` (n,) 1-based at ``snr``
-        (n,), clipped ``saturated`` (n,) bool; SNR outside the table takes its end bins."""
-        k = np.clip(np.searchsorted(self.snr_edges, snr, side="right") - 1, 0, self.snr_edges.size - 2)
-        cell = (np.clip(channel.astype(np.int64), 0, self.bias_m.shape[0] - 1), saturated.astype(np.int64), k)
+        (n,), clipped ``saturated`` (n,) bool, ``later`` (n,) bool not their pulse's first return, at ``range_m``
+        (n,) [m]; the nearest panel range, and SNR outside the table the end bins."""
+        cell = (np.clip(np.asarray(channel, np.int64), 0, self.bias_m.shape[0] - 1),
+                np.asarray(saturated, np.int64), np.asarray(later, np.int64),
+                nearest_index(self.ranges_m, range_m), snr_bin(self.snr_edges, snr))
         return self.bias_m[cell], self.std_m[cell]
 
     def as_dict(self) -> dict:
-        """The table as JSON-ready lists (the summary's ``uncertainty.ranging``)."""
-        return {"snr_edges": [round(float(e), 4) for e in self.snr_edges],
-                **{name: {f"ch{c}": {state: [round(float(v), 5) for v in table[c, i]]
-                                               for i, state in enumerate(("unclipped", "clipped"))}
-                          for c in range(1, table.shape[0])} for name, table in (("bias_m", self.bias_m),
-                                                                                  ("std_m", self.std_m))},
-                "count": {f"ch{c}": {"unclipped": self.count[c, 0].tolist(), "clipped": self.count[c, 1].tolist()}
-                          for c in range(1, self.count.shape[0])},
-                "ranges_m": [round(r, 3) for r in self.ranges_m], "reflectances": list(self.reflectances),
-                "shots_per_panel": SHOTS}
+        """The table as JSON-ready lists (the summary's ``uncertainty.ranging``): per channel, state and panel range,
+        the bias, standard deviation and count per SNR bin (bins without returns of their own show the figures they
+        take)."""
+        states = {"first": (0, 0), "first_clipped": (1, 0), "later": (0, 1), "later_clipped": (1, 1)}
+
+        def rows(table, digits):
+            return {f"ch{c}": {name: [[round(float(v), digits) for v in table[c, a, b, i]]
+                                      for i in range(len(self.ranges_m))] for name, (a, b) in states.items()}
+                    for c in range(1, table.shape[0])}
+
+        return {"snr_edges": [round(float(e), 4) for e in self.snr_edges], "ranges_m": [round(r, 3) for r in self.ranges_m],
+                "reflectances": list(REFLECTANCES), "shots_per_panel": SHOTS,
+                "bias_m": rows(self.bias_m, 4), "std_m": rows(self.std_m, 4), "count": rows(self.count, 0)}
+
+
+def snr_edges() -> np.ndarray:
+    """(bins + 1,) SNR edges of the table's bins: :data:`BINS_PER_DECADE` per decade over :data:`SNR_DECADES`."""
+    lo, hi = SNR_DECADES
+    return 10.0 ** np.linspace(lo, hi, int((hi - lo) * BINS_PER_DECADE) + 1)
+
+
+def snr_bin(edges: np.ndarray, snr) -> np.ndarray:
+    """(n,) int64 bin of each ``snr`` (n,) among ``edges``, the end bins taking what lies beyond."""
+    return np.clip(np.searchsorted(edges, snr, side="right") - 1, 0, edges.size - 2)
+
+
+def nearest_index(values, x) -> np.ndarray:
+    """(n,) int64 index of the nearest of ascending ``values`` (k,) to each ``x`` (n,)."""
+    values = np.asarray(values, float)
+    return np.searchsorted(0.5 * (values[1:] + values[:-1]), np.asarray(x, float)).astype(np.int64)
 
 
 def panel_ranges_m(delays_s: np.ndarray, speed_m_s: float) -> tuple[float, ...]:
     """The ranges [m] the panels stand at: :data:`RANGE_QUANTILES` of the one-way ranges of echo delays
-    ``delays_s`` (k,) [s] at light speed ``speed_m_s`` [m/s]."""
-    return tuple(float(r) for r in np.quantile(0.5 * speed_m_s * np.asarray(delays_s), RANGE_QUANTILES))
+    ``delays_s`` (k,) [s] at light speed ``speed_m_s`` [m/s], each once, ascending."""
+    return tuple(float(r) for r in np.unique(np.round(np.quantile(0.5 * speed_m_s * np.asarray(delays_s),
+                                                                  RANGE_QUANTILES), 3)))
 
 
 def measure_ranging_precision(physics, instrument, ranges_m: tuple[float, ...]) -> RangingPrecision:
@@ -85,37 +109,47 @@ def measure_ranging_precision(physics, instrument, ranges_m: tuple[float, ...]) 
     _, ranging = physics(batch)
     r = ranging.returns
     echo = r.echo_index >= 0
-    error = (r.range_m - truth[r.pulse])[echo]
-    return tabulate(error, r.channel[echo], r.snr[echo], r.saturated[echo], len(instrument.channels),
-                    tuple(ranges.tolist()))
+    later = ranging.return_number > 1
+    return tabulate((r.range_m - truth[r.pulse])[echo], r.channel[echo], r.snr[echo], r.saturated[echo], later[echo],
+                    nearest_index(ranges, truth[r.pulse][echo]), len(instrument.channels), tuple(ranges.tolist()))
 
 
-def tabulate(error_m, channel, snr, saturated, channels: int, ranges_m: tuple[float, ...]) -> RangingPrecision:
+def tabulate(error_m, channel, snr, saturated, later, range_index, channels: int, ranges_m: tuple[float, ...]
+             ) -> RangingPrecision:
     """The table (module doc) of returns with range errors ``error_m`` (n,) [m] on ``channel`` (n,) 1-based at
-    ``snr`` (n,), clipped ``saturated`` (n,), for an instrument of ``channels`` signal channels."""
-    lo, hi = SNR_DECADES
-    edges = 10.0 ** np.linspace(lo, hi, int((hi - lo) * BINS_PER_DECADE) + 1)
-    bins = edges.size - 1
-    k = np.clip(np.searchsorted(edges, snr, side="right") - 1, 0, bins - 1)
-    cell = (channel.astype(np.int64) * 2 + saturated.astype(np.int64)) * bins + k
-    size = (channels + 1) * 2 * bins
+    ``snr`` (n,), clipped ``saturated`` (n,), ``later`` (n,) returns, from the panel at ``ranges_m[range_index]``
+    (n,), for an instrument of ``channels`` signal channels."""
+    edges = snr_edges()
+    bins, n_ranges = edges.size - 1, len(ranges_m)
+    shape = (channels + 1, 2, 2, n_ranges, bins)
     error = np.asarray(error_m, float)
-    count = np.bincount(cell, minlength=size).reshape(channels + 1, 2, bins)
-    total = np.bincount(cell, weights=error, minlength=size).reshape(count.shape)
-    square = np.bincount(cell, weights=error**2, minlength=size).reshape(count.shape)
-    bias, std = np.full(count.shape, np.nan), np.full(count.shape, np.nan)
-    clipped = saturated.astype(bool)
-    for state in (0, 1):
-        pooled = error[clipped == bool(state)]
-        if pooled.size < MIN_SHOTS:
-            pooled = error
-        for c in range(channels + 1):
-            good = np.nonzero(count[c, state] >= MIN_SHOTS)[0]
-            if good.size == 0:
-                bias[c, state], std[c, state] = pooled.mean(), pooled.std()
-                continue
-            nearest = good[np.abs(np.arange(bins)[:, None] - good[None, :]).argmin(axis=1)]
-            n, mean = count[c, state, nearest], total[c, state, nearest] / count[c, state, nearest]
-            bias[c, state] = mean
-            std[c, state] = np.sqrt(np.maximum(square[c, state, nearest] / n - mean**2, 0.0))
-    return RangingPrecision(bias, std, edges, count, ranges_m)
+    index = (np.asarray(channel, np.int64), np.asarray(saturated, np.int64), np.asarray(later, np.int64),
+             np.asarray(range_index, np.int64), snr_bin(edges, snr))
+    cell = np.ravel_multi_index(index, shape)
+    size = int(np.prod(shape))
+    count = np.bincount(cell, minlength=size).reshape(shape)
+    total = np.bincount(cell, weights=error, minlength=size).reshape(shape)
+    square = np.bincount(cell, weights=error**2, minlength=size).reshape(shape)
+    bias, std = np.full(shape, np.nan), np.full(shape, np.nan)
+    every = _mean_std(error)
+    for clipped in (0, 1):
+        for behind in (0, 1):
+            mine = (index[1] == clipped) & (index[2] == behind)
+            pooled = _mean_std(error[mine]) if mine.sum() >= MIN_SHOTS else every
+            for c in range(channels + 1):
+                filled = [i for i in range(n_ranges) if (count[c, clipped, behind, i] >= MIN_SHOTS).any()]
+                for i in range(n_ranges):
+                    if not filled:
+                        bias[c, clipped, behind, i], std[c, clipped, behind, i] = pooled
+                        continue
+                    row = (c, clipped, behind, min(filled, key=lambda j: abs(j - i)))
+                    good = np.nonzero(count[row] >= MIN_SHOTS)[0]
+                    near = good[np.abs(np.arange(bins)[:, None] - good[None, :]).argmin(axis=1)]
+                    n, mean = count[row][near], total[row][near] / count[row][near]
+                    bias[c, clipped, behind, i] = mean
+                    std[c, clipped, behind, i] = np.sqrt(np.maximum(square[row][near] / n - mean**2, 0.0))
+    return RangingPrecision(bias, std, count, edges, ranges_m)
+
+
+def _mean_std(error: np.ndarray) -> tuple[float, float]:
+    return (float(error.mean()), float(error.std())) if error.size else (np.nan, np.nan)

@@ -36,6 +36,8 @@ from scanner_sim.survey.ranging_precision import RangingPrecision
 K95_VERTICAL = 1.96
 #: The confidence of THU and TVU.
 CONFIDENCE = 0.95
+#: Halvings of the bracket in :func:`folded_normal_quantile`: 2^-30 of a 1 m bracket is under a nanometre.
+BISECTIONS = 30
 #: THU and TVU are reported to the millimetre [decimals of a metre], the resolution of the points' LAS coordinates
 #: (which keeps points.laz compact: noise in the low bits would not compress).
 REPORTED_DECIMALS = 3
@@ -58,6 +60,12 @@ class NavigationSigmas:
         """From a :class:`scanner_sim.config.NavigationNoiseConfig`."""
         return cls(noise.position_sigma_m, noise.depth_sigma_m, math.radians(noise.attitude_sigma_deg),
                    math.radians(noise.heading_sigma_deg))
+
+    def as_dict(self) -> dict:
+        """The sigmas as the summary states them: position and depth [m], attitude and heading [deg]."""
+        return {"position_sigma_m": self.position_m, "depth_sigma_m": self.depth_m,
+                "attitude_sigma_deg": round(math.degrees(self.attitude_rad), 6),
+                "heading_sigma_deg": round(math.degrees(self.heading_rad), 6)}
 
 
 @dataclass(frozen=True)
@@ -101,29 +109,41 @@ class TpuModel:
                 cov += sigma**2 * j[:, :, None] * j[:, None, :]
         return cov
 
-    def __call__(self, lever_m, direction, attitude_rad, channel, snr, saturated, range_m, incidence_deg
-                 ) -> tuple[np.ndarray, np.ndarray]:
-        """(THU, TVU) [m] at 95 %, each (n,), of n points (arguments as :meth:`covariance` and
-        :meth:`RangingPrecision.of`, ``range_m`` (n,) the measured range [m], ``incidence_deg`` (n,))."""
-        bias, std = self.ranging.of(channel, snr, saturated)
+    def error_model(self, lever_m, direction, attitude_rad, channel, snr, saturated, later, range_m, incidence_deg
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """The predicted error of n points: its mean (n, 3) [m] (the ranging's bias along the beam) and covariance
+        (n, 3, 3) [m^2]. Arguments as :meth:`covariance` and :meth:`RangingPrecision.of`; ``range_m`` (n,) the
+        measured range [m], ``incidence_deg`` (n,)."""
+        bias, std = self.ranging.of(channel, snr, saturated, later, range_m)
         sigma_range = np.hypot(std, self.footprint_sigma_m(range_m, incidence_deg))
-        cov = self.covariance(lever_m, direction, attitude_rad, sigma_range)
-        mean = bias[:, None] * direction
-        thu = K95_HORIZONTAL * np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1] + mean[:, 0] ** 2 + mean[:, 1] ** 2))
-        tvu = folded_normal_quantile(mean[:, 2], np.sqrt(cov[:, 2, 2]), CONFIDENCE)
-        return np.round(thu, REPORTED_DECIMALS), np.round(tvu, REPORTED_DECIMALS)
+        return bias[:, None] * direction, self.covariance(lever_m, direction, attitude_rad, sigma_range)
+
+    def __call__(self, *point) -> tuple[np.ndarray, np.ndarray]:
+        """(THU, TVU) [m] at 95 %, each (n,), of n points (arguments as :meth:`error_model`), to the millimetre."""
+        mean, cov = self.error_model(*point)
+        return np.round(thu_of(mean, cov), REPORTED_DECIMALS), np.round(tvu_of(mean, cov), REPORTED_DECIMALS)
+
+
+def thu_of(mean, cov) -> np.ndarray:
+    """(n,) THU [m]: 2.45 sigma_h, sigma_h^2 the mean square horizontal error over two, of errors of ``mean`` (n, 3)
+    and covariance ``cov`` (n, 3, 3)."""
+    return K95_HORIZONTAL * np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1] + mean[:, 0] ** 2 + mean[:, 1] ** 2))
+
+
+def tvu_of(mean, cov, p: float = CONFIDENCE) -> np.ndarray:
+    """(n,) TVU [m]: the ``p`` quantile of |vertical error| of errors of ``mean`` (n, 3) and covariance ``cov``."""
+    return folded_normal_quantile(mean[:, 2], np.sqrt(cov[:, 2, 2]), p)
 
 
 def folded_normal_quantile(mean, sigma, p: float) -> np.ndarray:
-    """(n,) the T with P(|Z| <= T) = ``p`` for Z normal of ``mean`` (n,) and ``sigma`` (n,) [m]: Newton's method on
-    Phi((T - mean) / sigma) - Phi((-T - mean) / sigma) = p from T = |mean| + 1.96 sigma, above the root (the
-    function rises and is concave beyond |mean|: the first step lands at or below the root, the next rise onto it).
-    A sigma under 1 micrometre is taken as 1 micrometre."""
+    """(n,) the T with P(|Z| <= T) = ``p`` for Z normal of ``mean`` (n,) and ``sigma`` (n,) [m]: bisection of
+    Phi((T - mean) / sigma) - Phi((-T - mean) / sigma) = p, which rises with T, between 0 and |mean| + 6 sigma, to
+    2^-:data:`BISECTIONS` of that bracket. A sigma under 1 micrometre is taken as 1 micrometre."""
     mean, sigma = np.abs(np.asarray(mean, np.float64)), np.maximum(np.asarray(sigma, np.float64), 1e-6)
-    t = mean + K95_VERTICAL * sigma
-    for _ in range(8):
-        a, b = (t - mean) / sigma, (t + mean) / sigma
-        f = ndtr(a) - ndtr(-b) - p
-        slope = (np.exp(-0.5 * a * a) + np.exp(-0.5 * b * b)) / (sigma * math.sqrt(2.0 * math.pi))
-        t = t - f / slope
-    return t
+    lo, hi = np.zeros_like(mean), mean + 6.0 * sigma
+    for _ in range(BISECTIONS):
+        t = 0.5 * (lo + hi)
+        inside = ndtr((t - mean) / sigma) - ndtr((-t - mean) / sigma) >= p
+        hi = np.where(inside, t, hi)
+        lo = np.where(inside, lo, t)
+    return 0.5 * (lo + hi)
