@@ -104,7 +104,8 @@ def test_study_outputs_and_self_contained_report(small_study):
         assert 0.0 < r["covered_fraction"] <= 1.0
         assert r["settings"]["tolerance_m"] == 0.15 and r["settings"]["gate_delay_ns"] == 35.0
         assert sum(r["gaps_m2"].values()) == pytest.approx(r["reached_area_m2"] - r["covered_area_m2"])
-        for file in ("points.las", "summary.json", "coverage_grid.npz", "coverage_map.png", "s44_map.png", "render.png"):
+        for file in ("points.las", "summary.json", "coverage_grid.npz", "coverage_map.png", "s44_map.png", "calibration.png",
+                     "render.png"):
             assert (out / r["dir"] / file).is_file()
         assert not (out / r["dir"] / "scene.ply").exists()  # one truth mesh for the whole study
     assert (out / "scene.ply").is_file()
@@ -119,7 +120,7 @@ def test_study_outputs_and_self_contained_report(small_study):
     page.close()
     assert page.links == []  # nothing outside the file
     assert page.tables >= 2
-    assert len(page.images) == 1 + 3 * len(study["records"])  # chart, then two maps and a render per combination
+    assert len(page.images) == 1 + 4 * len(study["records"])  # chart, then two maps, a TPU chart and a render each
     for src in page.images:
         head, data = src.split(",", 1)
         assert head == "data:image/png;base64"
@@ -195,9 +196,9 @@ def test_report_s44_section_opens_in_chromium_with_every_image_decoding(small_st
     found = re.search(r'<div id="probe">(\d+) (\d+) ([^<]*)</div>', run.stdout)
     assert found, run.stdout[-2000:]
     images, decoded, sections = int(found[1]), int(found[2]), found[3].split(";")
-    assert images == decoded == 1 + 3 * 2  # the chart; per pass its coverage map, S-44 map and render
+    assert images == decoded == 1 + 4 * 2  # the chart; per pass its coverage map, S-44 map, TPU chart and render
     assert "S-44 compliance per water and altitude" in sections and "IHO S-44 orders (Edition 6.0.0, 2020, Table 1)" \
-        in sections
+        in sections and "Uncertainty per point (TPU) against the truth" in sections
 
 
 def test_coverage_map_colours_cells_by_cause(tmp_path):

@@ -13,7 +13,7 @@ from pathlib import Path
 
 #: Pictures of one combination shown in the report, with their captions.
 COMBINATION_PICTURES = (("coverage_map.png", "coverage map"), ("s44_map.png", "S-44 orders"),
-                        ("render.png", "point cloud"))
+                        ("calibration.png", "TPU calibration"), ("render.png", "point cloud"))
 #: Below this covered fraction the report says in words why a combination maps (next to) nothing.
 NEAR_ZERO = 0.10
 #: What each gap cause means for a planner, in a sentence (the rules: docs/outputs.md, Dropout causes).
@@ -127,6 +127,22 @@ def compliance_table(study: dict) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
+def tpu_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
+    """Per combination, the predicted 95 % THU and TVU and the share of points whose true error they hold."""
+    if not any(r.get("tpu") for r in study["records"]):
+        return None
+    header = ["water", "instrument", "altitude [m]", "TVU median / p95 [cm]", "THU median / p95 [cm]",
+              "points judged", "within TVU [%]", "within THU [%]"]
+
+    def cm(q):
+        return "–" if q["median"] is None else f"{100 * q['median']:.1f} / {100 * q['p95']:.1f}"
+
+    rows = [[r["water"], r["instrument"], _altitude(r["altitude_m"]), cm(t["tvu_m"]), cm(t["thu_m"]),
+             f"{t['points']:,}", _percent(t["vertical_within_tvu"]), _percent(t["horizontal_within_thu"])]
+            for r in study["records"] if (t := r.get("tpu"))]
+    return header, rows
+
+
 def feature_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
     """Per combination, the share of the placed cubes of each size detected, when the study placed cubes."""
     sizes = list(dict.fromkeys(size for r in study["records"] for size in r.get("features", {})))
@@ -190,6 +206,9 @@ def _sections(study: dict):
     features = feature_table(study)
     if features:
         sections.append(("Feature detection", features))
+    tpu = tpu_table(study)
+    if tpu:
+        sections.append(("Uncertainty per point (TPU) against the truth", tpu))
     return sections
 
 

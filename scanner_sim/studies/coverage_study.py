@@ -192,6 +192,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
 
             viz.plot_coverage_vs_altitude(out / "coverage_vs_altitude.png", records,
                                           title=f"{config.name}: coverage against altitude")
+            _calibration_charts(out, records)
             io.write_text(out / "report.html", report.report_html(study, out))
     return study
 
@@ -215,5 +216,27 @@ def study_record(config: SceneConfig, summary: dict, water: str, altitude_m, ins
         "range_error_m": summary["range_error_m"],
         "wall_s": summary["wall_s"],
         **figures,
+        "tpu": _tpu_figures(summary),
         "settings": settings,
     }
+
+
+def _tpu_figures(summary: dict) -> dict | None:
+    """The pass's predicted THU/TVU (median, p95 [m]) and their calibration against the truth (shares within and the
+    chart's levels), from summary.json's ``uncertainty``; None for a summary without one."""
+    u = summary.get("uncertainty")
+    if not u:
+        return None
+    c = u["calibration"]
+    return {"thu_m": u["thu_m"], "tvu_m": u["tvu_m"], "points": c["points"],
+            "vertical_within_tvu": c["vertical_within_tvu"], "horizontal_within_thu": c["horizontal_within_thu"],
+            "chart": c["chart"]}
+
+
+def _calibration_charts(out: Path, records: list[dict]) -> None:
+    """calibration.png in each combination's folder: its TPU's predicted against observed coverage."""
+    from scanner_sim.render.calibration_chart import plot_calibration
+
+    for r in records:
+        if r.get("tpu") and r["tpu"]["points"]:
+            plot_calibration(out / r["dir"] / "calibration.png", r["tpu"], title=f"{r['dir']}: THU/TVU against the truth")
