@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scanner_sim.render.viz import COVERAGE_COLOURS, _figure_to_png
+from scanner_sim.render.viz import COVERAGE_COLOURS, finish_plan_map
 
 DETECTED_COLOUR = "#1a9850"
 MISSED_COLOUR = "#d73027"
@@ -64,9 +64,5 @@ def plot_feature_detection(path_png, grid_npz: Path, result: dict, *, title: str
                Patch(facecolor=COVERAGE_COLOURS["not_reached"], edgecolor="grey", label="not reached by the scan")]
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, fontsize=8, frameon=False)
     rows = [f"{size} m: {c['detected']}/{c['placed']}" for size, c in result["cubes"].items()]
-    ax.set_xlabel("x east [m]; label: cube size: its valid soundings")
-    ax.set_ylabel("y north [m]")
-    ax.set_aspect("equal")
-    ax.set_title((title + "\n" if title else "") + "detected per size: " + ", ".join(rows), fontsize=10)
-    fig.tight_layout()
-    _figure_to_png(fig, path_png)
+    finish_plan_map(fig, ax, path_png, (title + "\n" if title else "") + "detected per size: " + ", ".join(rows),
+                    x_label="x east [m]; label: cube size: its valid soundings")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scanner_sim.render.viz import COVERAGE_COLOURS, _figure_to_png
+from scanner_sim.render.viz import COVERAGE_COLOURS, finish_plan_map
 
 #: Colour per order, strictest first (dark to light green), then "complies with none" and "not reached".
 ORDER_COLOURS = ("#00441b", "#238b45", "#74c476", "#bae4b3", "#edf8e9")
@@ -43,13 +43,7 @@ def plot_order_map(path_png, order, state, planned, extent_m, order_names, figur
         handles.append(Patch(facecolor="none", edgecolor="black", linestyle="--", label="planned swath"))
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=8, frameon=False,
               title="strictest S-44 order the cell complies with")
-    ax.set_xlabel("x east [m]")
-    ax.set_ylabel("y north [m]")
-    ax.set_aspect("equal")
-    if title:
-        ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    _figure_to_png(fig, path_png)
+    finish_plan_map(fig, ax, path_png, title)
 
 
 def _pct(fraction) -> str:

@@ -628,7 +628,12 @@ def plot_coverage_map(path_png, state, extent_m, gap_causes: Sequence[str], *, l
                      f"{counts[k] / reached:.1%}") for k, n in enumerate(names) if k == 1 or (k >= 2 and counts[k])]
     handles.append(Patch(facecolor=COVERAGE_COLOURS["not_reached"], edgecolor="grey", label="not reached by the scan"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    ax.set_xlabel("x east [m]")
+    finish_plan_map(fig, ax, path_png, title)
+
+
+def finish_plan_map(fig, ax, path_png, title: str | None, x_label: str = "x east [m]") -> None:
+    """A plan map's axes (x east, y north, equal scale), its title, written to ``path_png``."""
+    ax.set_xlabel(x_label)
     ax.set_ylabel("y north [m]")
     ax.set_aspect("equal")
     if title:
