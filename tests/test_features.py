@@ -81,3 +81,24 @@ def test_coverage_study_gains_feature_detection_per_size(tmp_path):
         cubes = [by_name[c["name"]] for c in study["cubes"] if f"{c['size_m']:g}" == size]
         assert row["placed"] == 2 and row["detected"] == sum(o["valid_points"] >= 5 for o in cubes)
     assert "## Feature detection" in (tmp_path / "study" / "coverage.md").read_text()
+
+
+def test_campaign_table_gains_feature_detection_per_size(tmp_path):
+    import csv
+
+    from scanner_sim.runs.campaign import parse_campaign, run_campaign
+
+    campaign = parse_campaign({"scene": "cable_survey", "sweep": {"water": ["clean_ocean", "turbid_harbor"]},
+                               "options": {"max_pulses": PULSES, "render": False, "cubes_m": [0.5, 2.0],
+                                           "cube_count": 2, "cube_seed": 3}})
+    result = run_campaign(campaign, tmp_path / "c", progress=False)
+    assert [c["size_m"] for c in result["cubes"]] == [2.0, 2.0, 0.5, 0.5]
+    rows = list(csv.DictReader((tmp_path / "c" / "campaign.csv").open()))
+    assert [r["water"] for r in rows] == ["clean_ocean", "turbid_harbor"]
+    for row, p in zip(rows, result["passes"]):
+        objects = {o["name"]: o for o in p["summary"]["coverage"]["objects"]}
+        for size in ("0.5", "2"):
+            mine = [objects[c["name"]] for c in result["cubes"] if f"{c['size_m']:g}" == size]
+            assert int(row[f"features.{size}.detected"]) == sum(o["valid_points"] >= 5 for o in mine)
+            assert float(row[f"features.{size}.fraction"]) == pytest.approx(int(row[f"features.{size}.detected"]) / 2)
+        assert 0.0 <= float(row["coverage.orders.exclusive.compliant_fraction"]) <= 1.0

@@ -144,8 +144,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
         lowest = min(a for _, a, _ in plan.combinations(config))
         narrowest = combination_config(config, SCENE_WATER, lowest, plan.instruments[0], plan.gate)
         placed = features.cube_positions(narrowest, cubes.sizes_m, cubes.count, cubes.seed, max_pulses, "cube_count")
-        out.mkdir(parents=True, exist_ok=True)
-        config = features.with_cubes(config, placed, (out / features.CUBE_FILE).resolve())
+        config = features.with_cubes(config, placed)
     combos = list(plan.combinations(config))
     # every combination is built (and so checked) before any pass runs
     jobs = [PassJob(combination_name(water, altitude, instrument),

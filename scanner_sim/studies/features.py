@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from muls.errors import ParameterError
-from scanner_sim.config import SceneConfig
+from scanner_sim.config import SCENES_DIR, SceneConfig
 from scanner_sim.metrics import s44
 from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.metrics.planned_swath import planned_swath
@@ -23,8 +23,8 @@ from scanner_sim.metrics.planned_swath import planned_swath
 #: Cubes per size unless asked otherwise.
 DEFAULT_COUNT = 8
 DEFAULT_SIZES_M = (0.5, 1.0, 2.0)
-#: Name of the unit cube mesh written beside the pass (scaled per cube).
-CUBE_FILE = "unit_cube.stl"
+#: The shipped unit cube (centred on the origin), scaled to each cube's size.
+CUBE_MESH = SCENES_DIR / "assets" / "unit_cube.obj"
 #: Gap kept between two cubes' bounding circles [m].
 CUBE_GAP_M = 0.25
 
@@ -42,22 +42,10 @@ def cube_name(size_m: float, k: int) -> str:
     return f"cube_{size_m:g}m_{k:02d}"
 
 
-def place_cubes(config: SceneConfig, sizes_m, count: int, seed: int, mesh_path: Path,
-                max_pulses: int | None = None) -> tuple[SceneConfig, list[dict]]:
-    """``config`` with ``count`` cubes of each size [m] added at seeded random plan positions inside the swath the
-    pass flies (kept whole inside it and apart from each other), as ``mesh`` objects of the unit cube at
-    ``mesh_path``; and the placements (name, size_m, x_m, y_m, heading_deg)."""
-    placed = cube_positions(config, sizes_m, count, seed, max_pulses)
-    return with_cubes(config, placed, mesh_path), placed
-
-
-def with_cubes(config: SceneConfig, placed: list[dict], mesh_path: Path) -> SceneConfig:
-    """``config`` with the cubes ``placed`` added as ``mesh`` objects of a unit cube written to ``mesh_path``."""
-    import trimesh
-
-    trimesh.creation.box(extents=(1.0, 1.0, 1.0)).export(mesh_path)
+def with_cubes(config: SceneConfig, placed: list[dict]) -> SceneConfig:
+    """``config`` with the cubes ``placed`` added as ``mesh`` objects: the shipped unit cube, scaled."""
     objects = [o.model_dump(exclude_unset=True) for o in config.objects]
-    objects += [{"type": "mesh", "name": p["name"], "file": str(mesh_path), "scale": p["size_m"],
+    objects += [{"type": "mesh", "name": p["name"], "file": str(CUBE_MESH), "scale": p["size_m"],
                  "translate_m": [p["x_m"], p["y_m"]], "rotate_deg": [0.0, 0.0, p["heading_deg"]],
                  "label": "object"} for p in placed]
     return config.with_overrides({"objects": objects})
@@ -144,7 +132,8 @@ def run_features(config: SceneConfig, out_dir: str | Path, sizes_m=DEFAULT_SIZES
         config = config.with_overrides({"water": water})
     placed = []
     if not scene_objects:
-        config, placed = place_cubes(config, sizes_m, count, seed, (out / CUBE_FILE).resolve(), max_pulses)
+        placed = cube_positions(config, sizes_m, count, seed, max_pulses)
+        config = with_cubes(config, placed)
     options = PassOptions(max_pulses=max_pulses, fidelity=fidelity, progress=progress, render=False,
                           write_scene=False, coverage=settings)
     summary = run_pass(config, out / "pass", options).summary
