@@ -144,3 +144,18 @@ def test_coverage_of_a_fast_pass_is_a_share_of_the_planned_swath():
     # the orders are measured over the planned swath, so the fast pass complies on at most what it reached
     assert fast["orders_area"] == "planned_swath"
     assert fast["orders"]["2"]["compliant_fraction"] <= swath["reached_fraction"]
+
+
+def test_coverage_json_prints_orders_per_record_and_the_table_used(tmp_path, capsys):
+    import json
+
+    from scanner_sim.cli import main
+
+    assert main(["coverage", "cable_survey", "--waters", "clean_ocean", "--instruments", "mul2023", "--max-pulses",
+                 "2000", "--no-render", "--workers", "0", "--out", str(tmp_path / "c"), "--json"]) == 0
+    study = json.loads(capsys.readouterr().out)
+    (record,) = study["records"]
+    assert set(record["orders"]) == {"exclusive", "special", "1a", "1b", "2"}
+    assert all(set(v) == {"compliant_fraction", "compliant_area_m2"} for v in record["orders"].values())
+    assert study["s44_orders"]["special"] == {"tvu_a_m": 0.25, "tvu_b": 0.0075, "thu_m": 2.0, "thu_depth_fraction": 0.0,
+                                              "feature_m": 1.0, "coverage_percent": 100.0}

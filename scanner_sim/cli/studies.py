@@ -170,6 +170,8 @@ def _add_coverage(sub):
     p.add_argument("--max-pulses", type=positive_int(), help="stop each pass after this many pulses")
     p.add_argument("--no-render", action="store_true", help="tables and coverage.json only: no pictures, no report")
     p.add_argument("--quiet", action="store_true", help="no progress; print only the path of coverage.json")
+    p.add_argument("--json", action="store_true", help="print coverage.json's content (records with their S-44 "
+                   "orders, s44_orders) instead of the table and the path")
     _add_dask_arguments(p)
     p.set_defaults(func=_cmd_coverage)
 
@@ -191,9 +193,12 @@ def _cmd_coverage(args) -> int:
     out = Path(args.out or Path(config.output_dir) / "coverage")
     with hold_output(out):  # taken before the passes are built, so a second writer is refused at once
         study = run_study(config, plan, out, settings=settings, fidelity=args.fidelity, seed=args.seed,
-                          max_pulses=args.max_pulses, render=not args.no_render, progress=not args.quiet,
+                          max_pulses=args.max_pulses, render=not args.no_render, progress=not (args.quiet or args.json),
                           workers=_workers(args), scheduler=args.scheduler, redo=args.redo,
                           cubes=CubePlan(tuple(args.cubes_m), args.cube_count, args.cube_seed) if args.cubes_m else None)
+    if args.json:
+        print((out / "coverage.json").read_text(), end="")
+        return 0
     if not args.quiet:
         print(markdown_table(*main_table(study)))
         print(f"{len(study['records'])} passes in {study['wall_s']:.0f} s")
