@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 #: Largest half sector [deg] whose swath edge a flat-seabed plan can draw (beyond, the edge runs off to the horizon).
-MAX_HALF_SECTOR_DEG = 80.0
+MAX_HALF_SECTOR_DEG = 80.0  # assumption: flat-seabed edge (docs/assumptions.md)
 
 
 @dataclass(frozen=True)

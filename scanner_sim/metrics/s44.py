@@ -22,12 +22,12 @@ import numpy as np
 from muls.errors import ParameterError
 
 #: Share of a cell's soundings that must meet an order (S-44's uncertainties are at 95 % confidence).
-CONFIDENCE = 0.95
+CONFIDENCE = 0.95  # assumption: 95 % of a cell's soundings (docs/assumptions.md)
 #: Soundings a cell needs by default (S-44 Ed. 6.0.0 Annex D, Sample Density: ">= five samples per node").
-DEFAULT_MIN_SOUNDINGS = 5
+DEFAULT_MIN_SOUNDINGS = 5  # assumption: S-44 Annex D's example (docs/assumptions.md)
 #: Valid soundings on a feature for it to count as detected: the same five samples, over the feature taken as one
 #: grid node (Annex D asks a grid cell no larger than the feature it must depict).
-FEATURE_MIN_SOUNDINGS = 5
+FEATURE_MIN_SOUNDINGS = 5  # assumption: one Annex D node on the feature (docs/assumptions.md)
 SOURCE = ("IHO S-44 Edition 6.0.0 (2020), Standards for Hydrographic Surveys, Table 1 (Minimum Bathymetry "
           "Standards for Safety of Navigation Hydrographic Surveys); TVU_max(d) = sqrt(a^2 + (b d)^2), section 3.2.2")
 

@@ -26,7 +26,7 @@ DEFAULT_SIZES_M = (0.5, 1.0, 2.0)
 #: The shipped unit cube (centred on the origin), scaled to each cube's size.
 CUBE_MESH = SCENES_DIR / "assets" / "unit_cube.obj"
 #: Gap kept between two cubes' bounding circles [m].
-CUBE_GAP_M = 0.25
+CUBE_GAP_M = 0.25  # assumption: cubes apart (docs/assumptions.md)
 
 
 def detection_rule(settings: CoverageSettings) -> dict:
