@@ -141,7 +141,8 @@ def test_a_false_alarm_takes_no_hit_of_another_pulse(hits):
     sight = LinesOfSight(origin_m=np.zeros((2, 3)), direction=np.tile([0.0, 0.0, -1.0], (2, 1)),
                          true_range_m=np.full(2, np.nan), first_surface=np.full(2, -1), scan_angle_deg=np.zeros(2),
                          time_s=np.array([0.0, 2e-4]), slot=np.array([10, 11]), leg=np.ones(2, np.uint16),
-                         platform_m=np.zeros((2, 3)), attitude_rad=np.zeros((2, 3)))
+                         platform_m=np.zeros((2, 3)), attitude_rad=np.zeros((2, 3)), true_origin_m=np.zeros((2, 3)),
+                         true_direction=np.tile([0.0, 0.0, -1.0], (2, 1)), axis_range_m=np.full(2, np.nan))
     ranging_table = tabulate(np.zeros(20), np.full(20, 3), np.full(20, 10.0), np.zeros(20, bool), np.zeros(20, bool),
                              np.zeros(20, np.int64), 3, (3.0,))
     points = georeference(ranging, hits, sight, TpuModel(ranging_table, NavigationSigmas(), 0.01, 0.004))

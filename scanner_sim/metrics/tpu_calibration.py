@@ -10,13 +10,12 @@ of sight; another surface there is a return behind an edge, whose true point the
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from scanner_sim.survey.point_records import PointRecords
-from scanner_sim.survey.uncertainty import CONFIDENCE, K95_HORIZONTAL, thu_of, tvu_of
+from scanner_sim.survey.uncertainty import CONFIDENCE, coverage_levels
 from scanner_sim.world.materials import NOISE_CLASS
 
 #: [m] A true beam whose first hit lies further than this along it from the truth of the point's own line of sight
@@ -29,49 +28,45 @@ INCIDENCE_BANDS_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 90.0)
 CHART_LEVELS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.95, 0.99])
 
 
-@dataclass(frozen=True)
-class TrueErrors:
-    """Per judged point (k of them): vertical error (k,) [m] signed, horizontal error (k,) [m] >= 0, the points
-    themselves (their THU, TVU, channel and incidence), and the error the pass's uncertainty model predicts for them
-    (``predicted``: mean (k, 3) [m] and covariance (k, 3, 3) [m^2]); ``skipped`` the points not judged, by reason."""
+class CheckedErrors(NamedTuple):
+    """The judged points of a chunk (k of them) against their uncertainty: vertical error (k,) [m] signed, horizontal
+    error (k,) [m], their TVU and THU (k,) [m], channel (k,), incidence (k,) [deg], and the coverage levels at which
+    the errors lie on their predicted distributions (k,) (:func:`~scanner_sim.survey.uncertainty.coverage_levels`);
+    ``skipped`` the points not judged, by reason."""
 
     vertical_m: np.ndarray
     horizontal_m: np.ndarray
-    points: PointRecords
-    predicted: tuple[np.ndarray, np.ndarray]
+    tvu_m: np.ndarray
+    thu_m: np.ndarray
+    channel: np.ndarray
+    incidence_deg: np.ndarray
+    level_vertical: np.ndarray
+    level_horizontal: np.ndarray
     skipped: dict
 
 
-def true_errors(setup, points: PointRecords) -> TrueErrors:
-    """The true errors (module doc) of ``points`` of the pass of ``setup`` (a :class:`PassSetup`)."""
-    poses = setup.trajectory.poses(points.gps_time_s)
-    origin, direction = setup.scanner.beam_rays(poses)
-    scene = setup.scene
-    ray, _, dist = setup.target.caster.first_hits((origin - scene.local_origin).astype(np.float32),
-                                                  direction.astype(np.float32))
-    true_range = np.full(len(points), np.nan)
-    true_range[ray] = dist
+def checked_errors(points: PointRecords, sight, tpu) -> CheckedErrors:
+    """The true errors (module doc) of a chunk's ``points`` against their THU and TVU, from the chunk's lines of
+    sight ``sight`` (:class:`~scanner_sim.survey.georeference.LinesOfSight`: the true beam axes and their first hits)
+    and the pass's uncertainty model ``tpu`` (the predicted distributions, at the estimated poses)."""
+    row = np.searchsorted(sight.slot, points.pulse_index)
+    true_range = sight.axis_range_m[row]
     noise = points.classification == NOISE_CLASS
     met = np.isfinite(true_range)
     same = met & (np.abs(true_range - points.true_range_m) <= SAME_SURFACE_M)
     judged = ~noise & same
-    truth = origin[judged] + true_range[judged, None] * direction[judged]
-    error = points.xyz[judged] - truth
+    p, row = points.select(judged), row[judged]
+    truth = sight.true_origin_m[row] + true_range[judged, None] * sight.true_direction[row]
+    error = p.xyz - truth
+    horizontal = np.hypot(error[:, 0], error[:, 1])
+    mean, var = tpu.error_model(p.xyz - sight.platform_m[row], sight.direction[row], sight.attitude_rad[row], p.channel,
+                                p.snr, p.saturated, p.return_number > 1,
+                                p.true_range_m.astype(np.float64) + p.range_error_m, p.incidence_deg)
+    level_z, level_h = coverage_levels(mean, var, error[:, 2], horizontal)
     skipped = {"noise": int(noise.sum()), "true_beam_meets_nothing": int((~noise & ~met).sum()),
                "other_surface": int((~noise & met & ~same).sum())}
-    mine = points.select(judged)
-    return TrueErrors(error[:, 2], np.hypot(error[:, 0], error[:, 1]), mine, predicted_error(setup, mine), skipped)
-
-
-def predicted_error(setup, points: PointRecords) -> tuple[np.ndarray, np.ndarray]:
-    """The mean (n, 3) and covariance (n, 3, 3) of the error the pass's model (``setup.tpu``) predicts for
-    ``points``, from the navigation's estimated poses at their times, as the pass computed their THU and TVU."""
-    estimate = setup.trajectory.poses(points.gps_time_s, estimated=True)
-    _, direction = setup.scanner.beam_rays(estimate)
-    attitude = np.c_[estimate.roll_rad, estimate.pitch_rad, estimate.yaw_rad]
-    return setup.tpu.error_model(points.xyz - estimate.position, direction, attitude, points.channel, points.snr,
-                                 points.saturated, points.return_number > 1,
-                                 points.true_range_m.astype(np.float64) + points.range_error_m, points.incidence_deg)
+    return CheckedErrors(error[:, 2], horizontal, p.tvu_m, p.thu_m, p.channel, p.incidence_deg, level_z, level_h,
+                         skipped)
 
 
 #: [m] Bin of the streaming histograms of THU, TVU and the true errors (their medians and 95th percentiles), and the
@@ -82,9 +77,10 @@ HISTOGRAM_MAX_M = 20.0
 
 class UncertaintySink:
     """A pass's uncertainty figures, chunk by chunk (the summary's ``uncertainty``): THU and TVU quantiles over every
-    point, and the calibration of the judged points (:func:`true_errors`): the shares within THU and TVU over all,
+    point, and the calibration of the judged points (:func:`checked_errors`): the shares within THU and TVU over all,
     per channel and per incidence band, the predicted-against-observed coverage curve, the true errors' quantiles.
-    Counts and histograms only, whatever the pass's size. ``setup``: the pass's :class:`PassSetup`."""
+    Counts and histograms only, whatever the pass's size: each chunk brings its points' checked errors
+    (``Chunk.errors``). ``setup``: the pass's :class:`PassSetup`, whose tables the figures state."""
 
     def __init__(self, setup):
         self.setup = setup
@@ -97,38 +93,30 @@ class UncertaintySink:
         self.skipped = {"noise": 0, "true_beam_meets_nothing": 0, "other_surface": 0}
 
     def add(self, chunk) -> None:
-        points = chunk.points
+        points, errors = chunk.points, chunk.errors
         self._count("thu_m", points.thu_m)
         self._count("tvu_m", points.tvu_m)
-        self.add_errors(true_errors(self.setup, points))
-
-    def add_errors(self, errors: TrueErrors) -> None:
-        """Tally the judged points of ``errors``."""
-        p = errors.points
-        self.judged += len(p)
+        self.judged += errors.vertical_m.size
         for key, n in errors.skipped.items():
             self.skipped[key] += n
         self._count("true_vertical_error_m", np.abs(errors.vertical_m))
         self._count("true_horizontal_error_m", errors.horizontal_m)
-        inside_z = np.abs(errors.vertical_m) <= p.tvu_m
-        inside_h = errors.horizontal_m <= p.thu_m
-        groups = {"all": np.ones(len(p), bool)}
-        groups.update({f"ch{c}": p.channel == c for c in np.unique(p.channel)})
+        inside_z = np.abs(errors.vertical_m) <= errors.tvu_m
+        inside_h = errors.horizontal_m <= errors.thu_m
+        groups = {"all": np.ones(errors.vertical_m.size, bool)}
+        groups.update({f"ch{c}": errors.channel == c for c in np.unique(errors.channel)})
         for a, b in zip(INCIDENCE_BANDS_DEG[:-1], INCIDENCE_BANDS_DEG[1:]):
-            groups[f"incidence {a:g}-{b:g}"] = (p.incidence_deg >= a) & (p.incidence_deg < b)
+            groups[f"incidence {a:g}-{b:g}"] = (errors.incidence_deg >= a) & (errors.incidence_deg < b)
         for name, mask in groups.items():
             tally = np.array([mask.sum(), (inside_z & mask).sum(), (inside_h & mask).sum()], np.int64)
             self.groups[name] = self.groups.get(name, np.zeros(3, np.int64)) + tally
-        mean, cov = errors.predicted
-        sigma_h = thu_of(mean, cov) / K95_HORIZONTAL
-        for i, q in enumerate(CHART_LEVELS):
-            self.chart[0, i] += int((np.abs(errors.vertical_m) <= tvu_of(mean, cov, float(q))).sum())
-            self.chart[1, i] += int((errors.horizontal_m <= math.sqrt(-2.0 * math.log(1.0 - q)) * sigma_h).sum())
+        self.chart[0] += np.searchsorted(np.sort(errors.level_vertical), CHART_LEVELS, side="right")
+        self.chart[1] += np.searchsorted(np.sort(errors.level_horizontal), CHART_LEVELS, side="right")
 
     def _count(self, name: str, values: np.ndarray) -> None:
         v = values[np.isfinite(values)]
         hist = self.histograms[name]
-        np.add.at(hist, np.minimum((v / HISTOGRAM_BIN_M).astype(np.int64), hist.size - 1), 1)
+        hist += np.bincount(np.minimum((v / HISTOGRAM_BIN_M).astype(np.int64), hist.size - 1), minlength=hist.size)
 
     def _quantiles(self, name: str) -> dict:
         hist = self.histograms[name]

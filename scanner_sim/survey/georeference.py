@@ -32,7 +32,9 @@ class LinesOfSight(NamedTuple):
     (``Scene.face_surface`` of the triangle met; -1: none);
     scan_angle_deg (n,); time_s (n,) [s from the pass start]; slot (n,) int64: the pulse's number in the pass;
     leg (n,) uint16: the survey leg, 1-based; platform_m (n, 3) and attitude_rad (n, 3) roll, pitch, yaw: the
-    vehicle's pose as navigation estimates it (what the uncertainty's Jacobians are evaluated at).
+    vehicle's pose as navigation estimates it (what the uncertainty's Jacobians are evaluated at); true_origin_m
+    (n, 3), true_direction (n, 3) and axis_range_m (n,): the true beam axis and the range to its first hit (nan where
+    it meets nothing), where each point truly belongs (:mod:`scanner_sim.metrics.tpu_calibration`).
     """
 
     origin_m: np.ndarray
@@ -45,6 +47,9 @@ class LinesOfSight(NamedTuple):
     leg: np.ndarray
     platform_m: np.ndarray
     attitude_rad: np.ndarray
+    true_origin_m: np.ndarray
+    true_direction: np.ndarray
+    axis_range_m: np.ndarray
 
 
 def intensity_from_power(peak_power_w: np.ndarray) -> np.ndarray:

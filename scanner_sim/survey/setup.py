@@ -24,6 +24,7 @@ from scanner_sim.config import SceneConfig
 from scanner_sim.config.unit_slips import warn_unit_slips
 from scanner_sim.fidelity import FidelityLevel
 from scanner_sim.metrics.coverage import CoverageSettings, Footprint, nominal_footprint
+from scanner_sim.metrics.tpu_calibration import CheckedErrors, checked_errors
 from scanner_sim.motion.scanner import Scanner
 from scanner_sim.motion.track_checks import build_trajectory
 from scanner_sim.motion.trajectory import Poses, Trajectory
@@ -156,7 +157,8 @@ class Chunk(NamedTuple):
     """One chunk through the flow: its pulse slots (n,), points, dropouts, the muls digitised records of its pulses
     (``waveforms``; as far as the ranging read them, None once dropped), the nominal beam footprint (None unless
     the pass measures coverage), and the whole records of the pulses among its slots that the pass keeps
-    (``kept_waveforms``: slots (k,) and records; None when none)."""
+    (``kept_waveforms``: slots (k,) and records; None when none), and its points' true errors against their THU and
+    TVU (``errors``, :func:`~scanner_sim.metrics.tpu_calibration.checked_errors`)."""
 
     slots: np.ndarray
     points: PointRecords
@@ -164,6 +166,7 @@ class Chunk(NamedTuple):
     waveforms: Records | None
     footprint: Footprint | None
     kept_waveforms: tuple[np.ndarray, Records] | None = None
+    errors: CheckedErrors | None = None
 
 
 @dataclass(frozen=True)
@@ -362,7 +365,9 @@ class PassSetup:
         sight, lost = cast.sight, ranging.dropout_cause >= 0
         dropouts = DropoutRecords(pulse_index=cast.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
                                   direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
-        return Chunk(cast.slots, georeference(ranging, cast.hits, sight, self.tpu), dropouts, records, cast.footprint)
+        points = georeference(ranging, cast.hits, sight, self.tpu)
+        return Chunk(cast.slots, points, dropouts, records, cast.footprint,
+                     errors=checked_errors(points, sight, self.tpu))
 
     def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, every_channel: bool = False,
                        whole_records: bool = False) -> Chunk:
@@ -382,15 +387,18 @@ class PassSetup:
             origin, direction = self.scanner.beam_rays(estimate)
         else:
             origin, direction = true_beam
-        true_range, first_surface = np.full(slots.size, np.nan), np.full(slots.size, -1)
+        axis = hits.subray_index == 0
+        axis_range, axis_surface = np.full(slots.size, np.nan), np.full(slots.size, -1)
+        axis_range[hits.pulse_index[axis]] = hits.range_m[axis]
+        axis_surface[hits.pulse_index[axis]] = hits.surface_id[axis]
         if noisy:
+            true_range, first_surface = np.full(slots.size, np.nan), np.full(slots.size, -1)
             ray, tri, dist = self.target.caster.first_hits((origin - self.scene.local_origin).astype(np.float32),
                                                            direction.astype(np.float32))
             true_range[ray], first_surface[ray] = dist, self.scene.face_surface[tri]
         else:
-            axis = hits.subray_index == 0
-            true_range[hits.pulse_index[axis]] = hits.range_m[axis]
-            first_surface[hits.pulse_index[axis]] = hits.surface_id[axis]
+            true_range, first_surface = axis_range, axis_surface
         return LinesOfSight(origin, direction, true_range, first_surface,
                             np.degrees(self.scanner.scan_angle_rad(times)), times, slots, self.trajectory.leg(times),
-                            estimate.position, np.c_[estimate.roll_rad, estimate.pitch_rad, estimate.yaw_rad])
+                            estimate.position, np.c_[estimate.roll_rad, estimate.pitch_rad, estimate.yaw_rad],
+                            *true_beam, axis_range)
