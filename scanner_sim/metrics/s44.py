@@ -2,8 +2,8 @@
 
 Source of every number in :data:`ORDERS`: IHO S-44 Edition 6.0.0 (2020), *Standards for Hydrographic Surveys*,
 Table 1 "Minimum Bathymetry Standards for Safety of Navigation Hydrographic Surveys" (THU, TVU a and b, feature
-detection, bathymetric coverage), all uncertainties at 95 % confidence; the maximum allowable TVU is its section
-3.2.2 formula (below). The density default is the example of its Annex D ("Sample Density"): at least five
+detection, bathymetric coverage), all uncertainties at 95 % confidence; the maximum allowable TVU is the formula
+of its section 3.2.3, Maximum Allowable Vertical Uncertainty (below). The density default is the example of its Annex D ("Sample Density"): at least five
 samples per grid node. docs/coverage.md tabulates them.
 
 A sounding *meets* an order when its true vertical error is within the order's TVU at its depth and its true
@@ -29,7 +29,8 @@ DEFAULT_MIN_SOUNDINGS = 5  # assumption: S-44 Annex D's example (docs/assumption
 #: grid node (Annex D asks a grid cell no larger than the feature it must depict).
 FEATURE_MIN_SOUNDINGS = 5  # assumption: one Annex D node on the feature (docs/assumptions.md)
 SOURCE = ("IHO S-44 Edition 6.0.0 (2020), Standards for Hydrographic Surveys, Table 1 (Minimum Bathymetry "
-          "Standards for Safety of Navigation Hydrographic Surveys); TVU_max(d) = sqrt(a^2 + (b d)^2), section 3.2.2")
+          "Standards for Safety of Navigation Hydrographic Surveys); TVU_max(d) = sqrt(a^2 + (b d)^2), section 3.2.3 "
+          "(Maximum Allowable Vertical Uncertainty)")
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,7 @@ class Order:
     coverage_percent: float
 
     def tvu_max_m(self, depth_m) -> np.ndarray:
-        """Largest allowed vertical uncertainty [m] at ``depth_m`` (S-44 Ed. 6.0.0 section 3.2.2)."""
+        """Largest allowed vertical uncertainty [m] at ``depth_m`` (S-44 Ed. 6.0.0 section 3.2.3)."""
         d = np.asarray(depth_m, float)
         return np.sqrt(self.tvu_a_m**2 + (self.tvu_b * d) ** 2)
 
