@@ -3,8 +3,8 @@
 Source of every number in :data:`ORDERS`: IHO S-44 Edition 6.0.0 (2020), *Standards for Hydrographic Surveys*,
 Table 1 "Minimum Bathymetry Standards for Safety of Navigation Hydrographic Surveys" (THU, TVU a and b, feature
 detection, bathymetric coverage), all uncertainties at 95 % confidence; the maximum allowable TVU is the formula
-of its section 3.2.3, Maximum Allowable Vertical Uncertainty (below). The density default is the example of its Annex D ("Sample Density"): at least five
-samples per grid node. docs/coverage.md tabulates them.
+of its section 3.2.3, Maximum Allowable Vertical Uncertainty (below). The density default is the example of its
+Annex D ("Sample Density"): at least five samples per grid node. docs/coverage.md tabulates them.
 
 A sounding *meets* an order when its true vertical error is within the order's TVU at its depth and its true
 horizontal error within the THU at its depth, and, when the pass predicts them, its own 95 % uncertainties
