@@ -11,7 +11,9 @@ from muls.ranging import Ranging
 from scanner_sim.config import load_scene, parse_scene
 from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.georeference import NO_OBJECT, NOISE_CLASS, LinesOfSight, georeference
+from scanner_sim.survey.ranging_precision import tabulate
 from scanner_sim.survey.setup import PassOptions, PassSetup
+from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel
 from scanner_sim.world.scene import LABELS, Part, Scene, build_scene, frustum
 
 STEP_M = 1.0
@@ -138,8 +140,12 @@ def test_a_false_alarm_takes_no_hit_of_another_pulse(hits):
                       np.array([-1, 2], np.int8), np.zeros(2))
     sight = LinesOfSight(origin_m=np.zeros((2, 3)), direction=np.tile([0.0, 0.0, -1.0], (2, 1)),
                          true_range_m=np.full(2, np.nan), first_surface=np.full(2, -1), scan_angle_deg=np.zeros(2),
-                         time_s=np.array([0.0, 2e-4]), slot=np.array([10, 11]), leg=np.ones(2, np.uint16))
-    points = georeference(ranging, hits, sight)
+                         time_s=np.array([0.0, 2e-4]), slot=np.array([10, 11]), leg=np.ones(2, np.uint16),
+                         platform_m=np.zeros((2, 3)), attitude_rad=np.zeros((2, 3)), true_origin_m=np.zeros((2, 3)),
+                         true_direction=np.tile([0.0, 0.0, -1.0], (2, 1)), axis_range_m=np.full(2, np.nan))
+    ranging_table = tabulate(np.zeros(20), np.full(20, 3), np.full(20, 10.0), np.zeros(20, bool), np.zeros(20, bool),
+                             np.zeros(20, np.int64), 3, (3.0,))
+    points = georeference(ranging, hits, sight, TpuModel(ranging_table, NavigationSigmas(), 0.01, 0.004))
     assert len(points) == 1 and points.pulse_index[0] == 10
     assert points.classification[0] == NOISE_CLASS and points.object_id[0] == NO_OBJECT
     assert np.isnan(points.true_range_m[0]) and np.isnan(points.incidence_deg[0])

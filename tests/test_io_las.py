@@ -43,6 +43,8 @@ def make_points(n: int = 500, seed: int = 0, first_pulse: int = 0) -> PointRecor
         object_id=rng.integers(-1, 20, n),
         leg=rng.integers(1, 9, n),
         pulse_index=pulse,
+        thu_m=rng.uniform(0.01, 0.3, n),
+        tvu_m=rng.uniform(0.01, 0.3, n),
     )
 
 
@@ -93,7 +95,7 @@ def test_las_layout_is_derived_from_the_point_declarations():
     header = laspy.LasHeader(version="1.4", point_format=6)
     dims = {d for col in columns.values() if isinstance(col.las, LasStandard) for d in col.las.dimensions}
     assert dims <= set(header.point_format.dimension_names)
-    assert 30 + sum(dtype.itemsize for dtype, _ in io.EXTRA_DIMENSIONS.values()) == 56
+    assert 30 + sum(dtype.itemsize for dtype, _ in io.EXTRA_DIMENSIONS.values()) == 64  # thu_m, tvu_m: 8 bytes
 
 
 # ------------------------------------------------------------------------------------------

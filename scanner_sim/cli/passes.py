@@ -208,7 +208,8 @@ def _cmd_run(args) -> int:
         if error["median"] is None:
             print("range error: no point has a truth surface along its line of sight")
         else:
-            print(f"range error |median| {100 * error['median']:.1f} cm, p95 {100 * error['p95']:.1f} cm")
+            print(f"range error |median| {100 * error['median']:.1f} cm, p95 {100 * error['p95']:.1f} cm; signed median "
+                  f"{100 * error['median_signed']:+.1f} cm, {100 * error['share_short']:.0f} % of the points short")
         cov = summary.get("coverage")
         if cov and cov["covered_fraction"] is not None:
             gaps = ", ".join(f"{k} {v:.2f} m²" for k, v in cov["gaps_m2"].items() if v) or "none"

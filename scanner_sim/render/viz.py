@@ -34,6 +34,7 @@ Other names take a colour from a fixed qualitative cycle indexed by their code.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -145,6 +146,12 @@ def _write_png(path_png, rgb: np.ndarray) -> None:
     with atomic_path(path_png) as tmp:
         with open(tmp, "wb") as fh:
             mpimg.imsave(fh, rgb, format="png")
+
+
+def text_width_px(text: str, font_size: int) -> int:
+    """Width [px] that VTK's default font (Arial) takes for ``text`` at ``font_size``, rounded up: measured at 13,
+    "seabed, class 40" takes 217 px (13.6 px a character); 1.1 font sizes a character keeps wide letters in."""
+    return int(math.ceil(1.1 * font_size * len(text)))
 
 
 def _figure_to_png(fig, path_png) -> None:
@@ -401,10 +408,13 @@ def _point_cloud_plotter(
                 cloud["rgb"] = rgb
                 plotter.add_mesh(cloud, scalars="rgb", rgb=True, point_size=point_size,
                                  render_points_as_spheres=False)
-                # One coloured line per category at the upper right (VTK's legend box clips long labels).
+                # One coloured line per category at the upper right (VTK's legend box clips long labels), its
+                # left edge far enough in for the longest label (text_width_px) to end inside the window.
                 w, h = int(window_size[0]), int(window_size[1])
+                size = 13 if w >= 1200 else 11
+                left = max(8, w - 12 - max((text_width_px(label, size) for _, label in lut.values()), default=0))
                 for i, (col, label) in enumerate(lut.values()):
-                    plotter.add_text(label, position=(int(0.79 * w), int(h - 40 - 30 * i)), font_size=13,
+                    plotter.add_text(label, position=(left, int(h - 40 - 2.3 * size * i)), font_size=size,
                                      color=tuple(np.array(col) / 255.0))
             else:
                 cmap, bar_title, symmetric = SCALAR_COLOUR_MAPS.get(color_by, ("viridis", color_by, False))
@@ -627,7 +637,12 @@ def plot_coverage_map(path_png, state, extent_m, gap_causes: Sequence[str], *, l
     if gaps.any():
         handles.append(Patch(facecolor=NO_SEABED_COLOUR, edgecolor="grey", label="no seabed data"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    ax.set_xlabel("x east [m]")
+    finish_plan_map(fig, ax, path_png, title)
+
+
+def finish_plan_map(fig, ax, path_png, title: str | None, x_label: str = "x east [m]") -> None:
+    """A plan map's axes (x east, y north, equal scale), its title, written to ``path_png``."""
+    ax.set_xlabel(x_label)
     ax.set_ylabel("y north [m]")
     ax.set_aspect("equal")
     if title:
@@ -636,13 +651,22 @@ def plot_coverage_map(path_png, state, extent_m, gap_causes: Sequence[str], *, l
     _figure_to_png(fig, path_png)
 
 
+def curve_layout(keys: Sequence[tuple], span: float) -> dict[tuple, tuple[float, float, float, int]]:
+    """Per curve key, in drawing order: (x offset, line width, marker size, z-order). Every curve is drawn a little
+    apart along x (2 % of ``span``, at least 0.02, between neighbours) and thinner, with smaller markers, than
+    the one before, on top of it: curves of equal values (two instruments both at 100 %) all stay visible."""
+    step = 0.02 * max(span, 1.0)
+    n = len(keys)
+    return {key: ((j - 0.5 * (n - 1)) * step, max(3.6 - 0.5 * j, 1.0), max(10.0 - 1.2 * j, 4.0), 2 + j)
+            for j, key in enumerate(keys)}
+
+
 def plot_coverage_vs_altitude(path_png, records: Sequence[Mapping], *, title: str | None = None) -> None:
     """Covered fraction [%] against altitude [m], one curve per water type and instrument.
 
     records: mappings with ``water``, ``instrument``, ``altitude_m`` and ``covered_fraction`` (0..1 or None).
-    Colour tells the water, line style and marker the instrument. Where waters give equal coverage (clean and
-    coastal at 100 %), their curves stay visible: each water is drawn a little apart along the altitude axis
-    and thinner than the one before, on top of it.
+    Colour tells the water, line style and marker the instrument. Where curves give equal coverage (clean and
+    coastal at 100 %, or both instruments of one water), they stay visible (:func:`curve_layout`).
     """
     from matplotlib.figure import Figure
 
@@ -654,16 +678,15 @@ def plot_coverage_vs_altitude(path_png, records: Sequence[Mapping], *, title: st
     ax = fig.add_subplot()
     cycle = iter(f"C{i}" for i in range(3, 100))
     colours: dict[str, str] = {}
-    waters = list(dict.fromkeys(water for water, _ in curves))
     altitudes = [a for pts in curves.values() for a, _ in pts]
-    dodge = 0.02 * max(max(altitudes) - min(altitudes), 1.0) if altitudes else 0.0
+    layout = curve_layout(list(curves), max(altitudes) - min(altitudes) if altitudes else 0.0)
     for (water, instrument), pts in curves.items():
         colour = colours.setdefault(water, WATER_COLOURS.get(water) or next(cycle))
         line, marker = _INSTRUMENT_STYLES.get(instrument, ("-.", "D"))
         alt, frac = np.array(sorted(pts)).T
-        k = waters.index(water)
-        ax.plot(alt + (k - 0.5 * (len(waters) - 1)) * dodge, frac, line, marker=marker, color=colour,
-                lw=max(3.6 - 1.2 * k, 1.0), ms=max(9.0 - 2.0 * k, 4.0), zorder=2 + k, label=f"{water}, {instrument}")
+        dx, lw, ms, z = layout[(water, instrument)]
+        ax.plot(alt + dx, frac, line, marker=marker, color=colour, lw=lw, ms=ms, zorder=z,
+                label=f"{water}, {instrument}")
     ax.set_xlabel("altitude [m]")
     ax.set_ylabel("covered fraction of the reached area [%]")
     ax.set_ylim(-2, 102)

@@ -14,6 +14,7 @@ import numpy as np
 from muls.ranging import Ranging
 from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.point_records import PointRecords
+from scanner_sim.survey.uncertainty import TpuModel
 from scanner_sim.world.materials import NOISE_CLASS
 
 #: Intensity scale: log10 of the echo's peak optical power [W] from 1 nW (0) to 1 W (65535).
@@ -30,7 +31,10 @@ class LinesOfSight(NamedTuple):
     the first truth surface along it (nan where it meets none) and first_surface (n,) int that surface
     (``Scene.face_surface`` of the triangle met; -1: none);
     scan_angle_deg (n,); time_s (n,) [s from the pass start]; slot (n,) int64: the pulse's number in the pass;
-    leg (n,) uint16: the survey leg, 1-based.
+    leg (n,) uint16: the survey leg, 1-based; platform_m (n, 3) and attitude_rad (n, 3) roll, pitch, yaw: the
+    vehicle's pose as navigation estimates it (what the uncertainty's Jacobians are evaluated at); true_origin_m
+    (n, 3), true_direction (n, 3) and axis_range_m (n,): the true beam axis and the range to its first hit (nan where
+    it meets nothing), where each point truly belongs (:mod:`scanner_sim.metrics.tpu_calibration`).
     """
 
     origin_m: np.ndarray
@@ -41,6 +45,11 @@ class LinesOfSight(NamedTuple):
     time_s: np.ndarray
     slot: np.ndarray
     leg: np.ndarray
+    platform_m: np.ndarray
+    attitude_rad: np.ndarray
+    true_origin_m: np.ndarray
+    true_direction: np.ndarray
+    axis_range_m: np.ndarray
 
 
 def intensity_from_power(peak_power_w: np.ndarray) -> np.ndarray:
@@ -67,8 +76,9 @@ def ranged_surface_range(origin_m, direction, point_m, normal) -> np.ndarray:
     return np.where((np.abs(along) >= GRAZING_COS) & (t > 0.0), t, np.nan)
 
 
-def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight) -> PointRecords:
-    """Points where the instrument and its navigation put them, with the truth attached.
+def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight, tpu: TpuModel) -> PointRecords:
+    """Points where the instrument and its navigation put them, with the truth attached and their uncertainty
+    (``thu_m``, ``tvu_m``: ``tpu``, :mod:`scanner_sim.survey.uncertainty`).
 
     xyz = estimated beam origin + measured range x estimated beam direction. Class, object and incidence are
     those of the hit whose echo the instrument ranged (``Peaks.echo_index``; the chunk's PulseBatch has one
@@ -101,11 +111,15 @@ def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight) -> PointReco
                                              hits.point[j[other]], hits.normal[j[other]])
     unseen = np.isnan(true_range)
     true_range[unseen] = of_hit(hits.range_m, np.nan)[unseen]
+    xyz = sight.origin_m[pulse] + r.range_m[:, None] * sight.direction[pulse]
+    incidence_deg = np.degrees(of_hit(hits.incidence_rad, np.nan))
+    thu, tvu = tpu(xyz - sight.platform_m[pulse], sight.direction[pulse], sight.attitude_rad[pulse], r.channel, r.snr,
+                   r.saturated, ranging.return_number > 1, r.range_m, incidence_deg)
     return PointRecords(
-        gps_time_s=sight.time_s[pulse], xyz=sight.origin_m[pulse] + r.range_m[:, None] * sight.direction[pulse],
+        gps_time_s=sight.time_s[pulse], xyz=xyz,
         intensity=intensity_from_power(r.peak_power_w), return_number=ranging.return_number,
         number_of_returns=ranging.number_of_returns, classification=of_hit(hits.label, NOISE_CLASS).astype(np.uint8),
         scan_angle_deg=sight.scan_angle_deg[pulse], channel=r.channel.astype(np.uint8), amplitude_lsb=r.amplitude_lsb,
         snr=r.snr, saturated=r.saturated, true_range_m=true_range, range_error_m=r.range_m - true_range,
-        incidence_deg=np.degrees(of_hit(hits.incidence_rad, np.nan)), object_id=of_hit(hits.object_id, NO_OBJECT),
-        leg=sight.leg[pulse], pulse_index=sight.slot[pulse])
+        incidence_deg=incidence_deg, object_id=of_hit(hits.object_id, NO_OBJECT),
+        leg=sight.leg[pulse], pulse_index=sight.slot[pulse], thu_m=thu, tvu_m=tvu)

@@ -26,6 +26,8 @@ from scanner_sim.config import SceneConfig
 from scanner_sim.config.crs import crs_label
 from scanner_sim.io.rosbag import ROSBAG_NAME
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
+from scanner_sim.metrics.planned_swath import planned_swath
+from scanner_sim.metrics.tpu_calibration import UncertaintySink
 from scanner_sim.render import viz
 from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.gis_products import write_gis_products
@@ -96,11 +98,12 @@ def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), sce
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
     compile_s = warm_up(setup, options)
-    memory = sinks.MemorySink()
-    stats, coverage, wall_s = stream_pass(setup, pass_chunks(setup, options), [memory], options)
+    memory, uncertainty = sinks.MemorySink(), UncertaintySink(setup)
+    stats, coverage, wall_s = stream_pass(setup, pass_chunks(setup, options), [memory, uncertainty], options)
     dropouts = memory.dropouts()
     summary = sinks.pass_summary(pass_facts(setup, options), stats, stats.points, dropouts.counts_by_cause(), wall_s,
                                  setup_s, compile_s)
+    summary["uncertainty"] = uncertainty.figures()
     if coverage is not None:
         summary["coverage"] = coverage.figures()
     return PassResult(summary, None, memory.points(), dropouts, trajectory_table(setup))
@@ -229,7 +232,10 @@ def _finished(chunk: Future, bar) -> Chunk:
 def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):
     """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally.
     Returns (stats, coverage sink or None, wall seconds)."""
-    coverage = sinks.CoverageSink(setup.scene, options.coverage) if setup.plan.measures_coverage else None
+    coverage = None
+    if setup.plan.measures_coverage:
+        planned = planned_swath(setup.config, setup.trajectory, setup.scanner.pulse_rate_hz)
+        coverage = sinks.CoverageSink(setup.scene, options.coverage, planned)
     stats = sinks.PassStats(len(setup.model.instrument.channels))
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
     started = time.perf_counter()
@@ -279,11 +285,12 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
         clouds += [stack.enter_context(sink) for sink in bag_sinks(setup, out, facts)]
         dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
         waveforms = sinks.WaveformSink(setup.model.instrument.digitizer, facts.channels)
-        sample = sinks.CloudSample()
-        stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts, waveforms]
+        sample, uncertainty = sinks.CloudSample(), UncertaintySink(setup)
+        stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts, waveforms, uncertainty]
                                               + ([sample] if render else []), options)
     summary = sinks.pass_summary(facts, stats, stats.points, dropouts.counts_by_cause(), wall_s + earlier_wall_s,
                                  setup_s, compile_s)
+    summary["uncertainty"] = uncertainty.figures()
     if coverage is not None:
         summary["coverage"] = coverage.write(out / "coverage_grid.npz")
     if "scene.ply" in files:
@@ -301,5 +308,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
         sinks.render_points(out / "render.png", sample, setup.scene, facts, options.render_size)
     if "coverage_map.png" in files:
         sinks.render_coverage_map(out / "coverage_map.png", coverage, setup.scene, facts, summary["coverage"])
+    if "s44_map.png" in files:
+        sinks.render_order_map(out / "s44_map.png", coverage, facts, summary["coverage"])
     io.write_summary_json(out / "summary.json", summary)  # last: a complete pass is one with a summary
     return summary

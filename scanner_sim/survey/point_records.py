@@ -176,8 +176,13 @@ class _Records:
         cls_name = type(self).__name__
         n = None
         first = None
-        for name, col in self.columns().items():
-            arr = _coerce_field(cls_name, name, getattr(self, name), col.dtype, col.width)
+        columns = self.columns()
+        given = next((getattr(self, name) for name in columns if getattr(self, name) is not None), ())
+        for name, col in columns.items():
+            value = getattr(self, name)
+            if value is None:  # a field with a default (None): its unknown value on every record
+                value = np.full((len(given),) if col.width is None else (len(given), col.width), col.unknown)
+            arr = _coerce_field(cls_name, name, value, col.dtype, col.width)
             object.__setattr__(self, name, arr)
             if n is None:
                 n, first = arr.shape[0], name
@@ -284,6 +289,11 @@ class PointRecords(_Records):
     leg: Annotated[np.ndarray, Column(np.uint16, las=_las("point_source_id"))]
     #: Index of the pulse in the pass (back-reference); not stored in LAS, -1 when read back.
     pulse_index: Annotated[np.ndarray, Column(np.int64, unknown=-1)]
+    #: [m] total horizontal uncertainty at 95 % (2.45 sigma, bivariate), propagated term by term
+    #: (:mod:`scanner_sim.survey.uncertainty`, ``docs/uncertainty.md``); NaN where not known.
+    thu_m: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "THU 95% [m]"), unknown=np.nan)] = None
+    #: [m] total vertical uncertainty at 95 % (1.96 sigma); NaN where not known.
+    tvu_m: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "TVU 95% [m]"), unknown=np.nan)] = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -25,6 +25,7 @@ from scanner_sim.config.unit_slips import warn_unit_slips
 from scanner_sim.fidelity import FidelityLevel
 from scanner_sim.io.rosbag import ROSBAG_NAME, bag_files
 from scanner_sim.metrics.coverage import CoverageSettings, Footprint, nominal_footprint
+from scanner_sim.metrics.tpu_calibration import CheckedErrors, checked_errors
 from scanner_sim.motion.scanner import Scanner
 from scanner_sim.motion.track_checks import build_trajectory
 from scanner_sim.motion.trajectory import Poses, Trajectory
@@ -38,6 +39,8 @@ from scanner_sim.survey.georeference import LinesOfSight, georeference
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
+from scanner_sim.survey.ranging_precision import measure_ranging_precision, panel_ranges_m
+from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel
 from scanner_sim.world.scene import Scene, build_scene
 
 
@@ -136,7 +139,7 @@ class PassPlan:
         files += ["scene.ply"] if options.write_scene else []
         files += ["waveforms.npz"] if options.waveforms or output.waveform_every_n_pulses else []
         files += ["render.png"] if options.render and clouds else []
-        files += ["coverage_map.png"] if options.render and coverage else []
+        files += ["coverage_map.png", "s44_map.png"] if options.render and coverage else []
         files += gis_files(coverage) if config.crs is not None else []
         if output.rosbag is not None and output.rosbag.dir is None:  # a bag elsewhere is no file of the folder
             files += bag_files(ROSBAG_NAME, output.rosbag.storage)
@@ -159,7 +162,8 @@ class Chunk(NamedTuple):
     """One chunk through the flow: its pulse slots (n,), points, dropouts, the muls digitised records of its pulses
     (``waveforms``; as far as the ranging read them, None once dropped), the nominal beam footprint (None unless
     the pass measures coverage), and the whole records of the pulses among its slots that the pass keeps
-    (``kept_waveforms``: slots (k,) and records; None when none)."""
+    (``kept_waveforms``: slots (k,) and records; None when none), and its points' true errors against their THU and
+    TVU (``errors``, :func:`~scanner_sim.metrics.tpu_calibration.checked_errors`)."""
 
     slots: np.ndarray
     points: PointRecords
@@ -167,6 +171,7 @@ class Chunk(NamedTuple):
     waveforms: Records | None
     footprint: Footprint | None
     kept_waveforms: tuple[np.ndarray, Records] | None = None
+    errors: CheckedErrors | None = None
 
 
 @dataclass(frozen=True)
@@ -229,6 +234,17 @@ def gated(config: SceneConfig, water, target: CastScene, trajectory: Trajectory,
                                   "instrument.gate_width_ns": round(gate[1] * 1e9, 3)}, given=False)
 
 
+def tpu_model(config: SceneConfig, model: OpticalModel, physics: Physics, span) -> TpuModel:
+    """The pass's uncertainty model (:mod:`scanner_sim.survey.uncertainty`): its ranging precision measured through
+    ``physics`` on panels at the ranges of its echoes (``span``: :func:`~scanner_sim.survey.gate.echo_span`; 5 m
+    when no sampled beam meets anything), its navigation noise and its beam."""
+    ranges = panel_ranges_m(span.delays_s, model.water.speed_m_s) if span.delays_s.size else (5.0,)
+    geometry = model.instrument.geometry
+    return TpuModel(measure_ranging_precision(physics, model.instrument, ranges),
+                    NavigationSigmas.of(config.platform.navigation_noise), geometry.beam_diameter_m,
+                    geometry.beam_divergence_full_rad)
+
+
 def checked_trajectory(config: SceneConfig, scene: Scene | None) -> Trajectory:
     """The trajectory of ``config`` over its built ``scene``, after the set-up checks: the pass's size, estimated
     before anything pass-sized is allocated (:func:`~scanner_sim.survey.budget.check_pass_budget`), and the built
@@ -262,6 +278,7 @@ class PassSetup:
     end_slot: int
     water_name: str
     given: SceneConfig
+    tpu: TpuModel
 
     @classmethod
     def build(cls, config: SceneConfig, options: PassOptions = PassOptions(), scene: Scene | None = None,
@@ -283,15 +300,19 @@ class PassSetup:
         config = gated(config, water, target, trajectory, scanner, first_slot, end_slot)
         plan = PassPlan.of(config, options, level)
         model = OpticalModel.build(config.instrument.to_instrument(water), water, plan.level.multiple_scattering)
-        return cls(config, plan, target, trajectory, scanner, *_stages(config, target, model, plan.level),
-                   first_slot, end_slot, config.water.preset or water.name, given)
+        stages = _stages(config, target, model, plan.level)
+        span = echo_span(target, trajectory, scanner, water.speed_m_s, first_slot, end_slot)
+        return cls(config, plan, target, trajectory, scanner, *stages, first_slot, end_slot,
+                   config.water.preset or water.name, given, tpu_model(config, stages[0], stages[4], span))
 
     def at_level(self, level: FidelityLevel) -> PassSetup:
         """This pass at fidelity ``level``: its plan, sub-ray pattern and stages chosen again (the built scene,
-        trajectory and tables kept)."""
+        trajectory and tables kept), its ranging precision measured again through the new physics."""
         model, pattern, rays, handoff, physics = _stages(self.config, self.target, self.model, level)
+        tpu = dataclasses.replace(self.tpu, ranging=measure_ranging_precision(physics, model.instrument,
+                                                                              self.tpu.ranging.ranges_m))
         return dataclasses.replace(self, plan=dataclasses.replace(self.plan, level=level), model=model, pattern=pattern,
-                                   rays=rays, handoff=handoff, physics=physics)
+                                   rays=rays, handoff=handoff, physics=physics, tpu=tpu)
 
     @property
     def level(self) -> FidelityLevel:
@@ -349,7 +370,9 @@ class PassSetup:
         sight, lost = cast.sight, ranging.dropout_cause >= 0
         dropouts = DropoutRecords(pulse_index=cast.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
                                   direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
-        return Chunk(cast.slots, georeference(ranging, cast.hits, sight), dropouts, records, cast.footprint)
+        points = georeference(ranging, cast.hits, sight, self.tpu)
+        return Chunk(cast.slots, points, dropouts, records, cast.footprint,
+                     errors=checked_errors(points, sight, self.tpu))
 
     def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, every_channel: bool = False,
                        whole_records: bool = False) -> Chunk:
@@ -364,18 +387,23 @@ class PassSetup:
         cast them from the true ``poses``), whose first hit the beam cast already holds (sub-ray 0 of every pattern is
         the axis), so only a noisy navigation needs its estimated poses, its beam and a cast of its own."""
         noisy, times = self.trajectory.has_navigation_noise, poses.time_s
+        estimate = self.trajectory.estimate_of(poses)
         if noisy:
-            origin, direction = self.scanner.beam_rays(self.trajectory.estimate_of(poses))
+            origin, direction = self.scanner.beam_rays(estimate)
         else:
             origin, direction = true_beam
-        true_range, first_surface = np.full(slots.size, np.nan), np.full(slots.size, -1)
+        axis = hits.subray_index == 0
+        axis_range, axis_surface = np.full(slots.size, np.nan), np.full(slots.size, -1)
+        axis_range[hits.pulse_index[axis]] = hits.range_m[axis]
+        axis_surface[hits.pulse_index[axis]] = hits.surface_id[axis]
         if noisy:
+            true_range, first_surface = np.full(slots.size, np.nan), np.full(slots.size, -1)
             ray, tri, dist = self.target.caster.first_hits((origin - self.scene.local_origin).astype(np.float32),
                                                            direction.astype(np.float32))
             true_range[ray], first_surface[ray] = dist, self.scene.face_surface[tri]
         else:
-            axis = hits.subray_index == 0
-            true_range[hits.pulse_index[axis]] = hits.range_m[axis]
-            first_surface[hits.pulse_index[axis]] = hits.surface_id[axis]
+            true_range, first_surface = axis_range, axis_surface
         return LinesOfSight(origin, direction, true_range, first_surface,
-                            np.degrees(self.scanner.scan_angle_rad(times)), times, slots, self.trajectory.leg(times))
+                            np.degrees(self.scanner.scan_angle_rad(times)), times, slots, self.trajectory.leg(times),
+                            estimate.position, np.c_[estimate.roll_rad, estimate.pitch_rad, estimate.yaw_rad],
+                            *true_beam, axis_range)

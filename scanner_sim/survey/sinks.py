@@ -231,26 +231,34 @@ class CoverageSink(CoverageAccumulator):
         super().add(chunk.slots, chunk.footprint, chunk.points, chunk.dropouts)
 
     def write(self, path: Path) -> dict:
-        io.write_coverage_grid_npz(path, self.grid, self.cell_states(), self.cells.reaching, self.cells.valid)
+        io.write_coverage_grid_npz(path, self.grid, self.cell_states(), self.cells.reaching, self.cells.valid,
+                                   s44_order=self.strictest_orders(), planned=self.planned_cells())
         return self.figures()
 
 
 class PassStats:
-    """Pulses, points per channel and a streaming histogram of |range error| [m] (median and 95th percentile)."""
+    """Pulses, points per channel and streaming histograms of the range error [m]: of |error| (median and 95th
+    percentile) and of the signed error (its median, the bias, and the share of points ranged short)."""
 
     def __init__(self, n_channels: int):
         self.pulses = 0
         self.points = 0
         self.channels = np.zeros(n_channels + 1, np.int64)
         self.error_counts = np.zeros(int(ERROR_MAX_M / ERROR_BIN_M) + 1, np.int64)
+        self.signed_counts = np.zeros(2 * self.error_counts.size, np.int64)  # bins of ERROR_BIN_M from -ERROR_MAX_M
+        self.short = 0
 
     def add(self, chunk) -> None:
         self.pulses += chunk.slots.size
         self.points += len(chunk.points)
         self.channels += np.bincount(chunk.points.channel, minlength=self.channels.size)
-        e = np.abs(chunk.points.range_error_m)
-        e = e[np.isfinite(e)]
+        signed = chunk.points.range_error_m[np.isfinite(chunk.points.range_error_m)].astype(np.float64)
+        e = np.abs(signed)
         np.add.at(self.error_counts, np.minimum((e / ERROR_BIN_M).astype(np.int64), self.error_counts.size - 1), 1)
+        half = self.error_counts.size
+        k = np.clip(np.floor(signed / ERROR_BIN_M).astype(np.int64) + half, 0, self.signed_counts.size - 1)
+        np.add.at(self.signed_counts, k, 1)
+        self.short += int((signed < 0).sum())
 
     def error_quantile_m(self, q: float) -> float | None:
         total = self.error_counts.sum()
@@ -258,6 +266,19 @@ class PassStats:
             return None
         k = int(np.searchsorted(np.cumsum(self.error_counts), q * total))
         return round((k + 0.5) * ERROR_BIN_M, 7)  # the bin's centre, without float noise in summary.json
+
+    def signed_median_m(self) -> float | None:
+        """Median signed range error [m] (negative: ranged short), to the histogram's bin."""
+        total = self.signed_counts.sum()
+        if total == 0:
+            return None
+        k = int(np.searchsorted(np.cumsum(self.signed_counts), 0.5 * total))
+        return round((k - self.error_counts.size + 0.5) * ERROR_BIN_M, 7)
+
+    def share_short(self) -> float | None:
+        """Share of the points with a truth whose range error is negative (ranged short)."""
+        total = self.error_counts.sum()
+        return round(float(self.short / total), 6) if total else None
 
 
 class WaveformSink:
@@ -336,7 +357,8 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
         "setup_s": round(setup_s, 3),
         "compile_s": round(compile_s, 3),
         "pulses_per_s": round(stats.pulses / wall_s, 1) if wall_s > 0 else None,
-        "range_error_m": {"median": stats.error_quantile_m(0.5), "p95": stats.error_quantile_m(0.95)},
+        "range_error_m": {"median": stats.error_quantile_m(0.5), "p95": stats.error_quantile_m(0.95),
+                          "median_signed": stats.signed_median_m(), "share_short": stats.share_short()},
         "settings": {
             "instrument": facts.instrument,
             "record_mode": facts.record_mode,
@@ -389,3 +411,15 @@ def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts:
              if fraction is not None else f"{facts.label}\nthe scan reaches no seabed cell")
     viz.plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
                           markers=markers, title=title, no_seabed=coverage.no_seabed)
+
+
+def render_order_map(path: Path, coverage: CoverageAccumulator, facts: PassFacts, figures: dict) -> None:
+    """s44_map.png: the strictest S-44 order each plan cell complies with, the planned swath outlined."""
+    from scanner_sim.metrics.s44 import ORDER_NAMES
+    from scanner_sim.render.s44_map import plot_order_map
+
+    planned = coverage.planned_cells()
+    plot_order_map(path, coverage.strictest_orders(), coverage.cell_states(),
+                   None if planned is None else planned.reshape(coverage.grid.shape), coverage.grid.extent_m,
+                   ORDER_NAMES, figures, title=f"{facts.label}\nIHO S-44 orders (Ed. 6.0.0), "
+                   f"{figures['order_min_soundings']} soundings a cell, 95 % within the order's TVU and THU")

@@ -1,0 +1,169 @@
+"""Total propagated uncertainty (TPU) of every point: THU and TVU at 95 %, propagated term by term.
+
+A point is X = p + R(roll, pitch, yaw) (m + rho u): the platform position p, its attitude R, the beam's exit m on
+the vehicle (the mounting) and the measured range rho along the beam's direction u at the mirror's scan angle. Each
+independent error source k moves X by J_k e_k, its Jacobian times its error, and the covariance of X is the sum of
+their variances times J_k J_k^T (the propagation of Hare 1995 and Hare, Godin and Mayer 2011 for hydrographic
+sounders, applied to a lidar beam; ``docs/uncertainty.md`` states every term and its source):
+
+- ranging: rho's error per channel, SNR and clipping, measured from the instrument's own ranging
+  (:mod:`scanner_sim.survey.ranging_precision`): a mean b (its systematic part) and a standard deviation, along the
+  beam: J = u;
+- footprint on the surface: the beam's disc of diameter w = D + 2 rho tan(gamma / 2) met at incidence theta spreads
+  the echo over ranges of standard deviation (w / 4) tan(theta) about the axis's, along the beam: J = u;
+- navigation position (east, north) and depth: J = unit axes;
+- attitude: a small turn e about axis a moves X by e (a x v), v = X - p the lever from the vehicle's reference
+  point (mounting and range together): heading turns about the vertical, pitch about the yawed pitch axis
+  -Rz(yaw) y, roll about the vehicle's forward axis R x.
+
+TVU is the 95 % quantile of |vertical error| for a normal error of mean u_z b and standard deviation sigma_z (the
+folded normal's; 1.96 sigma_z when b = 0, about |u_z b| + 1.645 sigma_z when the bias dominates). THU = 2.45 sigma_h
+with sigma_h^2 = (sigma_x^2 + sigma_y^2 + |u_xy b|^2) / 2: the 95 % radius of a circular bivariate normal,
+sqrt(-2 ln 0.05) = 2.4477 sigma, of the same mean square horizontal error.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr, ndtri
+
+from scanner_sim.survey.ranging_precision import RangingPrecision
+
+#: 95 % factor of a one-dimensional normal error of zero mean (vertical).
+K95_VERTICAL = 1.96
+#: The confidence of THU and TVU.
+CONFIDENCE = 0.95
+#: Newton steps of :func:`folded_normal_quantile`: from within 0.43 sigma of the root, four steps reach it to
+#: about 1e-6 sigma, far under the millimetre THU and TVU are reported to.
+NEWTON_STEPS = 4
+#: THU and TVU are reported to the millimetre [decimals of a metre], the resolution of the points' LAS coordinates
+#: (which keeps points.laz compact: noise in the low bits would not compress).
+REPORTED_DECIMALS = 3
+#: 95 % factor of a circular bivariate normal error (horizontal): sqrt(-2 ln 0.05) = 2.4477.
+K95_HORIZONTAL = 2.45
+
+
+@dataclass(frozen=True)
+class NavigationSigmas:
+    """Standard deviations of the navigation's errors (the pass's Gauss-Markov noise is stationary at these):
+    position east and north [m], depth [m], roll and pitch [rad], heading [rad]."""
+
+    position_m: float = 0.0
+    depth_m: float = 0.0
+    attitude_rad: float = 0.0
+    heading_rad: float = 0.0
+
+    @classmethod
+    def of(cls, noise) -> NavigationSigmas:
+        """From a :class:`scanner_sim.config.NavigationNoiseConfig`."""
+        return cls(noise.position_sigma_m, noise.depth_sigma_m, math.radians(noise.attitude_sigma_deg),
+                   math.radians(noise.heading_sigma_deg))
+
+    def as_dict(self) -> dict:
+        """The sigmas as the summary states them: position and depth [m], attitude and heading [deg]."""
+        return {"position_sigma_m": self.position_m, "depth_sigma_m": self.depth_m,
+                "attitude_sigma_deg": round(math.degrees(self.attitude_rad), 6),
+                "heading_sigma_deg": round(math.degrees(self.heading_rad), 6)}
+
+
+@dataclass(frozen=True)
+class TpuModel:
+    """What the propagation needs of a pass: its measured ranging precision, its navigation's noise, and its beam
+    (exit diameter [m], full divergence in the water [rad])."""
+
+    ranging: RangingPrecision
+    navigation: NavigationSigmas
+    beam_diameter_m: float
+    divergence_full_rad: float
+
+    def footprint_sigma_m(self, range_m: np.ndarray, incidence_deg: np.ndarray) -> np.ndarray:
+        """(n,) range spread [m] of the beam's footprint on a surface met at ``incidence_deg`` (n,) at ``range_m``
+        (n,): (w / 4) tan(theta), the standard deviation of x tan(theta) over a disc of diameter w (a uniform
+        disc's, and a Gaussian beam's to its 1/e^2 radius); 0 where the incidence is unknown (NaN)."""
+        width = self.beam_diameter_m + 2.0 * range_m * math.tan(0.5 * self.divergence_full_rad)
+        tan = np.tan(np.radians(np.nan_to_num(incidence_deg, nan=0.0)))
+        return 0.25 * width * tan
+
+    def variances(self, lever_m, direction, attitude_rad, range_sigma_m) -> np.ndarray:
+        """(n, 3) variances [m^2] of the x, y and z errors (the covariance's diagonal, sum of sigma_k^2 J_k^2) of points
+        whose lever from the vehicle's reference point is ``lever_m`` (n, 3) [m], along beam ``direction`` (n, 3)
+        unit, the vehicle at ``attitude_rad`` (n, 3) roll, pitch, yaw, with range standard uncertainty
+        ``range_sigma_m`` (n,) [m] (ranging and footprint together)."""
+        nav = self.navigation
+        u = np.asarray(direction, np.float64)
+        var = range_sigma_m[:, None] ** 2 * u**2
+        var += np.array([nav.position_m**2, nav.position_m**2, nav.depth_m**2])
+        yaw, pitch = attitude_rad[:, 2], attitude_rad[:, 1]
+        lx, ly = lever_m[:, 0], lever_m[:, 1]
+        if nav.heading_rad:  # z x v
+            var[:, 0] += (nav.heading_rad * ly) ** 2
+            var[:, 1] += (nav.heading_rad * lx) ** 2
+        if nav.attitude_rad:
+            for axis in (np.c_[np.sin(yaw), -np.cos(yaw), np.zeros_like(yaw)],  # pitch: -Rz(yaw) y
+                         np.c_[np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)]):  # roll: R x
+                var += (nav.attitude_rad * np.cross(axis, lever_m)) ** 2
+        return var
+
+    def error_model(self, lever_m, direction, attitude_rad, channel, snr, saturated, later, range_m, incidence_deg
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """The predicted error of n points: its mean (n, 3) [m] (the ranging's bias along the beam) and variances
+        (n, 3) [m^2]. Arguments as :meth:`variances` and :meth:`RangingPrecision.of`; ``range_m`` (n,) the measured
+        range [m], ``incidence_deg`` (n,)."""
+        bias, std = self.ranging.of(channel, snr, saturated, later, range_m)
+        sigma_range = np.hypot(std, self.footprint_sigma_m(range_m, incidence_deg))
+        return bias[:, None] * direction, self.variances(lever_m, direction, attitude_rad, sigma_range)
+
+    def __call__(self, *point) -> tuple[np.ndarray, np.ndarray]:
+        """(THU, TVU) [m] at 95 %, each (n,), of n points (arguments as :meth:`error_model`), to the millimetre."""
+        mean, var = self.error_model(*point)
+        return np.round(thu_of(mean, var), REPORTED_DECIMALS), np.round(tvu_of(mean, var), REPORTED_DECIMALS)
+
+
+def horizontal_sigma(mean, var) -> np.ndarray:
+    """(n,) sigma_h [m]: the per-axis standard deviation of the circular bivariate normal of the same mean square
+    horizontal error as errors of ``mean`` (n, 3) and variances ``var`` (n, 3)."""
+    return np.sqrt(0.5 * (var[:, 0] + var[:, 1] + mean[:, 0] ** 2 + mean[:, 1] ** 2))
+
+
+def thu_of(mean, var) -> np.ndarray:
+    """(n,) THU [m]: 2.45 sigma_h (:func:`horizontal_sigma`)."""
+    return K95_HORIZONTAL * horizontal_sigma(mean, var)
+
+
+def tvu_of(mean, var) -> np.ndarray:
+    """(n,) TVU [m]: the 95 % quantile of |vertical error| of errors of ``mean`` (n, 3) and variances ``var``."""
+    return folded_normal_quantile(mean[:, 2], np.sqrt(var[:, 2]), CONFIDENCE)
+
+
+def coverage_levels(mean, var, vertical_m, horizontal_m) -> tuple[np.ndarray, np.ndarray]:
+    """The coverage level at which each of n true errors lies on its predicted distribution, each (n,) in [0, 1]:
+    P(|Z| <= |vertical|) for Z normal of the predicted vertical mean and variance, and P(R <= horizontal) for R the
+    radius of the circular bivariate normal of :func:`horizontal_sigma`, 1 - exp(-h^2 / (2 sigma_h^2)). A model
+    that is right gives levels spread uniformly: the share of levels <= q is q (the calibration curve)."""
+    mu, sigma = mean[:, 2], np.maximum(np.sqrt(var[:, 2]), 1e-6)
+    e = np.abs(vertical_m)
+    level_z = ndtr((e - mu) / sigma) - ndtr((-e - mu) / sigma)
+    level_h = -np.expm1(-0.5 * (horizontal_m / np.maximum(horizontal_sigma(mean, var), 1e-6)) ** 2)
+    return level_z, level_h
+
+
+def folded_normal_quantile(mean, sigma, p: float) -> np.ndarray:
+    """(n,) the T with P(|Z| <= T) = ``p`` for Z normal of ``mean`` (n,) and ``sigma`` (n,) [m], for p >= 0.9:
+    Newton's method on F(T) = Phi((T - mean) / sigma) - Phi((-T - mean) / sigma) = p from T0 = |mean| + z sigma,
+    z = Phi^-1((1 + p) / 2) (1.96 for 0.95), which lies at or above the root. F rises and is concave beyond |mean|,
+    and its first step is at most (1 - p) / (2 phi(z)) sigma < z sigma long for p >= 0.9 (0.43 sigma at 0.95), so
+    every iterate stays beyond |mean| and the steps converge quadratically onto the root (:data:`NEWTON_STEPS`).
+    A sigma under 1 micrometre is taken as 1 micrometre."""
+    if not 0.9 <= p < 1.0:
+        raise ValueError(f"folded_normal_quantile: p = {p!r}; this solver holds for 0.9 <= p < 1")
+    mean, sigma = np.abs(np.asarray(mean, np.float64)), np.maximum(np.asarray(sigma, np.float64), 1e-6)
+    t = mean + ndtri(0.5 + 0.5 * p) * sigma
+    for _ in range(NEWTON_STEPS):
+        a, b = (t - mean) / sigma, (t + mean) / sigma
+        f = ndtr(a) - ndtr(-b) - p
+        slope = (np.exp(-0.5 * a * a) + np.exp(-0.5 * b * b)) / (sigma * math.sqrt(2.0 * math.pi))
+        t = t - f / slope
+    return t
