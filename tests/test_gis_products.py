@@ -52,7 +52,8 @@ def _epsg(wkt: str) -> int | None:
 def test_the_pass_writes_the_gis_products_its_plan_lists(utm_pass):
     out, _ = utm_pass
     plan = PassPlan.of(turbid_utm_scene(), OPTIONS).files
-    assert {"coverage.tif", "density.tif", "gaps.geojson", "trajectory.geojson", "lines.geojson"} <= set(plan)
+    assert {"coverage.tif", "density.tif", "s44_orders.tif", "gaps.geojson", "trajectory.geojson",
+            "lines.geojson"} <= set(plan)
     assert sorted(p.name for p in out.iterdir()) == sorted(plan)  # nothing more, nothing less, no temporary file
 
 
@@ -71,7 +72,7 @@ def test_gdalinfo_shows_the_coverage_raster_crs_and_the_survey_extent(utm_pass):
     x0, y0 = grid["origin_m"]
     expected = (x0 + cols.min() * cell, y0 + rows.min() * cell, x0 + (cols.max() + 1) * cell,
                 y0 + (rows.max() + 1) * cell)
-    for name in ("coverage.tif", "density.tif"):
+    for name in ("coverage.tif", "density.tif", "s44_orders.tif"):
         info = _gdalinfo(out / name)
         assert info["driverShortName"] == "GTiff" and info["metadata"]["IMAGE_STRUCTURE"]["LAYOUT"] == "COG"
         assert _epsg(info["coordinateSystem"]["wkt"]) == 32631
@@ -110,6 +111,33 @@ def test_the_rasters_add_up_to_the_summary_coverage_figures(utm_pass):
     assert np.allclose(density[tif_rows, tif_cols], grid["valid"][rows, cols] / cell ** 2)
     assert np.nansum(density.astype(float)) * cell_area == pytest.approx(figures["valid_points_in_reach"], rel=1e-6)
     assert np.array_equal(np.isnan(density), state == -2)
+
+
+def test_the_s44_raster_holds_each_cells_strictest_order_and_adds_up_to_the_summary(utm_pass):
+    """s44_orders.tif, looked up by map coordinates, is coverage_grid.npz's strictest order of each reached cell;
+    the orders are nested (each looser limit contains the stricter one), so the cells of the planned swath coded
+    0..k are the summary's compliant area of order k, which the coverage tally counts per order on its own."""
+    import rasterio
+
+    out, summary = utm_pass
+    grid = read_coverage_grid_npz(out / "coverage_grid.npz")
+    rows, cols = np.nonzero(grid["state"] != -2)
+    cell = float(grid["cell_m"])
+    with rasterio.open(out / "s44_orders.tif") as ds:
+        orders = ds.read(1)
+        assert ds.nodata == -2 and ds.tags(1)["codes"].startswith("-1=none, 0=exclusive")
+        x, y = grid["origin_m"][0] + (cols + 0.5) * cell, grid["origin_m"][1] + (rows + 0.5) * cell
+        tif_rows, tif_cols = rasterio.transform.rowcol(ds.transform, x, y)
+    code = orders[tif_rows, tif_cols]
+    assert np.array_equal(code, grid["s44_order"][rows, cols])
+    assert np.count_nonzero(orders != -2) == rows.size
+    figures = summary["coverage"]
+    assert figures["orders_area"] == "planned_swath"
+    in_swath = grid["planned"][rows, cols]
+    for k, name in enumerate(grid["s44_order_names"]):
+        compliant = np.count_nonzero((code >= 0) & (code <= k) & in_swath) * cell ** 2
+        assert compliant == pytest.approx(figures["orders"][str(name)]["compliant_area_m2"])
+    assert (code >= 0).any(), "the test pass should comply with some order somewhere"
 
 
 @needs_gdal

@@ -1,8 +1,9 @@
 """The GIS products of a pass over a scene with a CRS (docs/outputs.md#gis-products), in its map coordinates.
 
 - Rasters (Cloud-Optimized GeoTIFF) of the pass's coverage tally, one per entry of :data:`COVERAGE_RASTERS`:
-  ``coverage.tif`` (each cell's state: covered or the cause of its gap) and ``density.tif`` (valid points per
-  m²), cut to the cells the pass reached. They are the grids the coverage already holds (no second count).
+  ``coverage.tif`` (each cell's state: covered or the cause of its gap), ``density.tif`` (valid points per
+  m²) and ``s44_orders.tif`` (the strictest IHO S-44 order each cell meets), cut to the cells the pass
+  reached. They are the grids the coverage already holds (no second count).
 - ``gaps.geojson``: each gap (a 4-connected region of missed cells, the summary's ``holes``) as a polygon with the
   cause that failed most of the pulses aimed into it.
 - ``trajectory.geojson`` (the true track, one LineString per leg) and ``lines.geojson`` (the planned legs).
@@ -22,6 +23,7 @@ import numpy as np
 
 from scanner_sim.io.gis import write_cog, write_geojson
 from scanner_sim.metrics.coverage import COVERED, GAP_CAUSES, NOT_REACHED, OTHER_SURFACE, CoverageAccumulator
+from scanner_sim.metrics.s44 import NO_ORDER, ORDER_NAMES
 
 #: Decimals of the GeoJSON files' coordinates [m]: millimetres, the LAS files' scale.
 GEOJSON_DECIMALS = 3
@@ -55,10 +57,21 @@ def density_band(coverage: CoverageAccumulator) -> RasterBand:
                       {"units": "points/m2", "tolerance_m": f"{coverage.settings.tolerance_m:g}"})
 
 
+def s44_order_band(coverage: CoverageAccumulator) -> RasterBand:
+    """int16 strictest IHO S-44 order each reached cell complies with: k >= 0 is ORDER_NAMES[k] (0 the strictest),
+    NO_ORDER (-1) none; nodata -2 (not reached). The same cells as s44_map.png."""
+    orders = np.where(coverage.cell_states() == NOT_REACHED, NOT_REACHED, coverage.strictest_orders()).astype(np.int16)
+    codes = {str(NO_ORDER): "none", **{str(k): name for k, name in enumerate(ORDER_NAMES)}}
+    return RasterBand(orders, NOT_REACHED, "strictest IHO S-44 order (Ed. 6.0.0)",
+                      {"codes": ", ".join(f"{k}={v}" for k, v in codes.items()), "not_reached": str(NOT_REACHED),
+                       "min_soundings": str(coverage.settings.order_min_soundings)})
+
+
 #: The rasters a pass writes from its coverage: file name -> the band. Another grid of the coverage is one more line.
 COVERAGE_RASTERS: dict[str, Callable[[CoverageAccumulator], RasterBand]] = {
     "coverage.tif": coverage_state_band,
     "density.tif": density_band,
+    "s44_orders.tif": s44_order_band,
 }
 
 #: The vector files of a pass: gaps (with coverage), and always the track and the planned lines.
