@@ -146,7 +146,7 @@ def _chromium() -> str:
 def test_report_opens_in_headless_chromium_with_every_picture(small_study, tmp_path):
     """Chromium renders the page; the screenshot shows the map's covered teal and the renders' navy.
     .ci/run installs Chromium and sets MULS_REQUIRE_CHROMIUM=1, so CI never skips this."""
-    from scanner_sim.render.viz import COVERAGE_COLOURS
+    from scanner_sim.render.plan_map import COVERAGE_COLOURS
 
     browser = _chromium()
     out, _ = small_study
@@ -205,7 +205,8 @@ def test_report_s44_section_opens_in_chromium_with_every_image_decoding(small_st
 
 def test_coverage_map_colours_cells_by_cause(tmp_path):
     from scanner_sim.metrics.coverage import GAP_CAUSES
-    from scanner_sim.render.viz import COVERAGE_COLOURS, plot_coverage_map
+    from scanner_sim.render.coverage_map import plot_coverage_map
+    from scanner_sim.render.plan_map import COVERAGE_COLOURS
 
     state = np.full((40, 80), -2)
     state[10:30, 10:70] = -1

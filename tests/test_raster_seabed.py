@@ -289,7 +289,8 @@ def test_coverage_map_draws_cells_without_seabed_data_apart(tmp_path):
     import matplotlib.image as mpimg
 
     from scanner_sim.metrics.coverage import GAP_CAUSES
-    from scanner_sim.render.viz import COVERAGE_COLOURS, NO_SEABED_COLOUR, plot_coverage_map
+    from scanner_sim.render.coverage_map import plot_coverage_map
+    from scanner_sim.render.plan_map import COVERAGE_COLOURS, NO_SEABED_COLOUR
 
     def colours(no_seabed):
         plot_coverage_map(tmp_path / "m.png", state, (0, 20, 0, 10), GAP_CAUSES, no_seabed=no_seabed)

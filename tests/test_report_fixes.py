@@ -3,7 +3,7 @@
 import numpy as np
 
 from scanner_sim.metrics.coverage import GAP_CAUSES
-from scanner_sim.render import viz
+from scanner_sim.render import point_cloud, sweep_charts
 
 
 def test_render_legend_ends_inside_the_window(tmp_path):
@@ -15,7 +15,7 @@ def test_render_legend_ends_inside_the_window(tmp_path):
     pts = rng.uniform(-5, 5, (3000, 3)) * [1, 1, 0.1]
     classes = rng.choice([7, 40, 43, 64, 65, 66, 67, 68, 69, 70], 3000).astype(np.uint8)
     path = tmp_path / "render.png"
-    viz.render_point_cloud(path, pts, classes, title="t", window_size=(960, 600))
+    point_cloud.render_point_cloud(path, pts, classes, title="t", window_size=(960, 600))
     image = np.asarray(Image.open(path).convert("RGB")).astype(int)
     background = image[-1, -1]
     legend_rows = image[:300]  # the legend's ten lines, above the points
@@ -29,7 +29,7 @@ def test_coverage_chart_keeps_mul2023_visible_under_single_channel():
     """At 100 % both instruments of a water sat at the same x with the same marker size, and single_channel's
     squares, drawn last, hid mul2023's circles. Root cause: curves were set apart per water only."""
     keys = [(w, i) for w in ("clean_ocean", "coastal_ocean") for i in ("mul2023", "single_channel")]
-    layout = viz.curve_layout(keys, span=3.0)
+    layout = sweep_charts.curve_layout(keys, span=3.0)
     offsets = [layout[k][0] for k in keys]
     assert len(set(offsets)) == len(keys)  # no two curves at the same x
     for earlier, later in zip(keys, keys[1:]):  # each drawn on top of the one before, smaller

@@ -59,7 +59,7 @@ def _cmd_overlap(args) -> int:
         "full_overlap_m": round(geometry.full_overlap_m, 4),
     }
     if args.out:
-        from scanner_sim.render.viz import plot_overlap
+        from scanner_sim.render.overlap_plot import plot_overlap
 
         dense = np.linspace(0.0, float(dist.max()) * 1.05, 400)
         plot_overlap(args.out, dist, ray, ana, title=f"Beam / receiver-FOV overlap, {args.instrument} geometry",

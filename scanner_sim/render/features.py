@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scanner_sim.render.viz import COVERAGE_COLOURS, finish_plan_map
+from scanner_sim.render.plan_map import COVERAGE_COLOURS, finish_plan_map
 
 DETECTED_COLOUR = "#1a9850"
 MISSED_COLOUR = "#d73027"

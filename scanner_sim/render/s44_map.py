@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scanner_sim.render.viz import COVERAGE_COLOURS, finish_plan_map
+from scanner_sim.render.plan_map import COVERAGE_COLOURS, finish_plan_map
 
 #: Colour per order, strictest first (dark to light green), then "complies with none" and "not reached".
 ORDER_COLOURS = ("#00441b", "#238b45", "#74c476", "#bae4b3", "#edf8e9")

@@ -32,7 +32,7 @@ from scanner_sim.config.errors import invalid
 from scanner_sim.config.loading import parse_yaml_text, read_scene_text
 from scanner_sim.io.run_dir import hold_output
 from scanner_sim.metrics.coverage import CoverageSettings
-from scanner_sim.render import viz
+from scanner_sim.render.sweep_charts import plot_sweep
 from scanner_sim.runs.jobs import PassOutcome, run_jobs, run_pass_segmented
 from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassJob
 from scanner_sim.survey.setup import PassOptions
@@ -397,6 +397,6 @@ def draw_chart(out: Path, campaign: Campaign, chart: ChartConfig, rows: list[dic
         return None
     slug = lambda text: re.sub(r"[^A-Za-z0-9_]+", "-", text)  # noqa: E731
     name = f"{chart.y}_vs_{slug(chart.x)}" + (f"_by_{'_'.join(map(slug, chart.lines))}" if chart.lines else "") + ".png"
-    viz.plot_sweep(out / name, records, chart.x, chart.y, lines=chart.lines, y_label=label,
-                   title=f"{campaign.name} ({campaign.scene.name}): {chart.y.replace('_', ' ')} against {chart.x}")
+    plot_sweep(out / name, records, chart.x, chart.y, lines=chart.lines, y_label=label,
+               title=f"{campaign.name} ({campaign.scene.name}): {chart.y.replace('_', ' ')} against {chart.x}")
     return name

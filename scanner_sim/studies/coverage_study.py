@@ -187,10 +187,10 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
         io.write_summary_json(out / "coverage.json", study)
         io.write_text(out / "coverage.md", report.coverage_markdown(study))
         if render:
-            from scanner_sim.render import viz
+            from scanner_sim.render.sweep_charts import plot_coverage_vs_altitude
 
-            viz.plot_coverage_vs_altitude(out / "coverage_vs_altitude.png", records,
-                                          title=f"{config.name}: coverage against altitude")
+            plot_coverage_vs_altitude(out / "coverage_vs_altitude.png", records,
+                                      title=f"{config.name}: coverage against altitude")
             _calibration_charts(out, records)
             io.write_text(out / "report.html", report.report_html(study, out))
     return study

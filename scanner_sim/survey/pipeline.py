@@ -28,7 +28,7 @@ from scanner_sim.io.rosbag import ROSBAG_NAME
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.metrics.planned_swath import planned_swath
 from scanner_sim.metrics.tpu_calibration import UncertaintySink
-from scanner_sim.render import viz
+from scanner_sim.render import point_cloud
 from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.gis_products import write_gis_products
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
@@ -61,7 +61,7 @@ class PassResult:
 
     def points_polydata(self):
         """The points as a pyvista ``PolyData`` with every field as point data."""
-        return viz.points_polydata(self.points)
+        return point_cloud.points_polydata(self.points)
 
 
 @abort_on_error  # an unfinished run (an error, Ctrl-C, SIGTERM) leaves the output folder as it was

@@ -21,7 +21,8 @@ from muls.ranging import DROPOUT_CAUSES
 from scanner_sim import io
 from scanner_sim.io.rosbag import RosbagWriter
 from scanner_sim.metrics.coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
-from scanner_sim.render import viz
+from scanner_sim.render.coverage_map import plot_coverage_map
+from scanner_sim.render.point_cloud import render_point_cloud
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.provenance import point_cloud_provenance
 from scanner_sim.version import __version__
@@ -392,9 +393,9 @@ def write_trajectory(out: Path, table: dict[str, np.ndarray], split_legs: bool) 
 
 def render_points(path: Path, sample: CloudSample, scene, facts: PassFacts, window_size=(1600, 1000)) -> None:
     """render.png: the sampled points coloured by class over the faded truth mesh of ``scene``."""
-    viz.render_point_cloud(path, sample.xyz, sample.classification, truth_vertices=scene.vertices,
-                           truth_faces=scene.faces, title=f"{facts.label}: {len(sample.xyz):,} points ({facts.fidelity})",
-                           window_size=window_size)
+    render_point_cloud(path, sample.xyz, sample.classification, truth_vertices=scene.vertices,
+                       truth_faces=scene.faces, title=f"{facts.label}: {len(sample.xyz):,} points ({facts.fidelity})",
+                       window_size=window_size)
 
 
 def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts: PassFacts, figures: dict) -> None:
@@ -409,8 +410,8 @@ def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts:
     fraction = figures["covered_fraction"]
     title = (f"{facts.label}\ncovered {fraction:.1%} of {figures['reached_area_m2']:.0f} m² reached"
              if fraction is not None else f"{facts.label}\nthe scan reaches no seabed cell")
-    viz.plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
-                          markers=markers, title=title, no_seabed=coverage.no_seabed)
+    plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
+                      markers=markers, title=title, no_seabed=coverage.no_seabed)
 
 
 def render_order_map(path: Path, coverage: CoverageAccumulator, facts: PassFacts, figures: dict) -> None:
