@@ -104,7 +104,8 @@ def test_study_outputs_and_self_contained_report(small_study):
         assert 0.0 < r["covered_fraction"] <= 1.0
         assert r["settings"]["tolerance_m"] == 0.15 and r["settings"]["gate_delay_ns"] == 35.0
         assert sum(r["gaps_m2"].values()) == pytest.approx(r["reached_area_m2"] - r["covered_area_m2"])
-        for file in ("points.las", "summary.json", "coverage_grid.npz", "coverage_map.png", "render.png"):
+        for file in ("points.las", "summary.json", "coverage_grid.npz", "coverage_map.png", "s44_map.png", "calibration.png",
+                     "render.png"):
             assert (out / r["dir"] / file).is_file()
         assert not (out / r["dir"] / "scene.ply").exists()  # one truth mesh for the whole study
     assert (out / "scene.ply").is_file()
@@ -119,7 +120,7 @@ def test_study_outputs_and_self_contained_report(small_study):
     page.close()
     assert page.links == []  # nothing outside the file
     assert page.tables >= 2
-    assert len(page.images) == 1 + 2 * len(study["records"])  # chart, then a map and a render per combination
+    assert len(page.images) == 1 + 4 * len(study["records"])  # chart, then two maps, a TPU chart and a render each
     for src in page.images:
         head, data = src.split(",", 1)
         assert head == "data:image/png;base64"
@@ -132,16 +133,22 @@ def _hex_rgb(colour):
     return tuple(int(colour[i:i + 2], 16) for i in (1, 3, 5))
 
 
-def test_report_opens_in_headless_chromium_with_every_picture(small_study, tmp_path):
-    """Chromium renders the page; the screenshot shows the map's covered teal and the renders' navy.
-    .ci/run installs Chromium and sets MULS_REQUIRE_CHROMIUM=1, so CI never skips this."""
-    from scanner_sim.render.viz import COVERAGE_COLOURS
-
+def _chromium() -> str:
+    """The Chromium on PATH; the test is skipped without one, and fails without one under MULS_REQUIRE_CHROMIUM=1."""
     browser = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
     if browser is None:
         if os.environ.get("MULS_REQUIRE_CHROMIUM") == "1":
             pytest.fail("MULS_REQUIRE_CHROMIUM=1 but no chromium on PATH")
         pytest.skip("no chromium on PATH (CI installs it)")
+    return browser
+
+
+def test_report_opens_in_headless_chromium_with_every_picture(small_study, tmp_path):
+    """Chromium renders the page; the screenshot shows the map's covered teal and the renders' navy.
+    .ci/run installs Chromium and sets MULS_REQUIRE_CHROMIUM=1, so CI never skips this."""
+    from scanner_sim.render.plan_map import COVERAGE_COLOURS
+
+    browser = _chromium()
     out, _ = small_study
     shot = tmp_path / "report.png"
     run = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
@@ -155,9 +162,51 @@ def test_report_opens_in_headless_chromium_with_every_picture(small_study, tmp_p
     assert len(colours) > 500  # pictures, not just text on white
 
 
+def test_coverage_json_carries_s44_orders_and_compliance_per_record(small_study):
+    from scanner_sim.metrics import s44
+
+    out, _ = small_study
+    study = json.loads((out / "coverage.json").read_text())
+    assert study["s44_orders"] == s44.orders_table()
+    assert set(study["s44_orders"]["exclusive"]) >= {"tvu_a_m", "tvu_b", "thu_m", "thu_depth_fraction", "feature_m"}
+    for r in study["records"]:
+        assert list(r["orders"]) == ["exclusive", "special", "1a", "1b", "2"]
+        fractions = [r["orders"][name]["compliant_fraction"] for name in r["orders"]]
+        assert all(0.0 <= f <= 1.0 for f in fractions)
+        # a cell meeting a stricter order meets every looser one with the same limits or wider
+        assert fractions[0] <= fractions[1] <= fractions[2] <= fractions[4]
+        assert r["settings"]["order_min_soundings"] == s44.DEFAULT_MIN_SOUNDINGS
+        assert 0.0 <= r["planned_swath"]["reached_fraction"] <= 1.0
+    text = (out / "coverage.md").read_text()
+    assert "## IHO S-44 orders" in text and "## S-44 compliance per water and altitude" in text
+
+
+def test_report_s44_section_opens_in_chromium_with_every_image_decoding(small_study, tmp_path):
+    """A copy of report.html with a script that counts, once loaded, the images Chromium decoded and the sections."""
+    browser = _chromium()
+    out, _ = small_study
+    probe = ('<script>window.addEventListener("load", () => { const imgs = [...document.images];'
+             ' const ok = imgs.filter(i => i.complete && i.naturalWidth > 0).length;'
+             ' const d = document.createElement("div"); d.id = "probe";'
+             ' d.textContent = `${imgs.length} ${ok} ` + [...document.querySelectorAll("h2")].map(h => h.textContent)'
+             '.join(";"); document.body.appendChild(d); });</script>')
+    page = tmp_path / "report.html"
+    page.write_text((out / "report.html").read_text().replace("</body>", probe + "</body>"))
+    run = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=10000",
+                          "--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=180)
+    assert run.returncode == 0, run.stderr[-2000:]
+    found = re.search(r'<div id="probe">(\d+) (\d+) ([^<]*)</div>', run.stdout)
+    assert found, run.stdout[-2000:]
+    images, decoded, sections = int(found[1]), int(found[2]), found[3].split(";")
+    assert images == decoded == 1 + 4 * 2  # the chart; per pass its coverage map, S-44 map, TPU chart and render
+    assert "S-44 compliance per water and altitude" in sections and "IHO S-44 orders (Edition 6.0.0, 2020, Table 1)" \
+        in sections and "Uncertainty per point (TPU) against the truth" in sections
+
+
 def test_coverage_map_colours_cells_by_cause(tmp_path):
     from scanner_sim.metrics.coverage import GAP_CAUSES
-    from scanner_sim.render.viz import COVERAGE_COLOURS, plot_coverage_map
+    from scanner_sim.render.coverage_map import plot_coverage_map
+    from scanner_sim.render.plan_map import COVERAGE_COLOURS
 
     state = np.full((40, 80), -2)
     state[10:30, 10:70] = -1

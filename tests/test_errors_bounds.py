@@ -18,7 +18,7 @@ import pytest
 
 from muls.cli import main as muls_main
 from scanner_sim import io
-from scanner_sim.render import viz
+from scanner_sim.render import point_cloud
 from scanner_sim.survey.point_records import PointRecords
 
 REPO = Path(__file__).resolve().parents[1]
@@ -108,7 +108,7 @@ def test_window_size_beyond_what_vtk_can_render_is_refused_not_aborted(tmp_path)
         "scanner-sim view: error: --window-size = 50000 50000: at most 16384 px a side (the largest framebuffer OpenGL "
         "drivers commonly render)"], proc.stderr
     with pytest.raises(ValueError) as refused:  # a side VTK renders, a picture too large for the machine's memory
-        viz.check_window_size("--window-size", (16384, 16384), available_bytes=10**10)
+        point_cloud.check_window_size("--window-size", (16384, 16384), available_bytes=10**10)
     assert str(refused.value) == (
         "--window-size = 16384 16384: a 16,384 x 16,384 px picture would need about 26.8 GB of memory, more than the "
         "8.0 GB it may use (80% of the 10.0 GB available); at most 80,000,000 pixels (width x height) on this machine")

@@ -1,4 +1,4 @@
-"""One writer per output folder: every command that writes a folder (``run``, ``coverage``, ``campaign``,
+"""One writer per output folder: every command that writes a folder (``run``, ``coverage``, ``campaign``, ``dataset``,
 ``tradeoff``) holds the folder's lock (``.NAME.lock`` beside it) while it runs, on any ending; a second writer is
 refused with exit 2 and one line naming the holder's pid, before it writes anything.
 
@@ -56,10 +56,17 @@ def _campaign_file(tmp_path: Path) -> Path:
     return path
 
 
+def _dataset_file(tmp_path: Path) -> Path:
+    path = tmp_path / "tiny_dataset.yaml"
+    path.write_text("scene: pool_panel\nseed: 1\nscenes: 1\nmax_pulses: 20\n")
+    return path
+
+
 COMMANDS = {
     "coverage": lambda t, out: ["coverage", "cable_survey", "--waters", "scene", "--instruments", "mul2023",
                                 "--max-pulses", "20", "--workers", "0", "--no-render", "--quiet", "--out", str(out)],
     "campaign": lambda t, out: ["campaign", str(_campaign_file(t)), "--workers", "0", "--quiet", "--out", str(out)],
+    "dataset": lambda t, out: ["dataset", str(_dataset_file(t)), "--workers", "0", "--quiet", "--out", str(out)],
     "tradeoff": lambda t, out: ["tradeoff", "pool_panel", "--levels", "fast", "--knobs", "--pulses", "30",
                                 "--waveform-pulses", "5", "--repeat", "1", "--no-render", "--no-convergence",
                                 "--json", "--out", str(out)],

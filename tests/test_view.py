@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from scanner_sim import cli, io
-from scanner_sim.render import viz
+from scanner_sim.render import point_cloud, point_colours
 from scanner_sim.survey.point_records import PointRecords
 from scanner_sim.world.scene import LABELS
 
@@ -86,7 +86,7 @@ def test_every_colouring_renders_a_distinct_picture(survey_dir, tmp_path, monkey
         assert img.shape == (SIZE[1], SIZE[0], 3), colour
         assert len(np.unique(img.reshape(-1, 3), axis=0)) > MIN_DISTINCT_COLOURS, colour
         images[colour] = img
-    sand, orange = viz.CLASS_COLOURS["seabed"], viz.CLASS_COLOURS["cable"]
+    sand, orange = point_colours.CLASS_COLOURS["seabed"], point_colours.CLASS_COLOURS["cable"]
     assert _pixels_near(images["class"], sand) > 2000 and _pixels_near(images["class"], orange) > 500
     assert _pixels_near(images["intensity"], orange) < _pixels_near(images["class"], orange) / 10
     for a, b in itertools.combinations(COLOURS, 2):
@@ -105,7 +105,7 @@ def test_without_display_writes_beside_the_las_and_no_mesh_drops_the_truth(surve
     with_mesh, without = tmp_path / "mesh.png", tmp_path / "nomesh.png"
     assert _view(survey_dir / "points.las", "--screenshot", with_mesh, "--max-points", "1000") == 0
     assert _view(survey_dir / "points.las", "--screenshot", without, "--max-points", "1000", "--no-mesh") == 0
-    navy = tuple(int(viz._BACKGROUND[i:i + 2], 16) for i in (1, 3, 5))
+    navy = tuple(int(point_cloud._BACKGROUND[i:i + 2], 16) for i in (1, 3, 5))
     # the faded grey mesh covers part of the navy background
     assert _pixels_near(_image(without), navy, 2) > _pixels_near(_image(with_mesh), navy, 2) + 1000
 
@@ -113,7 +113,7 @@ def test_without_display_writes_beside_the_las_and_no_mesh_drops_the_truth(surve
 def test_with_a_display_opens_a_window(survey_dir, tmp_path, monkeypatch):
     calls = []
     monkeypatch.setenv("DISPLAY", ":99")
-    monkeypatch.setattr(viz, "show_point_cloud", lambda xyz, **kw: calls.append((len(xyz), kw)))
+    monkeypatch.setattr(point_cloud, "show_point_cloud", lambda xyz, **kw: calls.append((len(xyz), kw)))
     assert _view(survey_dir / "points.las", "--color", "range_error") == 0
     (n, kw), = calls
     assert n == 4000 and kw["color_by"] == "range_error" and kw["scalars"].shape == (4000,)
@@ -137,7 +137,7 @@ def test_show_point_cloud_builds_the_same_plotter_on_screen(monkeypatch):
     monkeypatch.setattr(pv.Plotter, "__init__", off_screen_init)
     monkeypatch.setattr(pv.Plotter, "show", fake_show)
     r = _records(300)
-    viz.show_point_cloud(r.xyz, r.classification, title="pass", window_size=SIZE)
+    point_cloud.show_point_cloud(r.xyz, r.classification, title="pass", window_size=SIZE)
     assert requested == [False]
     (title, size, n_actors), = seen
     assert title == "pass" and list(size) == list(SIZE) and n_actors >= 2  # points, legend, title
@@ -171,5 +171,5 @@ def test_a_study_pass_finds_the_scene_one_directory_up(survey_dir, tmp_path, mon
     found, dropped = tmp_path / "found.png", tmp_path / "dropped.png"
     assert _view(sub / "points.las", "--screenshot", found, "--max-points", "1000") == 0
     assert _view(sub / "points.las", "--screenshot", dropped, "--max-points", "1000", "--no-mesh") == 0
-    navy = tuple(int(viz._BACKGROUND[i:i + 2], 16) for i in (1, 3, 5))
+    navy = tuple(int(point_cloud._BACKGROUND[i:i + 2], 16) for i in (1, 3, 5))
     assert _pixels_near(_image(dropped), navy, 2) > _pixels_near(_image(found), navy, 2) + 1000

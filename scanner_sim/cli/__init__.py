@@ -15,12 +15,12 @@ from __future__ import annotations
 import argparse
 
 from muls.command import OneLineParser, checked_types, package_version, parse_guarded, run_guarded
-from scanner_sim.cli import clouds, passes, perf, studies, uncertainty  # noqa: F401  each registers its subcommands
+from scanner_sim.cli import clouds, datasets, features, passes, perf, studies, uncertainty  # noqa: F401  each registers its subcommands
 from scanner_sim.cli.registry import SUBCOMMANDS
 
 #: The order ``scanner-sim --help`` lists the subcommands in: the main job first.
-HELP_ORDER = ("run", "scenes", "validate", "schema", "view", "swath", "coverage", "campaign", "tradeoff", "overlap",
-              "bench", "bench-rays")
+HELP_ORDER = ("run", "scenes", "validate", "schema", "view", "swath", "coverage", "features", "campaign", "dataset",
+              "tradeoff", "overlap", "bench", "bench-rays")
 
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="scanner-sim", description="Underwater lidar survey simulator (MULS)")

@@ -13,7 +13,7 @@ from muls.command import (
 from scanner_sim.cli.registry import subcommand
 
 # -- view ---------------------------------------------------------------------------------------------------
-#: ``--color`` name (also the ``viz`` colouring) -> the PointRecords field it shows.
+#: ``--color`` name (also the point cloud's colouring, ``color_by``) -> the PointRecords field it shows.
 _VIEW_FIELDS = {"class": "classification", "intensity": "intensity", "channel": "channel",
                 "range_error": "range_error_m", "snr": "snr"}
 
@@ -43,9 +43,9 @@ def _cmd_view(args) -> int:
     import laspy
 
     from scanner_sim.io import read_las, read_scene_ply
-    from scanner_sim.render import viz
+    from scanner_sim.render import point_cloud, point_colours
 
-    viz.check_window_size("--window-size", args.window_size)
+    point_cloud.check_window_size("--window-size", args.window_size)
     las = Path(args.las)
     if not las.is_file():
         raise ValueError(f"POINTS.las = {str(las)!r}: no such file; expected a LAS file such as points.las")
@@ -69,14 +69,14 @@ def _cmd_view(args) -> int:
         if not os.environ.get("DISPLAY"):
             raise ValueError("--open3d: opens a window, and there is no display (DISPLAY is unset); "
                              "use --screenshot PNG instead")
-        viz.show_open3d(points.xyz, viz.point_rgb(values, args.color), title=str(las),
-                        **{k: v for k, v in mesh.items()})
+        point_cloud.show_open3d(points.xyz, point_colours.point_rgb(values, args.color), title=str(las),
+                                **{k: v for k, v in mesh.items()})
         return 0
     if png is None and os.environ.get("DISPLAY"):
-        viz.show_point_cloud(points.xyz, **options)
+        point_cloud.show_point_cloud(points.xyz, **options)
         return 0
     png = Path(png) if png is not None else las.with_suffix(f".{args.color}.png")
-    viz.render_point_cloud(png, points.xyz, **options)
+    point_cloud.render_point_cloud(png, points.xyz, **options)
     print(png)
     return 0
 

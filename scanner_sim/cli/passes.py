@@ -107,6 +107,9 @@ def _add_run(sub):
     p.add_argument("--gate-width-ns", type=positive_float(), help="gate width (default: the scene's or the preset's)")
     p.add_argument("--split-lines", action="store_true",
                    help="one point cloud and one trajectory per survey leg (output.split_legs)")
+    p.add_argument("--rosbag", metavar="DIR", type=output_dir(),
+                   help="also write the pass as a ROS 2 bag in folder DIR (output.rosbag.dir; frame and storage: "
+                        "--set output.rosbag.frame=ned, output.rosbag.storage=sqlite3)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="set any scene key by its dotted name (YAML value), validated like the scene file; "
                         "repeatable, e.g. --set survey.subrays=37 --set output.laz=true")
@@ -144,6 +147,8 @@ def scene_overrides(args, config) -> dict:
                                                else gated[0].gate_width_s * 1e9)
     if args.split_lines:
         changes["output.split_legs"] = True
+    if args.rosbag is not None:
+        changes["output.rosbag.dir"] = args.rosbag
     return changes
 
 
@@ -172,11 +177,12 @@ def _first_run_notice() -> bool:
 
 
 def _cmd_run(args) -> int:
+    import contextlib
     from pathlib import Path
 
     from scanner_sim.config import load_scene
     from scanner_sim.io.run_dir import hold_output
-    from scanner_sim.survey.pipeline import run_pass
+    from scanner_sim.survey.pipeline import check_bag_dir, run_pass
     from scanner_sim.survey.setup import PassOptions
 
     config = load_scene(args.scene)
@@ -185,7 +191,10 @@ def _cmd_run(args) -> int:
                           chunk_pulses=args.chunk_pulses, waveforms=args.waveforms, progress=not args.quiet,
                           render=not args.no_render)
     out = Path(args.out or config.output_dir)
-    with hold_output(out):  # taken before the pass is built, so a second writer is refused at once
+    bag = config.output.rosbag
+    check_bag_dir(bag, out)  # before the bag's lock would create its parent folder
+    with hold_output(out), (hold_output(bag.dir) if bag and bag.dir else contextlib.nullcontext()):
+        # taken before the pass is built, so a second writer is refused at once
         compiling = _first_run_notice()
         summary = run_pass(config, out, options).summary
     if compiling:
@@ -199,7 +208,8 @@ def _cmd_run(args) -> int:
         if error["median"] is None:
             print("range error: no point has a truth surface along its line of sight")
         else:
-            print(f"range error |median| {100 * error['median']:.1f} cm, p95 {100 * error['p95']:.1f} cm")
+            print(f"range error |median| {100 * error['median']:.1f} cm, p95 {100 * error['p95']:.1f} cm; signed median "
+                  f"{100 * error['median_signed']:+.1f} cm, {100 * error['share_short']:.0f} % of the points short")
         cov = summary.get("coverage")
         if cov and cov["covered_fraction"] is not None:
             gaps = ", ".join(f"{k} {v:.2f} m²" for k, v in cov["gaps_m2"].items() if v) or "none"

@@ -59,7 +59,7 @@ def _cmd_overlap(args) -> int:
         "full_overlap_m": round(geometry.full_overlap_m, 4),
     }
     if args.out:
-        from scanner_sim.render.viz import plot_overlap
+        from scanner_sim.render.overlap_plot import plot_overlap
 
         dense = np.linspace(0.0, float(dist.max()) * 1.05, 400)
         plot_overlap(args.out, dist, ray, ana, title=f"Beam / receiver-FOV overlap, {args.instrument} geometry",
@@ -157,12 +157,21 @@ def _add_coverage(sub):
                    help="valid points a cell needs (default: %(default)s)")
     p.add_argument("--tolerance-m", type=positive_float("tolerance_m"), default=CoverageSettings.tolerance_m,
                    help="largest |range error| of a valid point [m] (default: %(default)s, IHO S-44 Exclusive Order)")
+    p.add_argument("--order-min-soundings", type=positive_int("order_min_soundings"),
+                   default=CoverageSettings.order_min_soundings,
+                   help="soundings a cell needs to comply with an S-44 order (default: %(default)s, S-44 Annex D)")
+    p.add_argument("--cubes-m", nargs="+", type=positive_float("cubes_m"), metavar="M",
+                   help="place cubes of these edge sizes [m] across the swath and report the share detected per size")
+    p.add_argument("--cube-count", type=positive_int("cube_count"), default=8, help="cubes of each size (default: 8)")
+    p.add_argument("--cube-seed", type=seed(), default=0, help="seed of the cube positions (default: 0)")
     p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /coverage)")
     p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), help="fidelity level (default: the scene's)")
     p.add_argument("--seed", type=seed(), help="seed of every pass (default: the scene's survey.seed)")
     p.add_argument("--max-pulses", type=positive_int(), help="stop each pass after this many pulses")
     p.add_argument("--no-render", action="store_true", help="tables and coverage.json only: no pictures, no report")
     p.add_argument("--quiet", action="store_true", help="no progress; print only the path of coverage.json")
+    p.add_argument("--json", action="store_true", help="print coverage.json's content (records with their S-44 "
+                   "orders, s44_orders) instead of the table and the path")
     _add_dask_arguments(p)
     p.set_defaults(func=_cmd_coverage)
 
@@ -174,18 +183,22 @@ def _cmd_coverage(args) -> int:
     from scanner_sim.io.run_dir import hold_output
     from scanner_sim.metrics.coverage import CoverageSettings
     from scanner_sim.render.report import main_table, markdown_table
-    from scanner_sim.studies.coverage_study import StudyPlan, run_study
+    from scanner_sim.studies.coverage_study import CubePlan, StudyPlan, run_study
 
     config = load_scene(args.scene)
     _check_cell_memory(args, config)
     plan = StudyPlan(tuple(args.waters), tuple(args.altitudes_m) if args.altitudes_m else (None,),
                      tuple(args.instruments), args.gate)
-    settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m)
+    settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m, args.order_min_soundings)
     out = Path(args.out or Path(config.output_dir) / "coverage")
     with hold_output(out):  # taken before the passes are built, so a second writer is refused at once
         study = run_study(config, plan, out, settings=settings, fidelity=args.fidelity, seed=args.seed,
-                          max_pulses=args.max_pulses, render=not args.no_render, progress=not args.quiet,
-                          workers=_workers(args), scheduler=args.scheduler, redo=args.redo)
+                          max_pulses=args.max_pulses, render=not args.no_render, progress=not (args.quiet or args.json),
+                          workers=_workers(args), scheduler=args.scheduler, redo=args.redo,
+                          cubes=CubePlan(tuple(args.cubes_m), args.cube_count, args.cube_seed) if args.cubes_m else None)
+    if args.json:
+        print((out / "coverage.json").read_text(), end="")
+        return 0
     if not args.quiet:
         print(markdown_table(*main_table(study)))
         print(f"{len(study['records'])} passes in {study['wall_s']:.0f} s")
@@ -200,10 +213,11 @@ def _check_cell_memory(args, config) -> None:
 
     from muls.memory import check_memory
     from scanner_sim.survey.budget import COVERAGE_BYTES_PER_CELL
+    from scanner_sim.world.raster import seabed_plan_size_m
 
-    if config.seabed is None:  # the study refuses the scene itself
+    size = seabed_plan_size_m(config.seabed)
+    if size is None:  # the study refuses the scene itself (or measures a mesh seabed, sized once built)
         return
-    size = config.seabed.size_m
     cells = math.prod(math.ceil(s / args.cell_m) for s in size)
     workers = _workers(args)
     at_once = 1 if args.scheduler or workers == 0 else workers

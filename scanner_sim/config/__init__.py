@@ -10,7 +10,8 @@ Entry points: :func:`load_scene` (a shipped scene's name or a path), :func:`pars
 
 Modules: ``errors`` (ConfigError and the one-line messages), ``base`` (strict base model, value types),
 ``sections`` (water, instrument, platform, scanner, survey, output), ``geometry`` (seabed and objects),
-``scene_config`` (the whole scene, overrides, JSON Schema), ``loading`` (YAML files and shipped scenes).
+``scene_config`` (the whole scene, overrides, JSON Schema), ``loading`` (YAML files and shipped scenes),
+``crs`` (the scene's coordinate reference system).
 """
 
 from scanner_sim.config.errors import ConfigError, build

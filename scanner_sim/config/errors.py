@@ -88,12 +88,17 @@ def _join(path: str, key: str) -> str:
     return f"{path}.{key}" if path else key
 
 
+#: Tags of the discriminated unions that are not a ``type`` key of the data (the seabed section's kinds).
+UNION_TAGS = ("procedural_seabed", "raster_seabed")
+
+
 def _dotted(loc: tuple, data: Any) -> str:
     """``objects[2].radius_m`` from pydantic's ``("objects", 2, "cylinder_mine", "radius_m")``: the path
-    follows ``data``, so a discriminated union's tag (the object's ``type``, not a key) is left out."""
+    follows ``data``, so a discriminated union's tag (the object's ``type``, the seabed's kind: not a key) is
+    left out."""
     path, node = "", data
     for item in loc:
-        if isinstance(node, Mapping) and item not in node and item == node.get("type"):
+        if isinstance(node, Mapping) and item not in node and (item == node.get("type") or item in UNION_TAGS):
             continue
         path = _join(path, f"[{item}]" if isinstance(item, int) else str(item))
         if isinstance(node, Mapping):

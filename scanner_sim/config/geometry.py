@@ -12,8 +12,10 @@ from typing import Annotated, Any, ClassVar, Literal
 from pydantic import (
     BeforeValidator,
     Field,
+    PlainSerializer,
     PrivateAttr,
     ValidationInfo,
+    WithJsonSchema,
     model_validator,
 )
 
@@ -242,11 +244,36 @@ class PanelObject(scene_object("panel", "black_painted_aluminium", "panel")):
         return self
 
 
+def _path_or_mesh(value: Any) -> Any:
+    if isinstance(value, str) or type(value).__name__ == "Trimesh":  # trimesh imported only where a mesh is loaded
+        return value
+    raise invalid("must be a path to a mesh file (relative to the scene file) or, from Python, a trimesh.Trimesh",
+                  value=value)
+
+
+def _mesh_json(value: Any) -> Any:
+    """A mesh source as JSON: the path, or a mesh's digest (its vertices' and faces' bytes)."""
+    if isinstance(value, str):
+        return value
+    import hashlib
+
+    import numpy as np
+
+    digest = hashlib.sha256(np.ascontiguousarray(value.vertices, np.float64).tobytes())
+    digest.update(np.ascontiguousarray(value.faces, np.int64).tobytes())
+    return {"in_memory_mesh_sha256": digest.hexdigest()}
+
+
+#: A mesh file's path, or (from Python) a trimesh.Trimesh.
+MeshSource = Annotated[Any, BeforeValidator(_path_or_mesh), PlainSerializer(_mesh_json, when_used="json"),
+                       WithJsonSchema({"type": "string", "description": "Path relative to the scene file."})]
+
+
 class MeshObject(scene_object("mesh", "painted_steel", "wreck")):
     """Any mesh file trimesh reads: scaled, rotated (about x, y, z) then translated."""
 
-    file: str
-    """Path relative to the scene file."""
+    file: MeshSource
+    """Path relative to the scene file (from Python: a trimesh.Trimesh in memory)."""
     translate_m: Vector(2, 3) = (0.0, 0.0, 0.0)
     """[x, y] puts the mesh's lowest point on the seabed there; [x, y, z] places it exactly [m]."""
     rotate_deg: Vector(3) = (0.0, 0.0, 0.0)
@@ -256,6 +283,9 @@ class MeshObject(scene_object("mesh", "painted_steel", "wreck")):
 
     @model_validator(mode="after")
     def _file_exists(self, info: ValidationInfo):
+        if not isinstance(self.file, str):  # a mesh in memory
+            self._resolved_path = None
+            return self
         path = Path(self.file)
         path = path if path.is_absolute() else Path((info.context or {}).get("base_dir") or Path.cwd()) / path
         if not path.is_file():
@@ -265,8 +295,8 @@ class MeshObject(scene_object("mesh", "painted_steel", "wreck")):
         return self
 
     @property
-    def resolved_path(self) -> Path:
-        """The mesh file, resolved against the scene file's folder."""
+    def resolved_path(self) -> Path | None:
+        """The mesh file, resolved against the scene file's folder (None for a mesh in memory)."""
         return self._resolved_path
 
     @property

@@ -2,13 +2,16 @@
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from pydantic import PrivateAttr, model_validator
+from pydantic import Discriminator, PrivateAttr, Tag, model_validator
 
 from scanner_sim.config.base import Choice, StrictModel, choice_check
+from scanner_sim.config.crs import Crs
 from scanner_sim.config.errors import ConfigError, build, checked_at, invalid
 from scanner_sim.config.geometry import Objects, SeabedConfig
+from scanner_sim.config.map_inputs import restore_given, to_map
+from scanner_sim.config.raster_seabed import RasterSeabedConfig
 from scanner_sim.config.sections import (
     InstrumentConfig,
     OutputConfig,
@@ -22,6 +25,17 @@ from scanner_sim.config.sections import (
 FORMAT_VERSION = 1
 
 
+def _seabed_kind(value: Any) -> str:
+    """The seabed section's kind: a raster's when it names one, else the procedural one."""
+    named = isinstance(value, RasterSeabedConfig) or (isinstance(value, Mapping) and "raster" in value)
+    return "raster_seabed" if named else "procedural_seabed"
+
+
+#: The ``seabed`` section: procedural, or from a raster (a section that names ``raster``).
+SeabedSection = Annotated[Annotated[SeabedConfig, Tag("procedural_seabed")]
+                          | Annotated[RasterSeabedConfig, Tag("raster_seabed")], Discriminator(_seabed_kind)]
+
+
 class SceneConfig(StrictModel):
     """A muls-scanner scene file (YAML): water, instrument, seabed and objects, platform and trajectory,
     scanner, survey and output settings. Units are in the keys; the format is in docs/scene-format.md."""
@@ -32,10 +46,16 @@ class SceneConfig(StrictModel):
     platform: PlatformConfig
     description: str = ""
     """Its first line is what ``scanner-sim scenes`` prints."""
+    crs: Crs | None = None
+    """The projected CRS (metres) whose map coordinates the world frame is in: an EPSG code (32631 or
+    'EPSG:32631') or WKT; none: a local frame."""
+    lonlat: bool = False
+    """Plan positions (waypoints, lawnmower and seabed centres, static position, objects) are [longitude,
+    latitude] in degrees, WGS 84, converted to ``crs``."""
     water: WaterSection = WaterConfig(preset="coastal_ocean")
     instrument: InstrumentConfig = InstrumentConfig()
-    seabed: SeabedConfig | None = None
-    """The procedural seabed; tank scenes have none."""
+    seabed: SeabedSection | None = None
+    """The seabed: procedural, or from a bathymetry raster (``raster``); tank scenes have none."""
     objects: Objects = ()
     scanner: ScannerConfig = ScannerConfig()
     survey: SurveyConfig = SurveyConfig()
@@ -43,11 +63,13 @@ class SceneConfig(StrictModel):
     _source_path: Path | None = PrivateAttr(None)
     _base_dir: Path | None = PrivateAttr(None)
     _overrides: dict[str, Any] = PrivateAttr(default_factory=dict)
+    _given_positions: dict[tuple, Any] = PrivateAttr(default_factory=dict)
 
     def model_post_init(self, context: Any) -> None:
         context = context or {}
         self._source_path, self._base_dir = context.get("source_path"), context.get("base_dir")
         self._overrides = dict(context.get("overrides") or {})
+        self._given_positions = dict(context.get("given_positions") or {})
 
     @model_validator(mode="before")
     @classmethod
@@ -61,15 +83,25 @@ class SceneConfig(StrictModel):
     def _sections_agree(self):
         if self.platform.mode == "static" and self.survey.duration_s is None and self.survey.max_pulses is None:
             raise invalid("a static platform needs survey.duration_s or survey.max_pulses", key="survey")
-        if self.seabed is None and (self.platform.altitude_m is not None
+        if not self.has_seabed and (self.platform.altitude_m is not None
                                     or any(o.rests_on_seabed for o in self.objects)):
-            raise invalid("missing; altitude_m and objects placed on the bottom need a seabed section", key="seabed")
+            raise invalid("missing; altitude_m and objects placed on the bottom need a seabed section (or a mesh "
+                          "object labelled seabed)", key="seabed")
+        lawnmower = self.platform.lawnmower if self.platform.mode == "lawnmower" else None
+        if lawnmower is not None and lawnmower.size_m is None and not isinstance(self.seabed, RasterSeabedConfig):
+            raise invalid("missing; only a lawnmower over a raster seabed may leave its area to the raster's valid "
+                          "extent", key="platform.lawnmower.size_m")
         altitude = self.platform.altitude_m
-        if altitude is not None and altitude >= self.seabed.depth_m:
+        if altitude is not None and isinstance(self.seabed, SeabedConfig) and altitude >= self.seabed.depth_m:
             raise invalid(f"puts the vehicle above the water surface: the seabed lies {self.seabed.depth_m:g} m deep "
                           "(seabed.depth_m) and altitude_m is metres above it", key="platform.altitude_m",
                           value=altitude)
         return self
+
+    @property
+    def has_seabed(self) -> bool:
+        """A seabed section, or a mesh object labelled seabed: something to follow and measure coverage over."""
+        return self.seabed is not None or any(o.label == "seabed" for o in self.objects)
 
     @property
     def source_path(self) -> Path | None:
@@ -104,7 +136,7 @@ class SceneConfig(StrictModel):
         if not isinstance(overrides, Mapping) or not all(isinstance(key, str) for key in overrides):
             raise TypeError(f"overrides must be a mapping of dotted scene keys (str) to values, "
                             f"not {type(overrides).__name__} {overrides!r:.60}")
-        data = self.model_dump(exclude_unset=True)
+        data = restore_given(self.model_dump(exclude_unset=True), self._given_positions)
         for key, value in overrides.items():
             *sections, last = key.split(".")
             node = data
@@ -125,8 +157,11 @@ def parse_scene(data: Mapping, base_dir: Path | None = None, source_path: Path |
                 overrides: Mapping[str, Any] | None = None) -> SceneConfig:
     """Validate a scene mapping. Mesh files are resolved against ``base_dir`` (default: the working
     directory) and must exist; ``overrides``: the values given on top of it by dotted key
-    (:attr:`SceneConfig.overrides`). Raises :class:`ConfigError` (one line)."""
+    (:attr:`SceneConfig.overrides`). Longitude/latitude positions and a line plan are converted to map
+    coordinates first (:mod:`scanner_sim.config.map_inputs`). Raises :class:`ConfigError` (one line)."""
+    data, given_positions = to_map(data, base_dir)
     return build(SceneConfig, data, context={"base_dir": base_dir, "source_path": source_path,
+                                             "given_positions": given_positions,
                                              "overrides": overrides})
 
 

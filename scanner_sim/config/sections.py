@@ -163,8 +163,8 @@ class LawnmowerConfig(StrictModel):
 
     center_m: Vector(2) = (0.0, 0.0)
     """Centre of the rectangle [x, y] [m]."""
-    size_m: Vector(2, element=Positive)
-    """Extent along the lines and across them [m]."""
+    size_m: Vector(2, element=Positive) | None = None
+    """Extent along the lines and across them [m]; null (over a raster seabed): the raster's valid extent."""
     heading_deg: Real = 0.0
     """Compass direction of the first line [deg]."""
     line_spacing_m: Positive = 4.0
@@ -209,6 +209,9 @@ class PlatformConfig(StrictModel):
     speed_m_s: Positive = 1.0
     waypoints_m: Points(2) | None = None
     """[x, y] points of the track (mode waypoints) [m]."""
+    line_plan: str | None = None
+    """Survey lines from a GeoJSON (lon/lat) or CSV (line, x, y or line, lon, lat) file, in place of waypoints_m;
+    path relative to the scene file."""
     lawnmower: LawnmowerConfig | None = None
     """The pattern (mode lawnmower)."""
     position_m: Vector(2, 3) | None = None
@@ -317,6 +320,18 @@ class SurveyConfig(StrictModel):
                                             else self.multiple_scattering))
 
 
+class RosbagConfig(StrictModel):
+    """A ROS 2 bag of the pass (``docs/outputs.md``): scan lines as PointCloud2, odometry, tf."""
+
+    frame: Choice("enu", "ned") = "enu"
+    """Axes: enu (REP 103: world x east, y north, z up; vehicle x forward, y left, z up) or ned (world x north,
+    y east, z down; vehicle x forward, y starboard, z down)."""
+    storage: Choice("mcap", "sqlite3") = "mcap"
+    """rosbag2 storage: one .mcap file or one SQLite .db3 file."""
+    dir: str | None = None
+    """The bag's folder; default rosbag/ inside the output folder."""
+
+
 class OutputConfig(StrictModel):
     """What a pass writes, and where."""
 
@@ -332,3 +347,5 @@ class OutputConfig(StrictModel):
     """Write the full records of every n-th fired pulse to waveforms.npz; 0 = none."""
     split_legs: bool = False
     """One point cloud and one trajectory per survey leg (leg001_points.las, leg001_trajectory.csv...)."""
+    rosbag: RosbagConfig | None = None
+    """Also write the pass as a ROS 2 bag (``rosbag: {}`` for the defaults); none when absent."""

@@ -7,10 +7,14 @@
 - :mod:`~scanner_sim.io.ply`: ``scene.ply``, the labelled truth meshes.
 - :mod:`~scanner_sim.io.summary`: ``summary.json``.
 - :mod:`~scanner_sim.io.tables`: ``trajectory.csv``, ``waveforms.npz``, ``coverage_grid.npz``, text files.
+- :mod:`~scanner_sim.io.gis`: Cloud-Optimized GeoTIFF and GeoJSON in a map CRS (a scene with a ``crs``).
+- :mod:`~scanner_sim.io.rosbag`: a pass as a ROS 2 bag folder, streamed by :class:`~scanner_sim.io.rosbag.RosbagWriter`
+  (not re-exported: import it from its module).
 """
 
 from scanner_sim.io.atomic import atomic_path
 from scanner_sim.io.dropouts import DropoutWriter, read_dropouts_npz, write_dropouts_npz
+from scanner_sim.io.gis import write_cog, write_geojson
 from scanner_sim.io.las import (
     EXTRA_DIMENSIONS,
     LAS_POINT_FORMAT,
@@ -54,8 +58,10 @@ __all__ = [
     "read_trajectory_csv",
     "read_waveforms_npz",
     "scan_angle_to_las",
+    "write_cog",
     "write_coverage_grid_npz",
     "write_dropouts_npz",
+    "write_geojson",
     "write_las",
     "write_scene_ply",
     "write_summary_json",

@@ -72,12 +72,16 @@ class RunDirectory:
     :meth:`open`, write into :attr:`path`, then :meth:`commit` (or :meth:`abort`), inside a function
     decorated with :func:`abort_on_error`.
 
+    ``complete_marker``: the file whose presence makes a folder complete (a pass's summary.json; a ROS 2 bag's
+    metadata.yaml, :mod:`scanner_sim.io.rosbag`).
+
     Raises ValueError (one line) when ``final`` is a file or lies under one, is the current folder or holds
     it, or holds files but no complete run; :class:`OutputBusyError` when another live run holds its lock.
     """
 
-    def __init__(self, final: PathLike):
+    def __init__(self, final: PathLike, complete_marker: str = COMPLETE_MARKER):
         self.final = Path(final)
+        self.complete_marker = complete_marker
         self.path: Path | None = None
         self._target = Path(os.path.abspath(self.final))
         self._lock: OutputLock | None = None
@@ -169,10 +173,10 @@ class RunDirectory:
         if target.resolve() in (here.resolve(), *here.resolve().parents):
             raise ValueError(f"output folder {shown!r} is the current folder or holds it; give a folder for the run")
         entries = sorted(e for e in os.listdir(target) if not e.startswith("."))
-        if entries and COMPLETE_MARKER not in entries:
+        if entries and self.complete_marker not in entries:
             listed = ", ".join(entries[:3]) + (", ..." if len(entries) > 3 else "")
             raise ValueError(f"output folder {shown!r} holds files but no complete run ({listed}: no "
-                             f"{COMPLETE_MARKER}); a run replaces only an empty folder or an earlier run's, so "
+                             f"{self.complete_marker}); a run replaces only an empty folder or an earlier run's, so "
                              "give another folder or empty this one")
 
     def _remove_leftovers(self) -> None:

@@ -156,18 +156,27 @@ def read_waveforms_npz(path: PathLike) -> tuple[np.ndarray, np.ndarray, dict[str
         return z["pulse_index"], z["time_ns"], {name: z[name] for name in names}
 
 
-def write_coverage_grid_npz(path: PathLike, grid, state, reaching, valid) -> None:
+def write_coverage_grid_npz(path: PathLike, grid, state, reaching, valid, s44_order=None, planned=None) -> None:
     """Write a pass's plan-cell coverage to a compressed ``.npz``, atomically.
 
     ``grid`` is a :class:`scanner_sim.metrics.coverage.PlanGrid`; ``state`` (ny, nx) int16 (-2 not reached,
     -1 covered, else an index into ``gap_cause_names``); ``reaching`` and ``valid`` (ny * nx,) or
-    (ny, nx) counts of reaching pulses and valid points per cell. Row = y, column = x; cell (0, 0) has its
-    lower-left corner at ``origin_m``.
+    (ny, nx) counts of reaching pulses and valid points per cell; ``s44_order`` the strictest S-44 order each cell
+    complies with (index into ``s44_order_names``, -1 none) and ``planned`` (bool) the cells of the planned swath,
+    each written when given. Row = y, column = x; cell (0, 0) has its lower-left corner at ``origin_m``.
     """
+    from scanner_sim.metrics.s44 import ORDER_NAMES
+
     shape = tuple(grid.shape)
     arrays = {"state": np.asarray(state, np.int16), "reaching": np.asarray(reaching, np.int64),
               "valid": np.asarray(valid, np.int64)}
+    if s44_order is not None:
+        arrays |= {"s44_order": np.asarray(s44_order, np.int16), "s44_order_names": np.array(ORDER_NAMES)}
+    if planned is not None:
+        arrays["planned"] = np.asarray(planned, bool)
     for name, a in arrays.items():
+        if name == "s44_order_names":
+            continue
         if a.size != shape[0] * shape[1]:
             raise ValueError(f"{name}: {a.size} cells is not allowed; the grid has {shape[0]} x {shape[1]}")
         arrays[name] = a.reshape(shape)

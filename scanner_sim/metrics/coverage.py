@@ -28,12 +28,15 @@ import numpy as np
 
 from muls.errors import ParameterError
 from muls.ranging import DROPOUT_CAUSES
+from scanner_sim.metrics import s44
 
 #: Why a pulse reaching a bin gave no valid point (index = failure code).
 FAILURE_CAUSES = DROPOUT_CAUSES + ("out_of_tolerance",)
 #: Why a reached bin is missed: a failure cause, or ``other_surface`` (no reaching pulse failed).
 GAP_CAUSES = FAILURE_CAUSES + ("other_surface",)
 OTHER_SURFACE = len(FAILURE_CAUSES)
+#: Why an object the valid points reach is not detected: fewer than s44.FEATURE_MIN_SOUNDINGS of them.
+FEW_SOUNDINGS = "few_soundings"
 #: Bin states besides a gap cause index.
 NOT_REACHED = -2
 COVERED = -1
@@ -45,11 +48,13 @@ BACKGROUND_KINDS = ("seabed", "rocks")
 
 @dataclass(frozen=True)
 class CoverageSettings:
-    """cell_m: plan cell and cable stretch [m]; min_points: N; tolerance_m: largest |range error| [m]."""
+    """cell_m: plan cell and cable stretch [m]; min_points: N; tolerance_m: largest |range error| [m];
+    order_min_soundings: soundings a cell needs to comply with an S-44 order (:mod:`scanner_sim.metrics.s44`)."""
 
     cell_m: float = 0.25
     min_points: int = 1
     tolerance_m: float = 0.15  # IHO S-44 (6th ed., 2020) Exclusive Order, the constant part a of the TVU
+    order_min_soundings: int = s44.DEFAULT_MIN_SOUNDINGS
 
     def __post_init__(self):
         if not (isinstance(self.cell_m, (int, float)) and math.isfinite(self.cell_m) and self.cell_m > 0):
@@ -59,6 +64,7 @@ class CoverageSettings:
         if not (isinstance(self.tolerance_m, (int, float)) and math.isfinite(self.tolerance_m)
                 and self.tolerance_m > 0):
             raise ParameterError(f"tolerance_m = {self.tolerance_m!r}: must be a finite number > 0 [m]")
+        s44.ComplianceRule(self.order_min_soundings)
 
 
 class BinTally:
@@ -194,7 +200,8 @@ def pulse_outcomes(slots: np.ndarray, points, dropouts, tolerance_m: float) -> t
 class CoverageAccumulator:
     """Coverage of one pass, accumulated chunk by chunk: plan cells over the seabed, cable stretches, objects."""
 
-    def __init__(self, scene, settings: CoverageSettings = CoverageSettings()):
+    def __init__(self, scene, settings: CoverageSettings = CoverageSettings(), planned=None):
+        """planned: the pass's :class:`~scanner_sim.metrics.planned_swath.PlannedSwath`, or None."""
         if scene.heightfield is None:
             raise ParameterError("coverage: the scene has no seabed section; coverage is measured over the "
                                  "seabed's plan area")
@@ -202,11 +209,20 @@ class CoverageAccumulator:
         self.settings = settings
         x0, x1, y0, y1 = scene.heightfield.extent_m
         self.grid = PlanGrid.over((x0, x1), (y0, y1), settings.cell_m)
+        cx0, cx1, cy0, cy1 = self.grid.extent_m
+        ny, nx = self.grid.shape
+        gx, gy = np.meshgrid(np.linspace(cx0, cx1, nx + 1)[:-1] + 0.5 * settings.cell_m,
+                             np.linspace(cy0, cy1, ny + 1)[:-1] + 0.5 * settings.cell_m)
+        #: (ny, nx) bool: plan cells whose centre has no seabed (a raster's nodata, a mesh seabed's holes).
+        self.no_seabed = ~scene.heightfield.covers(gx, gy)
         self.cells = BinTally(self.grid.size)
         self.objects = BinTally(len(scene.objects))
         self.cables = [(obj, CableBins(obj.centreline, settings.cell_m)) for obj in scene.objects
                        if obj.centreline is not None]
         self.cable_tallies = [BinTally(bins.n_bins) for _, bins in self.cables]
+        self.orders = s44.OrderTally(self.grid.size)
+        self.planned = planned
+        self.slot_span = [None, None]  # first and last pulse slot seen
 
     def add(self, slots: np.ndarray, footprint: Footprint, points, dropouts) -> None:
         """One chunk: its slots (n,) ascending, the nominal footprint of those pulses, their points and dropouts."""
@@ -215,6 +231,10 @@ class CoverageAccumulator:
         pulse_cell = self.grid.index(footprint.xyz)
         self.cells.add(pulse_cell, outcome, pulse_cell[np.searchsorted(slots, points.pulse_index[valid])])
         self.objects.add(footprint.object_id, outcome, obj)
+        self._add_soundings(slots, footprint, points, pulse_cell)
+        if slots.size:
+            lo, hi = self.slot_span
+            self.slot_span = [int(slots[0]) if lo is None else min(lo, int(slots[0])), max(hi or 0, int(slots[-1]))]
         for (cable, bins), tally in zip(self.cables, self.cable_tallies):
             on_cable = footprint.object_id == cable.object_id
             reaching = np.full(slots.size, -1, np.int64)
@@ -223,6 +243,30 @@ class CoverageAccumulator:
             valid_bin = np.full(obj.size, -1, np.int64)
             valid_bin[mine] = bins.index(xyz[mine])
             tally.add(reaching, outcome, valid_bin)
+
+    def _add_soundings(self, slots, footprint: Footprint, points, pulse_cell) -> None:
+        """Every point is a sounding of its pulse's cell; its true errors are its offset from where its pulse's
+        nominal beam axis meets the truth (navigation, ranging and footprint errors together)."""
+        pulse = np.searchsorted(slots, points.pulse_index)
+        truth = footprint.xyz[pulse]
+        self.orders.add(np.where(np.isfinite(truth[:, 2]), pulse_cell[pulse], -1), -truth[:, 2],
+                        points.xyz[:, 2] - truth[:, 2], np.hypot(*(points.xyz[:, :2] - truth[:, :2]).T),
+                        getattr(points, "tvu_m", None), getattr(points, "thu_m", None))
+
+    def order_compliance(self) -> np.ndarray:
+        """(len(s44.ORDERS), cells) bool: the cells complying with each S-44 order."""
+        rule = s44.ComplianceRule(self.settings.order_min_soundings)
+        return rule.complies(self.orders.soundings, self.orders.meeting)
+
+    def strictest_orders(self) -> np.ndarray:
+        """(ny, nx) int16: the strictest S-44 order each cell complies with (index into s44.ORDERS), or s44.NO_ORDER."""
+        return s44.strictest_order(self.order_compliance()).reshape(self.grid.shape)
+
+    def planned_cells(self) -> np.ndarray | None:
+        """(cells,) bool: cells in the swath the plan promised over the stretch flown, or None without a plan swath."""
+        if self.planned is None or self.slot_span[0] is None:
+            return None
+        return self.planned.cell_mask(self.grid, *self.slot_span)
 
     def cell_states(self) -> np.ndarray:
         """(ny, nx) int16 plan-cell states: NOT_REACHED, COVERED or a GAP_CAUSES index."""
@@ -256,10 +300,27 @@ class CoverageAccumulator:
             "holes": {"count": int(n_holes), "largest_m2": float(hole_cells.max() * cell_area) if n_holes else 0.0,
                       "total_m2": float(hole_cells.sum() * cell_area)},
             "gaps_m2": _by_cause(state[missed], cell_area),
+            "no_seabed_data_m2": float(self.no_seabed.sum() * cell_area),
             "cables": [self._cable_figures(cable, bins, tally) for (cable, bins), tally in
                        zip(self.cables, self.cable_tallies)],
             "objects": self._object_figures(),
+            **self._plan_figures(reached.ravel(), covered.ravel(), cell_area),
         }
+
+    def _plan_figures(self, reached, covered, cell_area: float) -> dict:
+        """The share of the planned swath reached and covered, and the S-44 orders' compliant share of the surveyed
+        area: the planned swath when the plan has one, else the reached cells."""
+        planned = self.planned_cells()
+        swath = None
+        if planned is not None and planned.any():
+            n = planned.sum()
+            swath = {"area_m2": float(n * cell_area), "reached_fraction": float((reached & planned).sum() / n),
+                     "covered_fraction": float((covered & planned).sum() / n),
+                     "never_reached_fraction": float((planned & ~reached).sum() / n)}
+        area = planned if swath is not None else reached
+        return {"planned_swath": swath, "order_min_soundings": self.settings.order_min_soundings,
+                "orders_area": "planned_swath" if swath is not None else "reached",
+                "orders": s44.order_figures(self.order_compliance(), area, cell_area)}
 
     def _cable_figures(self, cable, bins: CableBins, tally: BinTally) -> dict:
         state = tally.states(self.settings.min_points)
@@ -283,13 +344,14 @@ class CoverageAccumulator:
             if obj.kind in BACKGROUND_KINDS or obj.centreline is not None:  # cables are counted by length
                 continue
             i = obj.object_id
+            detected = bool(self.objects.valid[i] >= s44.FEATURE_MIN_SOUNDINGS)
             out.append({
                 "name": obj.name,
                 "kind": obj.kind,
                 "reaching_pulses": int(self.objects.reaching[i]),
                 "valid_points": int(self.objects.valid[i]),
-                "detected": bool(state[i] == COVERED),
-                "gap_cause": GAP_CAUSES[state[i]] if state[i] >= 0 else None,
+                "detected": detected,
+                "gap_cause": GAP_CAUSES[state[i]] if state[i] >= 0 else (None if detected else FEW_SOUNDINGS),
             })
         return out
 

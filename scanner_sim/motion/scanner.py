@@ -104,6 +104,12 @@ class Scanner:
             return start + self.sector_rad * tri
         return self.center_rad - 0.5 * self.sector_rad * np.cos(phase)
 
+    def line_index(self, times_s) -> np.ndarray:
+        """(n,) int64 scan line of each time ``times_s`` (n,) [s]: the revolution (``continuous``), the half period
+        (``oscillating``, one line per sweep) or the period of ``scan_rate_hz`` (``static``) since t = 0."""
+        per_period = 2.0 if self.mode == "oscillating" else 1.0
+        return np.floor(np.asarray(times_s, float) * self.scan_rate_hz * per_period).astype(np.int64)
+
     # -- geometry -----------------------------------------------------------------------------------------
     @property
     def shaft_axis(self) -> np.ndarray:

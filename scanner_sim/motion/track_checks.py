@@ -13,6 +13,7 @@ import numpy as np
 from muls.water import MAX_ATTENUATION_EXPONENT
 from scanner_sim.config.errors import ConfigError, SetupWarning, config_value
 from scanner_sim.motion.trajectory import PATH_STEP_M, Trajectory, trajectory_of
+from scanner_sim.world.raster import lawnmower_area
 
 
 def build_trajectory(config, scene=None) -> Trajectory:
@@ -32,14 +33,16 @@ MAX_CONTAINS_SAMPLES = 20_000
 
 
 
-def track_length_m(platform) -> tuple[float, int]:
-    """(length [m], legs) of a platform's track in plan, by arithmetic on the scene keys (nothing allocated)."""
+def track_length_m(platform, seabed=None) -> tuple[float, int]:
+    """(length [m], legs) of a platform's track in plan, by arithmetic on the scene keys (nothing allocated but,
+    for a lawnmower that leaves its area to a raster ``seabed`` section, the raster's valid pixels)."""
     if platform.mode == "static":
         return 0.0, 1
     if platform.mode == "lawnmower":
         lm = platform.lawnmower
-        n_lines = math.floor(lm.size_m[1] / lm.line_spacing_m + 1e-9) + 1
-        return n_lines * lm.size_m[0] + (n_lines - 1) * lm.line_spacing_m, 2 * n_lines - 1
+        size = lm.size_m if lm.size_m is not None else lawnmower_area(lm, seabed)[1]
+        n_lines = math.floor(size[1] / lm.line_spacing_m + 1e-9) + 1
+        return n_lines * size[0] + (n_lines - 1) * lm.line_spacing_m, 2 * n_lines - 1
     seg = np.linalg.norm(np.diff(np.asarray(platform.waypoints_m, float)[:, :2], axis=0), axis=1)
     return float(seg.sum()), int(np.count_nonzero(seg > 1e-9))
 
@@ -47,7 +50,7 @@ def track_length_m(platform) -> tuple[float, int]:
 def track_span_s(config) -> tuple[float, float]:
     """(track_s, pass_s) [s] of a moving platform, by arithmetic on the scene keys: the time to run its whole
     track at its speed, and the pass's length (``survey.duration_s``, else the track's)."""
-    track_s = track_length_m(config.platform)[0] / config.platform.speed_m_s
+    track_s = track_length_m(config.platform, config.seabed)[0] / config.platform.speed_m_s
     return track_s, (config.survey.duration_s if config.survey.duration_s is not None else track_s)
 
 

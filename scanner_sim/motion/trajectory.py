@@ -26,6 +26,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from muls.errors import ParameterError
 from muls.filters import first_order_filter
+from scanner_sim.world.raster import lawnmower_area
 from scanner_sim.world.scene import compass_to_yaw_rad
 
 PATH_STEP_M = 0.05  # arc-length resolution of the precomputed path [m]
@@ -134,6 +135,7 @@ class Trajectory:
             d = np.gradient(xy, ds, axis=0)
             yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
         self._s, self._xy, self._yaw = s, xy, yaw
+        self.waypoints_xy_m = path[:1] if self.static else path  # (m, 2) the plan the legs join [m]
         # Where each leg ends along the path [m]: a leg runs from one waypoint to the next.
         self._leg_end_m = chord[1:-1] if not self.static else np.zeros(0)
         self._z, self._terrain_pitch = self._profile(s, xy)
@@ -260,7 +262,8 @@ def trajectory_of(config, scene=None) -> Trajectory:
                           p.navigation_noise, duration_s=sv.start_s + duration, heading_deg=p.heading_deg)
     if p.mode == "lawnmower":
         lm = p.lawnmower
-        path = lawnmower_waypoints(lm.center_m, lm.size_m, lm.heading_deg, lm.line_spacing_m)
+        center, size = lawnmower_area(lm, config.seabed)
+        path = lawnmower_waypoints(center, size, lm.heading_deg, lm.line_spacing_m)
     else:
         path = np.asarray(p.waypoints_m, float)
     z_mode, z_val = ("altitude", p.altitude_m) if p.altitude_m is not None else ("depth", p.depth_m)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from scanner_sim.render.viz import _figure_to_png
+from scanner_sim.render.figure_png import figure_to_png
 
 
 def plot_calibration(path_png, calibration: Mapping, *, title: str) -> None:
@@ -33,7 +33,7 @@ def plot_calibration(path_png, calibration: Mapping, *, title: str) -> None:
                  f"{_pct(calibration['horizontal_within_thu'])} of {calibration['points']:,} points", fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper left", fontsize=8)
-    _figure_to_png(fig, path_png)
+    figure_to_png(fig, path_png)
 
 
 def _pct(share) -> str:

@@ -12,7 +12,24 @@ import html
 from pathlib import Path
 
 #: Pictures of one combination shown in the report, with their captions.
-COMBINATION_PICTURES = (("coverage_map.png", "coverage map"), ("render.png", "point cloud"))
+COMBINATION_PICTURES = (("coverage_map.png", "coverage map"), ("s44_map.png", "S-44 orders"),
+                        ("calibration.png", "TPU calibration"), ("render.png", "point cloud"))
+#: Below this covered fraction the report says in words why a combination maps (next to) nothing.
+NEAR_ZERO = 0.10
+#: What each gap cause means for a planner, in a sentence (the rules: docs/outputs.md, Dropout causes).
+CAUSE_MEANINGS = {
+    "no_hit": "the beam met nothing within the record's range",
+    "blind_zone": "the target was too close: the beam and the receiver's field of view do not overlap yet",
+    "saturated": "the echo clipped the detector and the clipped returns were dropped",
+    "masked_by_backscatter": "the water column's own backscatter hid the echo: the water is too turbid for the "
+                             "instrument at this range",
+    "outside_gate": "the echo came while the far channel's gate was shut",
+    "below_threshold": "the echo came back too weak to clear the detector's noise: too much water between the "
+                       "lidar and the seabed for this water's attenuation",
+    "out_of_tolerance": "points came back but ranged further off the truth than the tolerance (in murky water, "
+                        "multiply scattered light ranges them long)",
+    "other_surface": "the pulses aimed there gave valid points from another surface",
+}
 
 
 def _percent(x) -> str:
@@ -31,8 +48,9 @@ def _gaps(gaps: dict, unit: str) -> str:
 
 def main_table(study: dict) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the coverage table, one row per combination."""
-    header = ["water", "instrument", "altitude [m]", "covered [%]", "reached [m²]", "valid points [1/m²]",
-              "holes (largest [m²])", "gaps by cause", "cable covered [%]", "objects detected", "points / pulses"]
+    header = ["water", "instrument", "altitude [m]", "covered [%]", "of the planned swath [%]", "reached [m²]",
+              "valid points [1/m²]", "holes (largest [m²])", "gaps by cause", "cable covered [%]", "objects detected",
+              "points / pulses"]
     rows = []
     for r in study["records"]:
         cables = "; ".join(f"{c['name']} {_percent(c['covered_fraction'])}" for c in r["cables"]) or "–"
@@ -40,7 +58,8 @@ def main_table(study: dict) -> tuple[list[str], list[list[str]]]:
         detected = f"{sum(o['detected'] for o in objects)}/{len(objects)}" if objects else "–"
         rows.append([
             r["water"], r["instrument"], _altitude(r["altitude_m"]),
-            _percent(r["covered_fraction"]), f"{r['reached_area_m2']:.1f}",
+            _percent(r["covered_fraction"]), _percent((r.get("planned_swath") or {}).get("covered_fraction")),
+            f"{r['reached_area_m2']:.1f}",
             "–" if r["density_pts_per_m2"] is None else f"{r['density_pts_per_m2']:.0f}",
             f"{r['holes']['count']} ({r['holes']['largest_m2']:.2f})", _gaps(r["gaps_m2"], "m²"), cables, detected,
             f"{r['points']:,} / {r['pulses']:,}",
@@ -81,6 +100,75 @@ def multichannel_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
     return header, rows
 
 
+def orders_table(study: dict) -> tuple[list[str], list[list[str]]]:
+    """The S-44 orders the study used (coverage.json's ``s44_orders``)."""
+    header = ["order", "TVU a [m]", "TVU b", "THU [m]", "THU [% of depth]", "feature [m]", "coverage [%]"]
+    rows = [[name, f"{o['tvu_a_m']:g}", f"{o['tvu_b']:g}", f"{o['thu_m']:g}", f"{100 * o['thu_depth_fraction']:g}",
+             "not specified" if o["feature_m"] is None else f"> {o['feature_m']:g}", f"{o['coverage_percent']:g}"]
+            for name, o in study.get("s44_orders", {}).items()]
+    return header, rows
+
+
+def compliance_table(study: dict) -> tuple[list[str], list[list[str]]]:
+    """Per combination: the share of the surveyed area complying with each S-44 order, the share of the planned
+    swath the scan reached, and the range error's signed bias beside its absolute size."""
+    names = list(study.get("s44_orders", {}))
+    header = (["water", "instrument", "altitude [m]", "swath reached [%]"] + [f"{n} [%]" for n in names]
+              + ["range error: median absolute / median signed [cm]", "points short [%]"])
+    rows = []
+    for r in study["records"]:
+        swath = r.get("planned_swath") or {}
+        error = r["range_error_m"]
+        signed = error.get("median_signed")
+        rows.append([r["water"], r["instrument"], _altitude(r["altitude_m"]), _percent(swath.get("reached_fraction"))]
+                    + [_percent(r.get("orders", {}).get(n, {}).get("compliant_fraction")) for n in names]
+                    + ["–" if error["median"] is None else f"{100 * error['median']:.1f} / {100 * signed:+.1f}",
+                       _percent(error.get("share_short"))])
+    return header, rows
+
+
+def tpu_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
+    """Per combination, the predicted 95 % THU and TVU and the share of points whose true error they hold."""
+    if not any(r.get("tpu") for r in study["records"]):
+        return None
+    header = ["water", "instrument", "altitude [m]", "TVU median / p95 [cm]", "THU median / p95 [cm]",
+              "points judged", "within TVU [%]", "within THU [%]"]
+
+    def cm(q):
+        return "–" if q["median"] is None else f"{100 * q['median']:.1f} / {100 * q['p95']:.1f}"
+
+    rows = [[r["water"], r["instrument"], _altitude(r["altitude_m"]), cm(t["tvu_m"]), cm(t["thu_m"]),
+             f"{t['points']:,}", _percent(t["vertical_within_tvu"]), _percent(t["horizontal_within_thu"])]
+            for r in study["records"] if (t := r.get("tpu"))]
+    return header, rows
+
+
+def feature_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
+    """Per combination, the share of the placed cubes of each size detected, when the study placed cubes."""
+    sizes = list(dict.fromkeys(size for r in study["records"] for size in r.get("features", {})))
+    if not sizes:
+        return None
+    header = ["water", "instrument", "altitude [m]"] + [f"{size} m cubes detected" for size in sizes]
+    rows = [[r["water"], r["instrument"], _altitude(r["altitude_m"])]
+            + [f"{c['detected']}/{c['placed']}" if (c := r["features"].get(size)) else "–" for size in sizes]
+            for r in study["records"]]
+    return header, rows
+
+
+def near_zero_notes(study: dict) -> list[str]:
+    """One sentence per combination that maps less than NEAR_ZERO of what it reaches: its largest gap cause and
+    what that cause means."""
+    notes = []
+    for r in study["records"]:
+        fraction = r["covered_fraction"]
+        if fraction is None or fraction >= NEAR_ZERO or not r["reached_area_m2"]:
+            continue
+        cause, area = max(r["gaps_m2"].items(), key=lambda kv: kv[1])
+        notes.append(f"{r['dir']}: {_percent(fraction)} % covered; {cause.replace('_', ' ')} takes "
+                     f"{_percent(area / r['reached_area_m2'])} % of the reached area: {CAUSE_MEANINGS[cause]}.")
+    return notes
+
+
 def markdown_table(header, rows) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
@@ -112,7 +200,25 @@ def _sections(study: dict):
     objects = object_table(study)
     if objects[1]:
         sections.append(("Objects and cables", objects))
+    if study.get("s44_orders"):
+        sections.append(("IHO S-44 orders (Edition 6.0.0, 2020, Table 1)", orders_table(study)))
+        sections.append(("S-44 compliance per water and altitude", compliance_table(study)))
+    features = feature_table(study)
+    if features:
+        sections.append(("Feature detection", features))
+    tpu = tpu_table(study)
+    if tpu:
+        sections.append(("Uncertainty per point (TPU) against the truth", tpu))
     return sections
+
+
+def _s44_text(study: dict) -> str:
+    s = study["study"]
+    return (f"A cell complies with an order when it holds at least {s.get('order_min_soundings', 5)} soundings and "
+            "at least 95 % of them lie within the order's TVU = sqrt(a² + (b·d)²) at their depth d and its THU of "
+            "their true position, and their predicted 95 % uncertainties (TVU, THU) are within the same limits. "
+            "Compliant % is of the planned swath (the track flown, widened by altitude · tan(half the scan sector)) "
+            "where the plan has one, else of the reached area. Source: " + study.get("s44_source", "") + ".")
 
 
 def coverage_markdown(study: dict) -> str:
@@ -120,6 +226,11 @@ def coverage_markdown(study: dict) -> str:
     parts = [f"# Coverage study: {study['scene']}\n", _definitions(study) + "\n"]
     for title, (header, rows) in _sections(study):
         parts.append(f"## {title}\n\n" + markdown_table(header, rows))
+    if study.get("s44_orders"):
+        parts.append(_s44_text(study) + "\n")
+    notes = near_zero_notes(study)
+    if notes:
+        parts.append("## Why some combinations map (next to) nothing\n\n" + "\n".join(f"- {n}" for n in notes) + "\n")
     parts.append(f"Study time {study['wall_s']:.0f} s.\n")
     return "\n".join(parts)
 
@@ -146,16 +257,17 @@ TRADEOFF_DIR = "../tradeoff"
 
 
 def tradeoff_section(study: dict, out: Path) -> str:
-    """The page's pointer to the speed-against-accuracy chart of the scene's fidelity levels: the chart itself,
-    embedded, when ``scanner-sim tradeoff`` has written it beside the study, else the command that writes it."""
-    scene = html.escape(str(study["scene"]))
+    """The speed-against-accuracy chart of the scene's fidelity levels, embedded with a sentence on how to read it,
+    when ``scanner-sim tradeoff`` has written it beside the study; else nothing but one line in the page's notes
+    (a section that only named a command read as a broken section)."""
     chart = out / TRADEOFF_DIR / "tradeoff.png"
-    text = (f"<h2>Speed against accuracy</h2><p>How far each fidelity level lies from the truth and from the "
-            f"reference level, against its speed: <code>scanner-sim tradeoff {scene}</code> writes tradeoff.png, "
-            f"tradeoff.md and tradeoff.json in {html.escape(TRADEOFF_DIR)}/ from this folder.</p>")
-    if chart.exists():
-        text += f"<figure>{_image(chart, 'speed against accuracy')}<figcaption>speed against accuracy</figcaption></figure>"
-    return text
+    if not chart.exists():
+        return ""
+    return ("<h2>Speed against accuracy</h2><p>How far each fidelity level lies from the truth and from the "
+            "reference level (vertical), against the pulses it simulates per second (horizontal): a level further "
+            f"right is faster, a level lower is closer to the reference (written by <code>scanner-sim tradeoff "
+            f"{html.escape(str(study['scene']))}</code>).</p>"
+            f"<figure>{_image(chart, 'speed against accuracy')}<figcaption>speed against accuracy</figcaption></figure>")
 
 
 def report_html(study: dict, out_dir: str | Path) -> str:
@@ -172,7 +284,16 @@ def report_html(study: dict, out_dir: str | Path) -> str:
                      "<figcaption>coverage against altitude</figcaption></figure>")
     for heading, (header, rows) in _sections(study):
         parts.append(f"<h2>{html.escape(heading)}</h2>" + html_table(header, rows))
+        if heading.startswith("S-44 compliance"):
+            parts.append(f"<p>{html.escape(_s44_text(study))}</p>")
+    notes = near_zero_notes(study)
+    if notes:
+        parts.append("<h2>Why some combinations map (next to) nothing</h2><ul>"
+                     + "".join(f"<li>{html.escape(n)}</li>" for n in notes) + "</ul>")
     parts.append(tradeoff_section(study, out))
+    if not (out / TRADEOFF_DIR / "tradeoff.png").exists():
+        parts.append(f"<p>Speed against accuracy of the scene's fidelity levels: run <code>scanner-sim tradeoff "
+                     f"{html.escape(str(study['scene']))}</code> and build the report again to see it here.</p>")
     parts.append("<h2>Maps and point clouds</h2>")
     for r in study["records"]:
         parts.append(f"<h3>{html.escape(r['dir'])}</h3>")

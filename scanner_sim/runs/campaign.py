@@ -10,6 +10,7 @@ campaign table (campaign.csv, campaign.parquet, campaign.json) and its charts.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io as stdio
 import itertools
 import json
@@ -31,7 +32,7 @@ from scanner_sim.config.errors import invalid
 from scanner_sim.config.loading import parse_yaml_text, read_scene_text
 from scanner_sim.io.run_dir import hold_output
 from scanner_sim.metrics.coverage import CoverageSettings
-from scanner_sim.render import viz
+from scanner_sim.render.sweep_charts import plot_sweep
 from scanner_sim.runs.jobs import PassOutcome, run_jobs, run_pass_segmented
 from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassJob
 from scanner_sim.survey.setup import PassOptions
@@ -101,6 +102,13 @@ class ChartConfig(StrictModel):
     y: Choice(*CHART_FIGURES) = "covered_fraction"
 
 
+def _cube_sizes(value: Any) -> tuple:
+    """Cube sizes: a non-empty list of distinct numbers (each checked > 0 as ``Positive``), kept as a tuple."""
+    if not isinstance(value, (list, tuple)) or not value or len(set(map(str, value))) != len(value):
+        raise invalid("must be a non-empty list of distinct cube sizes [m]", value=value)
+    return tuple(value)
+
+
 class CampaignOptions(StrictModel):
     """How every pass of the campaign runs."""
 
@@ -119,6 +127,12 @@ class CampaignOptions(StrictModel):
     cell_m: Positive = CoverageSettings.cell_m
     min_points: Integer(ge=1) = CoverageSettings.min_points
     tolerance_m: Positive = CoverageSettings.tolerance_m
+    cubes_m: Annotated[tuple[Positive, ...], BeforeValidator(_cube_sizes)] | None = None
+    """Cube edge sizes [m] placed across the base scene's swath for feature detection (scanner-sim features)."""
+    cube_count: Integer(ge=1) = 8
+    """Cubes of each size."""
+    cube_seed: Integer(ge=0) = 0
+    """Seed of the cube positions."""
 
 
 class CampaignConfig(StrictModel):
@@ -168,6 +182,8 @@ class Campaign:
     values: list[dict[str, Any]]
     jobs: list[PassJob]
     source_path: Path | None = None
+    cubes: list[dict] = dataclasses.field(default_factory=list)
+    """The cubes placed for feature detection (:func:`scanner_sim.studies.features.cube_positions`)."""
 
     @property
     def axes(self) -> list[str]:
@@ -179,12 +195,16 @@ def parse_campaign(data: Any, base_dir: Path | None = None, name: str = "campaig
     """A campaign mapping checked, its scene loaded and every combination's scene validated.
     Raises :class:`ConfigError` (one line naming the dotted key)."""
     config = build(CampaignConfig, data)
-    scene_path = Path(config.scene)
-    if base_dir is not None and not scene_path.is_absolute() and (base_dir / scene_path).is_file():
-        scene_path = base_dir / scene_path
-    base = load_scene(scene_path if scene_path.suffix in (".yaml", ".yml") else config.scene)
+    base = load_base_scene(config.scene, base_dir)
     opts = config.options
     fixed = {key: getattr(opts, option) for option, key in OPTION_KEYS.items() if getattr(opts, option) is not None}
+    cubes = []
+    if opts.cubes_m:
+        from scanner_sim.studies import features
+
+        cubes = features.cube_positions(base.with_overrides(fixed), opts.cubes_m, opts.cube_count, opts.cube_seed,
+                                        opts.max_pulses, "options.cube_count")
+        base = features.with_cubes(base, cubes)
     options = PassOptions(progress=False, render=opts.render, waveforms=opts.waveforms,
                           coverage=CoverageSettings(opts.cell_m, opts.min_points, opts.tolerance_m))
     axes = list(config.sweep)
@@ -205,7 +225,16 @@ def parse_campaign(data: Any, base_dir: Path | None = None, name: str = "campaig
                               "make the values differ more")
         names[name] = combo
         jobs.append(PassJob(name, scene, options, opts.segments))
-    return Campaign(config, config.name or name, base, values, jobs, source_path)
+    return Campaign(config, config.name or name, base, values, jobs, source_path, cubes)
+
+
+def load_base_scene(scene: str, base_dir: Path | None) -> SceneConfig:
+    """The base scene of a campaign or dataset file: a shipped scene's name, or a scene file's path (relative to
+    ``base_dir``, the file's folder, where it lies there)."""
+    scene_path = Path(scene)
+    if base_dir is not None and not scene_path.is_absolute() and (base_dir / scene_path).is_file():
+        scene_path = base_dir / scene_path
+    return load_scene(scene_path if scene_path.suffix in (".yaml", ".yml") else scene)
 
 
 def load_campaign(path: str | Path) -> Campaign:
@@ -250,7 +279,7 @@ def _run_campaign(campaign: Campaign, out: Path, client, redo: bool, progress: b
     started = time.perf_counter()
     outcomes = run_jobs(campaign.jobs, out, client, retries=campaign.config.options.retries, redo=redo,
                         progress=progress)
-    rows = [table_row(values, outcome) for values, outcome in zip(campaign.values, outcomes)]
+    rows = [table_row(values, outcome, campaign.cubes) for values, outcome in zip(campaign.values, outcomes)]
     io.write_text(out / "campaign.csv", csv_text(rows))
     tables = ["campaign.csv", "campaign.json"]
     if write_parquet(out / "campaign.parquet", rows):
@@ -265,6 +294,7 @@ def _run_campaign(campaign: Campaign, out: Path, client, redo: bool, progress: b
         "scene": campaign.scene.name,
         "sweep": campaign.config.sweep,
         "options": campaign.config.options.model_dump(),
+        "cubes": campaign.cubes,
         "wall_s": round(time.perf_counter() - started, 1),
         "ran": sum(o.status == "ran" for o in outcomes),
         "skipped": sum(o.status == "skipped" for o in outcomes),
@@ -289,8 +319,9 @@ def _flatten(summary: Mapping, prefix: str = "") -> dict[str, Any]:
     return flat
 
 
-def table_row(values: Mapping[str, Any], outcome: PassOutcome) -> dict[str, Any]:
-    """One row of the campaign table: the axis values, the folder, the status, the summary's figures."""
+def table_row(values: Mapping[str, Any], outcome: PassOutcome, cubes: list[dict] = ()) -> dict[str, Any]:
+    """One row of the campaign table: the axis values, the folder, the status, the summary's figures, and with
+    ``cubes`` placed, per size ``features.SIZE.placed``, ``.detected`` and ``.fraction``."""
     axes = {axis: v if v is None or isinstance(v, (bool, int, float, str)) else json.dumps(v)
             for axis, v in values.items()}
     row = {**axes, "dir": outcome.job.name, "status": outcome.status, "error": outcome.error}
@@ -298,6 +329,12 @@ def table_row(values: Mapping[str, Any], outcome: PassOutcome) -> dict[str, Any]
         summary = outcome.summary
         row["points_per_pulse"] = summary["points"] / summary["pulses"] if summary.get("pulses") else None
         row |= _flatten(summary)
+        if cubes and summary.get("coverage"):
+            from scanner_sim.studies.features import detection_table
+
+            table = detection_table(summary["coverage"]["objects"], cubes)
+            row |= _flatten({"features": {size: {k: v for k, v in c.items() if k != "valid_soundings"}
+                                          for size, c in table.items()}})
     return row
 
 
@@ -345,7 +382,7 @@ def campaign_charts(campaign: Campaign) -> list[ChartConfig]:
     if campaign.config.charts is not None:
         return list(campaign.config.charts)
     sweep = campaign.config.sweep
-    y = "covered_fraction" if campaign.scene.seabed is not None else "points_per_pulse"
+    y = "covered_fraction" if campaign.scene.has_seabed else "points_per_pulse"
     numeric = [axis for axis, values in sweep.items() if all(_is_number(v) for v in values)]
     along = numeric or list(sweep)[:1]
     return [ChartConfig(x=x, lines=tuple(a for a in sweep if a != x), y=y) for x in along]
@@ -360,6 +397,6 @@ def draw_chart(out: Path, campaign: Campaign, chart: ChartConfig, rows: list[dic
         return None
     slug = lambda text: re.sub(r"[^A-Za-z0-9_]+", "-", text)  # noqa: E731
     name = f"{chart.y}_vs_{slug(chart.x)}" + (f"_by_{'_'.join(map(slug, chart.lines))}" if chart.lines else "") + ".png"
-    viz.plot_sweep(out / name, records, chart.x, chart.y, lines=chart.lines, y_label=label,
-                   title=f"{campaign.name} ({campaign.scene.name}): {chart.y.replace('_', ' ')} against {chart.x}")
+    plot_sweep(out / name, records, chart.x, chart.y, lines=chart.lines, y_label=label,
+               title=f"{campaign.name} ({campaign.scene.name}): {chart.y.replace('_', ' ')} against {chart.x}")
     return name

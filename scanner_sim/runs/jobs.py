@@ -55,6 +55,7 @@ def write_pass(folder: Path, files: PassFiles) -> dict:
     with contextlib.suppress(FileNotFoundError):
         (folder / "summary.json").unlink()
     for name, data in sorted(files.files.items(), key=lambda item: item[0] == "summary.json"):
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)  # a file in a sub-folder: a bag's
         with io.atomic_path(folder / name) as tmp:
             tmp.write_bytes(data)
     return json.loads(files.files["summary.json"])
@@ -92,9 +93,14 @@ def check_jobs(jobs: Sequence[PassJob]) -> None:
     track (:func:`~scanner_sim.survey.budget.check_pass_budget`), and its built track against the water surface, the
     seabed and the objects (:func:`~scanner_sim.survey.setup.checked_trajectory`). Raises the first refusal as a
     ConfigError naming the pass; a set-up error is then never met in a task, where it would be retried and
-    reported only when its pass started."""
+    reported only when its pass started. Passes that would all write one bag folder (``output.rosbag.dir``) are
+    refused: each would replace the one before."""
     for job in jobs:
         config = job.config.with_overrides(job.options.scene_overrides())
+        bag = config.output.rosbag
+        if len(jobs) > 1 and bag is not None and bag.dir is not None:
+            raise ConfigError(f"output.rosbag.dir = {bag.dir!r}: the {len(jobs)} passes would each replace the one "
+                              "bag there; leave dir out, so that each pass writes rosbag/ in its own folder")
         try:
             checked_trajectory(config, cached_scene(job.config))
         except ConfigError as exc:
@@ -102,8 +108,9 @@ def check_jobs(jobs: Sequence[PassJob]) -> None:
 
 
 def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retries: int = DEFAULT_RETRIES,
-             redo: bool = False, progress: bool = True) -> list[PassOutcome]:
-    """Run ``jobs`` into ``out_dir/JOB.name/`` and return their outcomes in the order of ``jobs``.
+             redo: bool = False, progress: bool = True, checked: bool = False) -> list[PassOutcome]:
+    """Run ``jobs`` into ``out_dir/JOB.name/`` and return their outcomes in the order of ``jobs``; their set-ups are
+    checked first (:func:`check_jobs`) unless the caller did (``checked``).
 
     Passes already complete there are skipped (unless ``redo``). With a Dask ``client``, every other pass
     is submitted at once and written as it finishes; a pass whose task fails (after ``retries``) is
@@ -114,7 +121,8 @@ def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retri
     names = [job.name for job in jobs]
     if len(set(names)) != len(names):
         raise ValueError(f"passes: folder names repeat ({sorted({n for n in names if names.count(n) > 1})})")
-    check_jobs(jobs)
+    if not checked:
+        check_jobs(jobs)
     outcomes: dict[int, PassOutcome] = {}
     todo = []
     for k, job in enumerate(jobs):

@@ -45,7 +45,7 @@ class PassJob:
 
 
 class PassFiles(NamedTuple):
-    """A pass's output files by name, bytes and all (summary.json among them)."""
+    """A pass's output files by their path in its folder, bytes and all (summary.json among them)."""
 
     files: dict[str, bytes]
 
@@ -61,10 +61,10 @@ _SCENES: dict[str, Scene] = {}
 
 
 def cached_scene(config: SceneConfig) -> Scene:
-    """The built scene of ``config``, kept per process: the scene depends only on the seabed and the
+    """The built scene of ``config``, kept per process: the scene depends only on its CRS, the seabed and the
     objects (and the folder mesh files are found in), so passes that differ in water, instrument, platform,
     scanner or survey share one build. One scene is kept."""
-    key = config.model_dump_json(include={"seabed", "objects"}) + str(config.source_path)
+    key = config.model_dump_json(include={"crs", "seabed", "objects"}) + str(config.source_path)
     if key not in _SCENES:
         _SCENES.clear()
         _SCENES[key] = build_scene(config)
@@ -72,7 +72,9 @@ def cached_scene(config: SceneConfig) -> Scene:
 
 
 def _read_files(folder: Path) -> PassFiles:
-    return PassFiles({p.name: p.read_bytes() for p in sorted(folder.iterdir()) if p.is_file()})
+    """Every file of the pass's folder, by its path in the folder (``rosbag/metadata.yaml`` for a bag's)."""
+    return PassFiles({p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*"))
+                      if p.is_file()})
 
 
 def pass_files(config: SceneConfig, options: PassOptions) -> PassFiles:

@@ -20,6 +20,7 @@ from muls.errors import ParameterError
 from muls.presets import instrument_preset, water_preset
 from scanner_sim.config import SceneConfig
 from scanner_sim.io.run_dir import hold_output
+from scanner_sim.metrics import s44
 from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.runs.cluster import maybe_client
 from scanner_sim.runs.jobs import run_jobs
@@ -34,6 +35,15 @@ SCENE_WATER = "scene"
 DEFAULT_INSTRUMENTS = ("mul2023", "single_channel")
 #: Picture size of each combination's point-cloud render in the study (the report embeds them all).
 STUDY_RENDER_SIZE = (960, 600)
+
+
+@dataclass(frozen=True)
+class CubePlan:
+    """Cubes for feature detection: edge sizes [m], how many of each, the seed of their positions."""
+
+    sizes_m: tuple[float, ...]
+    count: int
+    seed: int
 
 
 @dataclass(frozen=True)
@@ -104,7 +114,8 @@ def combination_name(water: str, altitude_m: float | None, instrument: str) -> s
 def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
               settings: CoverageSettings = CoverageSettings(), fidelity: str | None = None, seed: int | None = None,
               max_pulses: int | None = None, render: bool = True, progress: bool = True, client=None,
-              workers: int | None = None, scheduler: str | None = None, redo: bool = False) -> dict:
+              workers: int | None = None, scheduler: str | None = None, redo: bool = False,
+              cubes: CubePlan | None = None) -> dict:
     """Run every combination of ``plan`` and write the study's files into ``out_dir``.
 
     Per combination, a sub-directory with the pass's outputs (points.las, summary.json, coverage_map.png,
@@ -114,15 +125,26 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     The study is a campaign (docs/campaigns.md): its passes run as Dask tasks on ``client``, or on the
     scheduler at ``scheduler``, or on a local cluster of ``workers`` processes; with none of them (or
     ``workers=0``), one after another in this process. The results are the same bits either way. Passes
-    already complete in ``out_dir`` are kept, unless ``redo``. The folder is locked while the study runs: a
+    already complete in ``out_dir`` are kept, unless ``redo``. ``cubes``: cubes placed once for the whole study
+    across the swath of its lowest altitude (the narrowest), each record gaining ``features`` (per size placed,
+    detected, fraction; :mod:`scanner_sim.studies.features`). The folder is locked while the study runs: a
     second writer is refused (:func:`~scanner_sim.io.run_dir.hold_output`).
     """
     from scanner_sim import io
     from scanner_sim.render import report
 
-    if config.seabed is None:
+    if not config.has_seabed:
         raise ParameterError(f"scene '{config.name}': coverage is measured over the seabed's plan area; the "
-                             "scene has no seabed section")
+                             "scene has no seabed section (nor a mesh labelled seabed)")
+    out = Path(out_dir)
+    placed: list[dict] = []
+    if cubes is not None:
+        from scanner_sim.studies import features
+
+        lowest = min(a for _, a, _ in plan.combinations(config))
+        narrowest = combination_config(config, SCENE_WATER, lowest, plan.instruments[0], plan.gate)
+        placed = features.cube_positions(narrowest, cubes.sizes_m, cubes.count, cubes.seed, max_pulses, "cube_count")
+        config = features.with_cubes(config, placed)
     combos = list(plan.combinations(config))
     # every combination is built (and so checked) before any pass runs
     jobs = [PassJob(combination_name(water, altitude, instrument),
@@ -131,7 +153,6 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
                                 max_pulses=max_pulses, progress=False,
                                 render=render, render_size=STUDY_RENDER_SIZE, write_scene=False, coverage=settings))
             for water, altitude, instrument in combos]
-    out = Path(out_dir)
     with hold_output(out):  # one writer at a time (io/run_dir.py)
         out.mkdir(parents=True, exist_ok=True)
         started = time.perf_counter()
@@ -145,22 +166,32 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
                                "the others are complete in the output folder: run the study again to redo only these")
         records = [study_record(job.config, o.summary, water, altitude, instrument, job.name)
                    for (water, altitude, instrument), job, o in zip(combos, jobs, outcomes)]
+        if placed:
+            from scanner_sim.studies.features import detection_table
+
+            for record in records:
+                record["features"] = detection_table(record["objects"], placed)
         study = {
             "scene": config.name,
             "study": {"waters": list(plan.waters),
                       "altitudes_m": [a if a is not None else config.platform.altitude_m for a in plan.altitudes_m],
                       "instruments": list(plan.instruments), "gate": plan.gate, "cell_m": settings.cell_m,
-                      "min_points": settings.min_points, "tolerance_m": settings.tolerance_m},
+                      "min_points": settings.min_points, "tolerance_m": settings.tolerance_m,
+                      "order_min_soundings": settings.order_min_soundings},
+            "s44_orders": s44.orders_table(),
+            "cubes": placed,
+            "s44_source": s44.SOURCE,
             "wall_s": round(time.perf_counter() - started, 1),
             "records": records,
         }
         io.write_summary_json(out / "coverage.json", study)
         io.write_text(out / "coverage.md", report.coverage_markdown(study))
         if render:
-            from scanner_sim.render import viz
+            from scanner_sim.render.sweep_charts import plot_coverage_vs_altitude
 
-            viz.plot_coverage_vs_altitude(out / "coverage_vs_altitude.png", records,
-                                          title=f"{config.name}: coverage against altitude")
+            plot_coverage_vs_altitude(out / "coverage_vs_altitude.png", records,
+                                      title=f"{config.name}: coverage against altitude")
+            _calibration_charts(out, records)
             io.write_text(out / "report.html", report.report_html(study, out))
     return study
 
@@ -168,7 +199,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
 def study_record(config: SceneConfig, summary: dict, water: str, altitude_m, instrument: str, name: str) -> dict:
     """One coverage.json record: the combination, its settings, pass counts and coverage figures."""
     figures = dict(summary["coverage"])
-    settings = {key: figures.pop(key) for key in ("cell_m", "min_points", "tolerance_m")}
+    settings = {key: figures.pop(key) for key in ("cell_m", "min_points", "tolerance_m", "order_min_soundings")}
     used = summary["settings"]
     settings.update(gate_delay_ns=used["gate_delay_ns"], gate_width_ns=used["gate_width_ns"], fidelity=summary["fidelity"],
                     seed=summary["seed"], max_pulses=summary["settings"]["max_pulses"],
@@ -184,5 +215,27 @@ def study_record(config: SceneConfig, summary: dict, water: str, altitude_m, ins
         "range_error_m": summary["range_error_m"],
         "wall_s": summary["wall_s"],
         **figures,
+        "tpu": _tpu_figures(summary),
         "settings": settings,
     }
+
+
+def _tpu_figures(summary: dict) -> dict | None:
+    """The pass's predicted THU/TVU (median, p95 [m]) and their calibration against the truth (shares within and the
+    chart's levels), from summary.json's ``uncertainty``; None for a summary without one."""
+    u = summary.get("uncertainty")
+    if not u:
+        return None
+    c = u["calibration"]
+    return {"thu_m": u["thu_m"], "tvu_m": u["tvu_m"], "points": c["points"],
+            "vertical_within_tvu": c["vertical_within_tvu"], "horizontal_within_thu": c["horizontal_within_thu"],
+            "chart": c["chart"]}
+
+
+def _calibration_charts(out: Path, records: list[dict]) -> None:
+    """calibration.png in each combination's folder: its TPU's predicted against observed coverage."""
+    from scanner_sim.render.calibration_chart import plot_calibration
+
+    for r in records:
+        if r.get("tpu") and r["tpu"]["points"]:
+            plot_calibration(out / r["dir"] / "calibration.png", r["tpu"], title=f"{r['dir']}: THU/TVU against the truth")

@@ -307,7 +307,7 @@ def write_tradeoff(result: dict, out_dir: str | Path, render: bool = True) -> Pa
 
 
 def _write_tradeoff(result: dict, out: Path, render: bool) -> Path:
-    from scanner_sim.render.viz import plot_tradeoff
+    from scanner_sim.render.tradeoff_chart import plot_tradeoff
 
     out.mkdir(parents=True, exist_ok=True)
     if render:

@@ -9,9 +9,11 @@ import math
 from dataclasses import dataclass
 
 from muls.memory import MEMORY_SHARE, available_memory_bytes, gb
+from scanner_sim.config import SeabedConfig
 from scanner_sim.config.errors import ConfigError, config_value
 from scanner_sim.motion.track_checks import track_length_m, track_span_s
 from scanner_sim.motion.trajectory import PATH_STEP_M
+from scanner_sim.world.raster import seabed_plan_size_m
 
 #: Bytes a chunk holds per pulse slot and sub-ray (rays, hits, echoes), and per pulse slot for its records by
 #: record mode, with the chunks a pass keeps in flight (one per worker and one more): the growth of peak RSS of
@@ -58,7 +60,7 @@ class PassEstimate:
 def estimate_pass(config) -> PassEstimate:
     """Duration, pulses and memory of the scene's pass, by arithmetic on its keys (before allocating)."""
     p, sv, sc = config.platform, config.survey, config.scanner
-    length_m, _ = track_length_m(p)
+    length_m, _ = track_length_m(p, config.seabed)
     rate = sc.pulse_rate_hz or config.instrument_model().transmitter.repetition_rate_hz
     active = sc.sector_deg / 360.0 if sc.mode == "continuous" else 1.0
     if p.mode == "static":
@@ -86,9 +88,11 @@ def estimate_pass(config) -> PassEstimate:
     if config.output.waveform_every_n_pulses:
         memory["output.waveform_every_n_pulses"] = (min(slots, pulses) * WAVEFORM_BYTES_PER_PULSE,
                                                     f"the list of {pulses:,} pulses to sample")
-    if config.seabed is not None:
-        cells = math.prod(math.ceil(s / COVERAGE_CELL_M) for s in config.seabed.size_m)
-        memory["seabed.size_m"] = (cells * COVERAGE_BYTES_PER_CELL, f"coverage over {cells:,} cells")
+    size = seabed_plan_size_m(config.seabed)  # a raster's whole extent: its window is at most that
+    if size is not None:
+        cells = math.prod(math.ceil(s / COVERAGE_CELL_M) for s in size)
+        key = "seabed.size_m" if isinstance(config.seabed, SeabedConfig) else "seabed.raster"
+        memory[key] = (cells * COVERAGE_BYTES_PER_CELL, f"coverage over {cells:,} cells")
     return PassEstimate(track_s, pass_s, time_key, rate, active, pulses,
                         {k: (int(b), what) for k, (b, what) in memory.items()})
 
@@ -100,7 +104,7 @@ def check_pass_budget(config, available_bytes: int | None = None) -> PassEstimat
     :class:`ConfigError` names the key that drives the figure. Returns the estimate."""
     est = estimate_pass(config)
     p, sv = config.platform, config.survey
-    _, legs = track_length_m(p)
+    _, legs = track_length_m(p, config.seabed)
     if legs > MAX_LEGS:
         key = "platform.lawnmower.line_spacing_m" if p.mode == "lawnmower" else "platform.waypoints_m"
         raise ConfigError(f"{key} = {config_value(config, key)}: gives a track of {legs:,} legs, more than the "

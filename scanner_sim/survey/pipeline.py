@@ -23,12 +23,16 @@ from tqdm import tqdm
 
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
+from scanner_sim.config.crs import crs_label
+from scanner_sim.io.rosbag import ROSBAG_NAME
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
+from scanner_sim.metrics.planned_swath import planned_swath
 from scanner_sim.metrics.tpu_calibration import UncertaintySink
-from scanner_sim.render import viz
+from scanner_sim.render import point_cloud
 from scanner_sim.survey import provenance, sinks
+from scanner_sim.survey.gis_products import write_gis_products
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
-from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup
+from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup, check_pass_arguments
 from scanner_sim.world.scene import Scene
 
 
@@ -57,7 +61,7 @@ class PassResult:
 
     def points_polydata(self):
         """The points as a pyvista ``PolyData`` with every field as point data."""
-        return viz.points_polydata(self.points)
+        return point_cloud.points_polydata(self.points)
 
 
 @abort_on_error  # an unfinished run (an error, Ctrl-C, SIGTERM) leaves the output folder as it was
@@ -74,6 +78,8 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     """
     if out_dir is not None and not isinstance(out_dir, (str, os.PathLike)):
         raise TypeError(f"out_dir must be a folder path (str or Path) or None, not {type(out_dir).__name__} {out_dir!r}")
+    check_pass_arguments(config, options, scene)
+    check_bag_dir(config.output.rosbag, Path(out_dir or config.output_dir))  # before the slow set-up
     t_setup = time.perf_counter()
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup
@@ -135,7 +141,7 @@ def pass_facts(setup: PassSetup, options: PassOptions) -> sinks.PassFacts:
         attenuation_model=setup.model.water.attenuation_model, multiple_scattering=setup.model.multiple_scattering,
         chunk_pulses=setup.chunk_slots, max_pulses=setup.max_pulses,
         scene_file=str(config.source_path) if config.source_path else None, altitude_m=config.platform.altitude_m,
-        gate_delay_ns=gate[0], gate_width_ns=gate[1],
+        gate_delay_ns=gate[0], gate_width_ns=gate[1], crs=crs_label(config.crs), seabed=setup.scene.seabed_info,
         provenance=provenance.pass_provenance(config, setup.model.water, setup.model.instrument, level, fingerprint))
 
 
@@ -226,7 +232,10 @@ def _finished(chunk: Future, bar) -> Chunk:
 def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):
     """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally.
     Returns (stats, coverage sink or None, wall seconds)."""
-    coverage = sinks.CoverageSink(setup.scene, options.coverage) if setup.plan.measures_coverage else None
+    coverage = None
+    if setup.plan.measures_coverage:
+        planned = planned_swath(setup.config, setup.trajectory, setup.scanner.pulse_rate_hz)
+        coverage = sinks.CoverageSink(setup.scene, options.coverage, planned)
     stats = sinks.PassStats(len(setup.model.instrument.channels))
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
     started = time.perf_counter()
@@ -234,6 +243,32 @@ def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOption
         for sink in every:
             sink.add(chunk)
     return stats, coverage, time.perf_counter() - started
+
+
+def check_bag_dir(bag, final: Path) -> None:
+    """Refuse (ValueError, one line) a bag folder ``bag.dir`` in the run's folder ``final`` or holding it: the run
+    replaces its folder whole."""
+    if bag is None or bag.dir is None:
+        return
+    there, run = Path(os.path.abspath(bag.dir)), Path(os.path.abspath(final))
+    if there == run or run in there.parents or there in run.parents:
+        raise ValueError(f"output.rosbag.dir = {bag.dir!r}: lies in the output folder {str(final)!r} or holds it, "
+                         f"which a run replaces whole; leave it out to write the bag as {str(final / ROSBAG_NAME)!r}")
+
+
+def bag_sinks(setup: PassSetup, out: Path, facts: sinks.PassFacts) -> list:
+    """The ROS 2 bag the scene's ``output.rosbag`` asks for (none when absent), in ``out/rosbag`` or its own ``dir``."""
+    bag, trajectory = setup.config.output.rosbag, setup.trajectory
+    if bag is None:
+        return []
+
+    def poses_at(times_s):
+        truth = trajectory.poses(times_s)
+        return truth, trajectory.estimate_of(truth)
+
+    return [sinks.RosbagSink(Path(bag.dir) if bag.dir else out / ROSBAG_NAME, bag, setup.scene.local_origin,
+                             setup.scanner.line_index, poses_at, (0.0, trajectory.duration_s), setup.scanner.pulse_rate_hz,
+                             setup.scanner.mount_position_m, facts.metadata())]
 
 
 def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, setup_s: float,
@@ -246,7 +281,8 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     render = "render.png" in files
     with ExitStack() as stack:
         clouds = [stack.enter_context(sink) for sink in
-                  sinks.point_cloud_sinks(output, out, setup.scene.local_origin, facts.metadata())]
+                  sinks.point_cloud_sinks(output, out, setup.scene.local_origin, facts.metadata(), setup.scene.crs)]
+        clouds += [stack.enter_context(sink) for sink in bag_sinks(setup, out, facts)]
         dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
         waveforms = sinks.WaveformSink(setup.model.instrument.digitizer, facts.channels)
         sample, uncertainty = sinks.CloudSample(), UncertaintySink(setup)
@@ -260,13 +296,19 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     if "scene.ply" in files:
         scene = setup.scene
         io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
+    crs = setup.scene.crs
+    table = trajectory_table(setup) if output.trajectory_csv or crs is not None else None
     if output.trajectory_csv:
-        sinks.write_trajectory(out, trajectory_table(setup), output.split_legs)
+        sinks.write_trajectory(out, table, output.split_legs)
+    if crs is not None:
+        write_gis_products(out, crs, coverage, table, setup.trajectory.waypoints_xy_m)
     if "waveforms.npz" in files:
         waveforms.write(out / "waveforms.npz")
     if render:
         sinks.render_points(out / "render.png", sample, setup.scene, facts, options.render_size)
     if "coverage_map.png" in files:
         sinks.render_coverage_map(out / "coverage_map.png", coverage, setup.scene, facts, summary["coverage"])
+    if "s44_map.png" in files:
+        sinks.render_order_map(out / "s44_map.png", coverage, facts, summary["coverage"])
     io.write_summary_json(out / "summary.json", summary)  # last: a complete pass is one with a summary
     return summary

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from muls.water import PHASE_FUNCTION, RANGE_DEPENDENT_MODELS, Water
 from scanner_sim.config import SceneConfig
+from scanner_sim.config.crs import crs_provenance
 from scanner_sim.config.geometry import MeshObject
 from scanner_sim.fidelity import FidelityLevel
 from scanner_sim.io.summary import jsonable
@@ -63,6 +64,7 @@ def pass_provenance(config: SceneConfig, water: Water, instrument, level: Fideli
         "inputs_fingerprint": fingerprint,
         "scene_file": str(config.source_path) if config.source_path else None,
         "overrides": jsonable(dict(sorted(config.overrides.items()))),
+        "crs": crs_provenance(config.crs),
         "water": water_provenance(config, water),
         "instrument": jsonable(instrument),
         "fidelity": jsonable(level),
@@ -86,6 +88,15 @@ def _file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
+def raster_files(config: SceneConfig) -> list[Path]:
+    """The raster files a scene's seabed reads (bathymetry, classes): their bytes are inputs like mesh files'."""
+    seabed = config.seabed
+    files = [getattr(seabed, "resolved_raster", None)]
+    classes = getattr(seabed, "classes", None)
+    files += [classes.resolved_raster] if classes is not None else []
+    return [f for f in files if f is not None]
+
+
 def inputs_fingerprint(config: SceneConfig, options, level: FidelityLevel) -> str:
     """SHA-256 (hex) of everything a pass's files follow from: ``config`` (the scene as given, every override
     applied, before the pass derives its gate) as validated, the values given on top of the file, the bytes of
@@ -97,12 +108,16 @@ def inputs_fingerprint(config: SceneConfig, options, level: FidelityLevel) -> st
         "output_format_version": OUTPUT_FORMAT_VERSION,
         "scene": config.model_dump(mode="json"),
         "overrides": jsonable(dict(sorted(config.overrides.items()))),
-        "meshes": [_file_sha256(o.resolved_path) for o in config.objects if isinstance(o, MeshObject)],
+        "meshes": [_file_sha256(o.resolved_path) for o in config.objects
+                   if isinstance(o, MeshObject) and o.resolved_path is not None],
         "water": jsonable(config.water_model()),
         "instrument": jsonable(config.instrument_model()),
         "fidelity": jsonable(level),
         "options": {"waveforms": options.waveforms, "render": options.render, "render_size": options.render_size,
                     "write_scene": options.write_scene, "coverage": jsonable(options.coverage)},
     }
+    rasters = raster_files(config)
+    if rasters:  # only then: the fingerprints of scenes without rasters stay as they were
+        inputs["rasters"] = [_file_sha256(path) for path in rasters]
     text = json.dumps(jsonable(inputs), sort_keys=True, ensure_ascii=True, allow_nan=False)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()

@@ -23,6 +23,7 @@ from muls.waveform import OpticalModel, PulseBatch
 from scanner_sim.config import SceneConfig
 from scanner_sim.config.unit_slips import warn_unit_slips
 from scanner_sim.fidelity import FidelityLevel
+from scanner_sim.io.rosbag import ROSBAG_NAME, bag_files
 from scanner_sim.metrics.coverage import CoverageSettings, Footprint, nominal_footprint
 from scanner_sim.metrics.tpu_calibration import CheckedErrors, checked_errors
 from scanner_sim.motion.scanner import Scanner
@@ -35,6 +36,7 @@ from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.budget import check_pass_budget
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.georeference import LinesOfSight, georeference
+from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.ranging_precision import measure_ranging_precision, panel_ranges_m
@@ -128,7 +130,7 @@ class PassPlan:
            ) -> PassPlan:
         """The plan of ``config`` with ``options`` applied (or already applied: they are idempotent)."""
         config = config.with_overrides(options.scene_overrides())
-        output, coverage = config.output, config.seabed is not None
+        output, coverage = config.output, config.has_seabed
         clouds = [s for s, on in ((".las", output.las), (".laz", output.laz)) if on]
         files = [] if output.split_legs else [f"points{s}" for s in clouds]
         files += ["dropouts.npz"]
@@ -137,7 +139,10 @@ class PassPlan:
         files += ["scene.ply"] if options.write_scene else []
         files += ["waveforms.npz"] if options.waveforms or output.waveform_every_n_pulses else []
         files += ["render.png"] if options.render and clouds else []
-        files += ["coverage_map.png"] if options.render and coverage else []
+        files += ["coverage_map.png", "s44_map.png"] if options.render and coverage else []
+        files += gis_files(coverage) if config.crs is not None else []
+        if output.rosbag is not None and output.rosbag.dir is None:  # a bag elsewhere is no file of the folder
+            files += bag_files(ROSBAG_NAME, output.rosbag.storage)
         return cls(level or config.survey.level, coverage, (*files, "summary.json"))
 
 

@@ -1,8 +1,9 @@
 """Where a pass's chunks go, and the files written once it is done. Each sink receives what it writes and
 nothing else: no sink reads the pass's set-up or calls back into the pipeline.
 
-Chunk sinks have ``add(chunk)`` (a :class:`scanner_sim.survey.setup.Chunk`): :class:`LasSink`, :class:`LegLasSink`
-and :class:`DropoutSink` stream to disk (atomically: a file appears under its final name only when complete),
+Chunk sinks have ``add(chunk)`` (a :class:`scanner_sim.survey.setup.Chunk`): :class:`LasSink`, :class:`LegLasSink`,
+:class:`DropoutSink` and :class:`RosbagSink` (a ROS 2 bag, line by line) stream to disk (atomically: a file appears
+under its final name only when complete),
 :class:`PassStats` keeps the summary's running figures, :class:`CoverageSink` tallies coverage,
 :class:`WaveformSink` keeps the whole records of the pulses the pass keeps, :class:`CloudSample` a decimated copy
 of the points for the picture. After the chunks, :func:`pass_summary` assembles the summary from
@@ -18,8 +19,10 @@ import numpy as np
 
 from muls.ranging import DROPOUT_CAUSES
 from scanner_sim import io
+from scanner_sim.io.rosbag import RosbagWriter
 from scanner_sim.metrics.coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
-from scanner_sim.render import viz
+from scanner_sim.render.coverage_map import plot_coverage_map
+from scanner_sim.render.point_cloud import render_point_cloud
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.provenance import point_cloud_provenance
 from scanner_sim.version import __version__
@@ -57,13 +60,16 @@ class PassFacts:
     provenance: dict
     gate_delay_ns: float | None = None
     gate_width_ns: float | None = None
+    crs: str | None = None  # the scene's CRS by its code ('EPSG:32631'), None for a local frame
+    seabed: dict | None = None  # a raster's or a mesh's seabed: source, CRS, sign, datum, synthetic relief
 
     def metadata(self) -> dict:
         """For the LAS metadata VLR: scene, water, instrument, fidelity, seed, package version, scene file, and the
         pass's provenance as point clouds carry it (:func:`~scanner_sim.survey.provenance.point_cloud_provenance`)."""
         return {"scene": self.scene, "water": self.water, "instrument": self.instrument, "fidelity": self.fidelity,
                 "seed": self.seed, "muls_scanner_version": __version__, "scene_file": self.scene_file,
-                "provenance": point_cloud_provenance(self.provenance)}
+                "provenance": point_cloud_provenance(self.provenance),
+                **({"seabed": self.seabed} if self.seabed is not None else {})}
 
     @property
     def label(self) -> str:
@@ -75,8 +81,10 @@ class PassFacts:
 class LasSink(io.LasWriter):
     """points.las or points.laz (by the suffix), streamed chunk by chunk."""
 
-    def __init__(self, path: Path, local_origin: np.ndarray, metadata: dict | None = None, file_source_id: int = 0):
-        super().__init__(path, offset_m=local_origin, metadata=metadata, file_source_id=file_source_id)
+    def __init__(self, path: Path, local_origin: np.ndarray, metadata: dict | None = None, file_source_id: int = 0,
+                 crs_wkt: str | None = None):
+        super().__init__(path, offset_m=local_origin, metadata=metadata, file_source_id=file_source_id,
+                         crs_wkt=crs_wkt)
 
     def add(self, chunk) -> None:
         self.write(chunk.points)
@@ -86,8 +94,10 @@ class LegLasSink:
     """One LAS/LAZ file per survey leg (``leg007_points.laz``...), like a HELIOS++ leg, each opened when its
     leg's first point arrives and carrying the leg as its file source id."""
 
-    def __init__(self, out: Path, suffix: str, local_origin: np.ndarray, metadata: dict | None = None):
+    def __init__(self, out: Path, suffix: str, local_origin: np.ndarray, metadata: dict | None = None,
+                 crs_wkt: str | None = None):
         self.out, self.suffix, self.local_origin, self.metadata = out, suffix, local_origin, metadata
+        self.crs_wkt = crs_wkt
         self.writers: dict[int, LasSink] = {}
 
     def path(self, leg: int) -> Path:
@@ -97,7 +107,8 @@ class LegLasSink:
         points = chunk.points
         for leg in np.unique(points.leg):
             if leg not in self.writers:
-                self.writers[leg] = LasSink(self.path(int(leg)), self.local_origin, self.metadata, int(leg))
+                self.writers[leg] = LasSink(self.path(int(leg)), self.local_origin, self.metadata, int(leg),
+                                            self.crs_wkt)
                 self.writers[leg].open()
             self.writers[leg].write(points.select(points.leg == leg))
 
@@ -113,13 +124,81 @@ class LegLasSink:
             writer.__exit__(exc_type, exc, tb)
 
 
-def point_cloud_sinks(output, out: Path, local_origin: np.ndarray, metadata: dict) -> list:
+def point_cloud_sinks(output, out: Path, local_origin: np.ndarray, metadata: dict, crs=None) -> list:
     """The point-cloud writers a scene's ``output`` section asks for: points.las and/or points.laz, or one file per
-    leg of each, every one carrying ``metadata`` and placing points off ``local_origin`` (3,) [m]."""
+    leg of each, every one carrying ``metadata`` and placing points off ``local_origin`` (3,) [m], in the map
+    coordinates of ``crs`` (a :class:`pyproj.CRS`, its WKT in the LAS CRS record) or, with None, the local frame."""
     suffixes = [s for s, on in ((".las", output.las), (".laz", output.laz)) if on]
+    wkt = None if crs is None else crs.to_wkt("WKT1_GDAL")  # LAS 1.4 R15: OGC WKT 1 (01-009)
     if output.split_legs:
-        return [LegLasSink(out, s, local_origin, metadata) for s in suffixes]
-    return [LasSink(out / f"points{s}", local_origin, metadata) for s in suffixes]
+        return [LegLasSink(out, s, local_origin, metadata, wkt) for s in suffixes]
+    return [LasSink(out / f"points{s}", local_origin, metadata, crs_wkt=wkt) for s in suffixes]
+
+
+#: Rate of the bag's odometry and transforms [Hz] (the trajectory table's).
+ODOMETRY_RATE_HZ = 10.0
+
+
+class RosbagSink(RosbagWriter):
+    """The pass as a ROS 2 bag (:class:`~scanner_sim.io.rosbag.RosbagWriter`): each scan line's points as one
+    message once the chunks have passed the line's end, and the navigation's and the true poses on a
+    :data:`ODOMETRY_RATE_HZ` grid from the first pulse up to the tick after the last.
+
+    line_of: times (n,) [s] -> scan line (n,) int; poses_at: times (n,) [s] -> (true, estimated)
+    :class:`~scanner_sim.motion.trajectory.Poses`, on the track from ``track_s`` (start, end) [s]; pulse_rate_hz:
+    slot k fires at k / pulse_rate_hz."""
+
+    def __init__(self, path: Path, settings, local_origin: np.ndarray, line_of, poses_at, track_s: tuple,
+                 pulse_rate_hz: float, lidar_offset_m, metadata: dict | None = None):
+        super().__init__(path, frame=settings.frame, storage=settings.storage, offset_m=local_origin,
+                         lidar_offset_m=lidar_offset_m, metadata=metadata)
+        self.line_of, self.poses_at, self.track_s, self.pulse_rate_hz = line_of, poses_at, track_s, pulse_rate_hz
+        self._pending = PointRecords.empty()
+        self._next_tick: int | None = None
+        self._last_s: float | None = None
+
+    def add(self, chunk) -> None:
+        times = chunk.slots / self.pulse_rate_hz
+        if times.size == 0:
+            return
+        points = PointRecords.concatenate([self._pending, chunk.points])
+        done = self.line_of(points.gps_time_s) < self.line_of(times[-1:])[0]  # later pulses start a later line
+        self._write_lines(points.select(done))
+        self._pending = points.select(~done)
+        if self._next_tick is None:
+            self._next_tick = int(np.floor(times[0] * ODOMETRY_RATE_HZ))
+        self._last_s = float(times[-1])
+        self._write_ticks(int(np.floor(times[-1] * ODOMETRY_RATE_HZ)))
+
+    def _write_lines(self, points: PointRecords) -> None:
+        lines = self.line_of(points.gps_time_s)
+        for line in np.unique(lines):
+            self.write_line(points.select(lines == line), int(line))
+
+    def _write_ticks(self, last_tick: int) -> None:
+        """Poses at ticks ``_next_tick`` .. ``last_tick``; the twist from the poses half a tick either side (one side
+        at the track's ends, where the vehicle stands still)."""
+        ticks = np.arange(self._next_tick, last_tick + 1)
+        if ticks.size == 0:
+            return
+        t, h = ticks / ODOMETRY_RATE_HZ, 0.5 / ODOMETRY_RATE_HZ
+        t0, t1 = np.clip(t - h, *self.track_s), np.clip(t + h, *self.track_s)
+        dt = np.where(t1 > t0, t1 - t0, np.inf)[:, None]  # no time on the track: no motion
+        for truth, (now, before, after) in zip((True, False), zip(self.poses_at(t), self.poses_at(t0),
+                                                                   self.poses_at(t1))):
+            velocity = (after.position - before.position) / dt
+            # R^T dR/dt is the skew matrix of the angular rate in the vehicle frame
+            spin = np.einsum("nji,njk->nik", now.rotation, (after.rotation - before.rotation) / dt[:, :, None])
+            angular = 0.5 * np.c_[spin[:, 2, 1] - spin[:, 1, 2], spin[:, 0, 2] - spin[:, 2, 0],
+                                  spin[:, 1, 0] - spin[:, 0, 1]]
+            self.write_poses(t, now.position, now.rotation, velocity, angular, truth)
+        self._next_tick = last_tick + 1
+
+    def close(self) -> None:
+        if self._last_s is not None:
+            self._write_lines(self._pending)
+            self._write_ticks(int(np.ceil(self._last_s * ODOMETRY_RATE_HZ)))
+        super().close()
 
 
 class DropoutSink(io.DropoutWriter):
@@ -153,26 +232,34 @@ class CoverageSink(CoverageAccumulator):
         super().add(chunk.slots, chunk.footprint, chunk.points, chunk.dropouts)
 
     def write(self, path: Path) -> dict:
-        io.write_coverage_grid_npz(path, self.grid, self.cell_states(), self.cells.reaching, self.cells.valid)
+        io.write_coverage_grid_npz(path, self.grid, self.cell_states(), self.cells.reaching, self.cells.valid,
+                                   s44_order=self.strictest_orders(), planned=self.planned_cells())
         return self.figures()
 
 
 class PassStats:
-    """Pulses, points per channel and a streaming histogram of |range error| [m] (median and 95th percentile)."""
+    """Pulses, points per channel and streaming histograms of the range error [m]: of |error| (median and 95th
+    percentile) and of the signed error (its median, the bias, and the share of points ranged short)."""
 
     def __init__(self, n_channels: int):
         self.pulses = 0
         self.points = 0
         self.channels = np.zeros(n_channels + 1, np.int64)
         self.error_counts = np.zeros(int(ERROR_MAX_M / ERROR_BIN_M) + 1, np.int64)
+        self.signed_counts = np.zeros(2 * self.error_counts.size, np.int64)  # bins of ERROR_BIN_M from -ERROR_MAX_M
+        self.short = 0
 
     def add(self, chunk) -> None:
         self.pulses += chunk.slots.size
         self.points += len(chunk.points)
         self.channels += np.bincount(chunk.points.channel, minlength=self.channels.size)
-        e = np.abs(chunk.points.range_error_m)
-        e = e[np.isfinite(e)]
+        signed = chunk.points.range_error_m[np.isfinite(chunk.points.range_error_m)].astype(np.float64)
+        e = np.abs(signed)
         np.add.at(self.error_counts, np.minimum((e / ERROR_BIN_M).astype(np.int64), self.error_counts.size - 1), 1)
+        half = self.error_counts.size
+        k = np.clip(np.floor(signed / ERROR_BIN_M).astype(np.int64) + half, 0, self.signed_counts.size - 1)
+        np.add.at(self.signed_counts, k, 1)
+        self.short += int((signed < 0).sum())
 
     def error_quantile_m(self, q: float) -> float | None:
         total = self.error_counts.sum()
@@ -180,6 +267,19 @@ class PassStats:
             return None
         k = int(np.searchsorted(np.cumsum(self.error_counts), q * total))
         return round((k + 0.5) * ERROR_BIN_M, 7)  # the bin's centre, without float noise in summary.json
+
+    def signed_median_m(self) -> float | None:
+        """Median signed range error [m] (negative: ranged short), to the histogram's bin."""
+        total = self.signed_counts.sum()
+        if total == 0:
+            return None
+        k = int(np.searchsorted(np.cumsum(self.signed_counts), 0.5 * total))
+        return round((k - self.error_counts.size + 0.5) * ERROR_BIN_M, 7)
+
+    def share_short(self) -> float | None:
+        """Share of the points with a truth whose range error is negative (ranged short)."""
+        total = self.error_counts.sum()
+        return round(float(self.short / total), 6) if total else None
 
 
 class WaveformSink:
@@ -258,7 +358,8 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
         "setup_s": round(setup_s, 3),
         "compile_s": round(compile_s, 3),
         "pulses_per_s": round(stats.pulses / wall_s, 1) if wall_s > 0 else None,
-        "range_error_m": {"median": stats.error_quantile_m(0.5), "p95": stats.error_quantile_m(0.95)},
+        "range_error_m": {"median": stats.error_quantile_m(0.5), "p95": stats.error_quantile_m(0.95),
+                          "median_signed": stats.signed_median_m(), "share_short": stats.share_short()},
         "settings": {
             "instrument": facts.instrument,
             "record_mode": facts.record_mode,
@@ -271,8 +372,10 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
             "scene_file": facts.scene_file,
             "gate_delay_ns": facts.gate_delay_ns,
             "gate_width_ns": facts.gate_width_ns,
+            "crs": facts.crs,
         },
         "provenance": facts.provenance,
+        **({"seabed": facts.seabed} if facts.seabed is not None else {}),
     }
 
 
@@ -290,9 +393,9 @@ def write_trajectory(out: Path, table: dict[str, np.ndarray], split_legs: bool) 
 
 def render_points(path: Path, sample: CloudSample, scene, facts: PassFacts, window_size=(1600, 1000)) -> None:
     """render.png: the sampled points coloured by class over the faded truth mesh of ``scene``."""
-    viz.render_point_cloud(path, sample.xyz, sample.classification, truth_vertices=scene.vertices,
-                           truth_faces=scene.faces, title=f"{facts.label}: {len(sample.xyz):,} points ({facts.fidelity})",
-                           window_size=window_size)
+    render_point_cloud(path, sample.xyz, sample.classification, truth_vertices=scene.vertices,
+                       truth_faces=scene.faces, title=f"{facts.label}: {len(sample.xyz):,} points ({facts.fidelity})",
+                       window_size=window_size)
 
 
 def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts: PassFacts, figures: dict) -> None:
@@ -307,5 +410,17 @@ def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts:
     fraction = figures["covered_fraction"]
     title = (f"{facts.label}\ncovered {fraction:.1%} of {figures['reached_area_m2']:.0f} m² reached"
              if fraction is not None else f"{facts.label}\nthe scan reaches no seabed cell")
-    viz.plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
-                          markers=markers, title=title)
+    plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
+                      markers=markers, title=title, no_seabed=coverage.no_seabed)
+
+
+def render_order_map(path: Path, coverage: CoverageAccumulator, facts: PassFacts, figures: dict) -> None:
+    """s44_map.png: the strictest S-44 order each plan cell complies with, the planned swath outlined."""
+    from scanner_sim.metrics.s44 import ORDER_NAMES
+    from scanner_sim.render.s44_map import plot_order_map
+
+    planned = coverage.planned_cells()
+    plot_order_map(path, coverage.strictest_orders(), coverage.cell_states(),
+                   None if planned is None else planned.reshape(coverage.grid.shape), coverage.grid.extent_m,
+                   ORDER_NAMES, figures, title=f"{facts.label}\nIHO S-44 orders (Ed. 6.0.0), "
+                   f"{figures['order_min_soundings']} soundings a cell, 95 % within the order's TVU and THU")

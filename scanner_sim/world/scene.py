@@ -4,6 +4,10 @@ A :class:`Scene` is one triangle mesh (world coordinates, float64) with per-tria
 class label and reflectance, the seabed's height field for fast height queries, and a local origin: the mesh is shifted
 by ``local_origin`` before it reaches Embree in float32, and rays are shifted the same way, so a scene in
 UTM coordinates ranges as accurately as one at the origin (docs/design.md#frames).
+
+Past 450 lines as one module: the object generators and the build that places them share its helpers (rotation,
+ground level, the degenerate-face test) and the mesh loader's checks; the seabeds of rasters and meshes live in
+:mod:`scanner_sim.world.raster` and :mod:`scanner_sim.world.mesh_seabed`.
 """
 
 from __future__ import annotations
@@ -26,8 +30,12 @@ from scanner_sim.config import (
     SceneConfig,
     reflectance_of,
 )
+from scanner_sim.config.crs import to_crs
+from scanner_sim.config.raster_seabed import RasterSeabedConfig
 from scanner_sim.io.ply import ply_element_counts
 from scanner_sim.world.materials import LABELS
+from scanner_sim.world.mesh_seabed import seabed_of_meshes
+from scanner_sim.world.raster import load_raster_seabed, plan_bounds
 from scanner_sim.world.terrain import HeightField, generate_heightfield, rock_meshes
 
 #: Largest world coordinate [m]: beyond any place on Earth in a projected CRS (UTM northings reach 1e7 m);
@@ -61,6 +69,7 @@ class Part:
     reflectance: float
     centreline: np.ndarray | None = None
     one_surface: bool = False  # one smooth surface whatever its creases (the seabed's height field)
+    face_reflectance: np.ndarray | None = None  # (m,) per face, in place of ``reflectance`` (a class raster's)
 
 
 class Scene:
@@ -69,17 +78,20 @@ class Scene:
     vertices (n_v, 3) float64 world [m]; faces (n_f, 3) int64; face_object (n_f,) int32; face_surface (n_f,)
     int32 (:func:`smooth_surfaces`: which smooth surface of the scene the face belongs to); face_label (n_f,)
     int16 (LAS code); face_reflectance (n_f,) float64; face_normal (n_f, 3) float64 unit (right-hand winding);
-    local_origin (3,) float64 world [m]; heightfield: the seabed's, or None; objects: list of SceneObject.
+    local_origin (3,) float64 world [m]; heightfield: the seabed's, or None; objects: list of SceneObject;
+    seabed_info: what the outputs report about a seabed read from a raster or a mesh (JSON-ready), or None;
+    crs: the :class:`pyproj.CRS` whose map coordinates the world frame is in, or None (a local frame).
     """
 
     def __init__(self, parts: list[Part], heightfield: HeightField | None = None,
-                 local_origin: np.ndarray | None = None):
+                 local_origin: np.ndarray | None = None, crs=None, seabed_info: dict | None = None):
         if not parts:
             raise ParameterError("scene: no geometry (give a seabed or at least one object)")
         verts = [np.asarray(p.vertices, float) for p in parts]
         starts = np.cumsum([0] + [len(v) for v in verts])
         faces = np.concatenate([np.asarray(p.faces, np.int64) + starts[i] for i, p in enumerate(parts)])
         part = np.concatenate([np.full(len(p.faces), i, np.int32) for i, p in enumerate(parts)])
+        starts_f = np.cumsum([0] + [len(p.faces) for p in parts])
         self.vertices = np.concatenate(verts)
         lo, hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
         # Local origin: the bounding box centre rounded to whole metres (a readable number).
@@ -93,10 +105,15 @@ class Scene:
         self.face_surface = smooth_surfaces(self.faces, self.face_normal, np.array([p.one_surface for p in parts])[part])
         self.face_label = np.array([p.label for p in parts], np.int16)[part]
         self.face_reflectance = np.array([p.reflectance for p in parts], float)[part]
+        for i, p in enumerate(parts):
+            if p.face_reflectance is not None:
+                self.face_reflectance[part == i] = np.asarray(p.face_reflectance, float)[keep[starts_f[i]:starts_f[i + 1]]]
         ends = np.cumsum(np.bincount(part, minlength=len(parts)))
         self.objects = [SceneObject(i, p.name, p.kind, p.label, p.reflectance, int(ends[i - 1]) if i else 0,
                                     int(ends[i]), p.centreline) for i, p in enumerate(parts)]
         self.heightfield = heightfield
+        self.crs = crs
+        self.seabed_info = seabed_info
         self.local_extent_m = float(np.abs(local).max())
 
     @property
@@ -316,9 +333,18 @@ def build_scene(config) -> Scene:
         raise TypeError(f"config must be a SceneConfig (scanner_sim.load_scene(name_or_path) gives one), not "
                         f"{type(config).__name__} {config!r:.60}")
     parts: list[Part] = []
-    hf = None
+    hf, info = None, None
     sb = config.seabed
-    if sb is not None:
+    if isinstance(sb, RasterSeabedConfig):
+        raster = load_raster_seabed(sb, plan_bounds(config), config.crs)
+        hf, info = raster.heightfield, raster.info
+        v, f = hf.mesh()
+        cell = raster.cell_reflectance
+        per_face = None if cell is None else np.tile(cell.ravel(), 2)[
+            np.tile(hf.valid.ravel(), 2) if hf.valid is not None else slice(None)]
+        parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True,
+                          face_reflectance=per_face))
+    elif sb is not None:
         rng = np.random.default_rng(sb.seed)
         hf = generate_heightfield(sb.center_m, sb.size_m, sb.resolution_m, sb.depth_m, sb.relief.rms_m,
                                   sb.relief.wavelength_m, sb.relief.hurst, sb.ripples.amplitude_m,
@@ -333,10 +359,16 @@ def build_scene(config) -> Scene:
             f = np.concatenate([r[1] + o for r, o in zip(rocks, offsets)])
             parts.append(Part("rocks", "rocks", v, f, LABELS[rk.label], reflectance_of(rk)))
 
+    seabed_meshes = {i: placed_mesh(obj, i, None) for i, obj in enumerate(config.objects)
+                     if isinstance(obj, MeshObject) and obj.label == "seabed" and hf is None}
+    if seabed_meshes:
+        hf, info = seabed_of_meshes(config.objects, seabed_meshes)
     for index, obj in enumerate(config.objects):
         refl, label = reflectance_of(obj), LABELS[obj.label]
         centreline = None
-        if isinstance(obj, CableObject):
+        if index in seabed_meshes:
+            v, f = seabed_meshes[index]
+        elif isinstance(obj, CableObject):
             line = cable_centreline(obj.points_m, obj.diameter_m, obj.burial_fraction, hf, obj.step_m,
                                     obj.stiffness_length_m)
             v, f = tube(line, 0.5 * obj.diameter_m, obj.sides)
@@ -368,21 +400,29 @@ def build_scene(config) -> Scene:
         elif isinstance(obj, PanelObject):
             v, f = panel_mesh(obj.center_m, obj.size_m, obj.normal, obj.up)
         elif isinstance(obj, MeshObject):
-            v, f = load_mesh_file(obj, index)
-            rot = rotation_matrix(*np.radians(obj.rotate_deg))
-            v = v * obj.scale @ rot.T
-            if len(obj.translate_m) == 2:
-                ground = _ground_z(obj.translate_m, hf)
-                v = v + [obj.translate_m[0], obj.translate_m[1], ground - v[:, 2].min()]
-            else:
-                v = v + np.asarray(obj.translate_m)
+            v, f = placed_mesh(obj, index, hf)
         else:  # pragma: no cover - config only produces the types above
             raise ParameterError(f"object type {type(obj).__name__} is not supported")
         if not (np.abs(v) <= MAX_COORDINATE_M).all():  # NaN included
             raise ConfigError(f"objects[{index}] ({obj.name!r}): its sizes and position give coordinates that are not "
                               f"finite or beyond +-{MAX_COORDINATE_M:.0e} m; check them (metres)")
-        parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline))
-    return Scene(parts, hf)
+        kind = "seabed" if index in seabed_meshes else obj.type  # a mesh seabed is the background, as the procedural
+        parts.append(Part(obj.name, kind, v, f, label, refl, centreline, one_surface=index in seabed_meshes))
+    return Scene(parts, hf, crs=to_crs(config.crs), seabed_info=info)
+
+
+def placed_mesh(obj: MeshObject, index: int, hf: HeightField | None) -> tuple[np.ndarray, np.ndarray]:
+    """A ``mesh`` object's vertices (n, 3) and faces (m, 3), scaled, rotated and translated into the world."""
+    v, f = load_mesh_file(obj, index)
+    rot = rotation_matrix(*np.radians(obj.rotate_deg))
+    v = v * obj.scale @ rot.T
+    if len(obj.translate_m) == 2:
+        if obj.label == "seabed":
+            raise ConfigError(f"objects[{index}].translate_m = {list(obj.translate_m)}: a mesh labelled seabed is the "
+                              "seabed and cannot rest on one; give [x, y, z]")
+        ground = _ground_z(obj.translate_m, hf)
+        return v + [obj.translate_m[0], obj.translate_m[1], ground - v[:, 2].min()], f
+    return v + np.asarray(obj.translate_m), f
 
 
 def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]:
@@ -398,7 +438,7 @@ def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]
 
     where = f"objects[{index}].file = {obj.file!r} (object {obj.name!r})"
     try:
-        mesh = trimesh.load(obj.resolved_path, force="mesh", process=False)
+        mesh = obj.file if obj.resolved_path is None else trimesh.load(obj.resolved_path, force="mesh", process=False)
         v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), float)
         f = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))))
     except Exception as exc:  # trimesh raises whatever its parser meets: ValueError, IndexError, KeyError...

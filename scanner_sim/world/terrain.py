@@ -14,6 +14,21 @@ import numpy as np
 
 
 @dataclass(frozen=True)
+class RasterGrid:
+    """A bathymetry grid in memory, as a raster file would give it: heights (rows, cols) float [m], its affine
+    ``transform`` (rasterio's ``Affine``: map x, y of a pixel's corner from (col, row)), CRS (anything pyproj
+    reads), nodata value (or None; NaN cells are nodata too) and vertical sign ('elevation_up' or 'depth_down').
+    A raster seabed section takes one in place of a file name (scanner_sim.world.raster reads both)."""
+
+    heights: np.ndarray
+    transform: object
+    crs: object
+    nodata: float | None = None
+    vertical: str = "elevation_up"
+    source: str = "in memory"
+
+
+@dataclass(frozen=True)
 class HeightField:
     """A regular grid of seabed heights and its triangulation.
 
@@ -21,12 +36,17 @@ class HeightField:
     world z of each node [m], row i at y0 + i dy, column j at x0 + j dx. Cell (i, j) is split into the
     triangles (a, b, d) and (a, d, c) with a = (i, j), b = (i, j+1), c = (i+1, j), d = (i+1, j+1); the height
     query interpolates on exactly those triangles, so it agrees with the mesh the rays see.
+
+    valid: (ny-1, nx-1) bool, the cells that hold seabed (a raster's nodata leaves gaps: their cells have no
+    triangles), or None where every cell does (the procedural seabed). Heights under a gap are filled from the
+    nearest valid node, so a track over the gap still has a seabed to follow; the rays find nothing there.
     """
 
     x0_m: float
     y0_m: float
     spacing_m: float
     heights_m: np.ndarray
+    valid: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -54,8 +74,21 @@ class HeightField:
         upper = ha + v * (hc - ha) + u * (hd - hc)  # triangle (a, d, c): v > u
         return np.where(u >= v, lower, upper)
 
+    def covers(self, x_m, y_m) -> np.ndarray:
+        """bool (shape of x_m): (x, y) [m] lies in a cell that holds seabed (inside the extent, not a gap)."""
+        x, y = np.asarray(x_m, dtype=float), np.asarray(y_m, dtype=float)
+        ny, nx = self.shape
+        fx, fy = (x - self.x0_m) / self.spacing_m, (y - self.y0_m) / self.spacing_m
+        inside = (fx >= 0) & (fx <= nx - 1) & (fy >= 0) & (fy <= ny - 1)
+        if self.valid is None:
+            return inside
+        j = np.clip(np.nan_to_num(fx).astype(np.int64), 0, nx - 2)
+        i = np.clip(np.nan_to_num(fy).astype(np.int64), 0, ny - 2)
+        return inside & self.valid[i, j]
+
     def mesh(self) -> tuple[np.ndarray, np.ndarray]:
-        """Vertices (ny nx, 3) float64 world and faces (2 (ny-1)(nx-1), 3) int64, normals pointing up."""
+        """Vertices (ny nx, 3) float64 world and faces (2 (ny-1)(nx-1), 3) int64, normals pointing up (the faces
+        of the cells that are not ``valid`` left out)."""
         ny, nx = self.shape
         xs = self.x0_m + self.spacing_m * np.arange(nx)
         ys = self.y0_m + self.spacing_m * np.arange(ny)
@@ -65,6 +98,8 @@ class HeightField:
         a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
         c, d = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
         faces = np.concatenate([np.c_[a, b, d], np.c_[a, d, c]])
+        if self.valid is not None:
+            faces = faces[np.tile(self.valid.ravel(), 2)]
         return vertices, faces
 
 

@@ -1,0 +1,162 @@
+"""IHO S-44 survey orders: the Edition 6.0.0 (2020) table as data, and which orders a cell's soundings meet.
+
+Source of every number in :data:`ORDERS`: IHO S-44 Edition 6.0.0 (2020), *Standards for Hydrographic Surveys*,
+Table 1 "Minimum Bathymetry Standards for Safety of Navigation Hydrographic Surveys" (THU, TVU a and b, feature
+detection, bathymetric coverage), all uncertainties at 95 % confidence; the maximum allowable TVU is the formula
+of its section 3.2.3, Maximum Allowable Vertical Uncertainty (below). The density default is the example of its
+Annex D ("Sample Density"): at least five samples per grid node. docs/coverage.md tabulates them.
+
+A sounding *meets* an order when its true vertical error is within the order's TVU at its depth and its true
+horizontal error within the THU at its depth, and, when the pass predicts them, its own 95 % uncertainties
+(``tvu_m``, ``thu_m``) are within those limits too. A cell *complies* with an order when it holds at least
+``min_soundings`` soundings and at least 95 % of them meet it (the standard's 95 % confidence read over the
+cell's soundings).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from muls.errors import ParameterError
+
+#: Share of a cell's soundings that must meet an order (S-44's uncertainties are at 95 % confidence).
+CONFIDENCE = 0.95  # assumption: 95 % of a cell's soundings (docs/assumptions.md)
+#: Soundings a cell needs by default (S-44 Ed. 6.0.0 Annex D, Sample Density: ">= five samples per node").
+DEFAULT_MIN_SOUNDINGS = 5  # assumption: S-44 Annex D's example (docs/assumptions.md)
+#: Valid soundings on a feature for it to count as detected: the same five samples, over the feature taken as one
+#: grid node (Annex D asks a grid cell no larger than the feature it must depict).
+FEATURE_MIN_SOUNDINGS = 5  # assumption: one Annex D node on the feature (docs/assumptions.md)
+SOURCE = ("IHO S-44 Edition 6.0.0 (2020), Standards for Hydrographic Surveys, Table 1 (Minimum Bathymetry "
+          "Standards for Safety of Navigation Hydrographic Surveys); TVU_max(d) = sqrt(a^2 + (b d)^2), section 3.2.3 "
+          "(Maximum Allowable Vertical Uncertainty)")
+
+
+@dataclass(frozen=True)
+class Order:
+    """One S-44 order: TVU = sqrt(a² + (b·d)²) [m]; THU = thu_m + thu_depth_fraction·d [m] (95 %); feature_m:
+    the cube edge it must detect (None: not specified); coverage_percent: the bathymetric coverage it asks."""
+
+    name: str
+    tvu_a_m: float
+    tvu_b: float
+    thu_m: float
+    thu_depth_fraction: float
+    feature_m: float | None
+    coverage_percent: float
+
+    def tvu_max_m(self, depth_m) -> np.ndarray:
+        """Largest allowed vertical uncertainty [m] at ``depth_m`` (S-44 Ed. 6.0.0 section 3.2.3)."""
+        d = np.asarray(depth_m, float)
+        return np.sqrt(self.tvu_a_m**2 + (self.tvu_b * d) ** 2)
+
+    def thu_max_m(self, depth_m) -> np.ndarray:
+        """Largest allowed horizontal uncertainty [m] at ``depth_m``."""
+        return self.thu_m + self.thu_depth_fraction * np.asarray(depth_m, float)
+
+    def as_json(self) -> dict:
+        out = asdict(self)
+        del out["name"]
+        return out
+
+
+#: Table 1 of S-44 Ed. 6.0.0, strictest first. Order 1a's feature size holds to 40 m depth (10 % of the depth
+#: beyond); every shipped scene is shallower.
+ORDERS: tuple[Order, ...] = (
+    Order("exclusive", 0.15, 0.0075, 1.0, 0.0, 0.5, 200.0),
+    Order("special", 0.25, 0.0075, 2.0, 0.0, 1.0, 100.0),
+    Order("1a", 0.5, 0.013, 5.0, 0.05, 2.0, 100.0),
+    Order("1b", 0.5, 0.013, 5.0, 0.05, None, 5.0),
+    Order("2", 1.0, 0.023, 20.0, 0.10, None, 5.0),
+)
+ORDER_NAMES = tuple(o.name for o in ORDERS)
+#: Cell value of the strictest-order map where a cell meets none.
+NO_ORDER = -1
+
+
+def orders_table() -> dict:
+    """The table as JSON: order name -> its figures (``coverage.json`` → ``s44_orders``)."""
+    return {o.name: o.as_json() for o in ORDERS}
+
+
+def soundings_meeting(depth_m, vertical_error_m, horizontal_error_m, tvu_m=None, thu_m=None) -> np.ndarray:
+    """(len(ORDERS), n) bool: which orders each of n soundings meets.
+
+    depth_m (n,): true depth below the surface [m]; vertical_error_m, horizontal_error_m (n,): the sounding's
+    true errors [m] (NaN: unknown, meets none); tvu_m, thu_m (n,) or None: its predicted 95 % uncertainties [m]
+    (NaN where the pass predicts none).
+    """
+    d = np.asarray(depth_m, float)
+    dz = np.abs(np.asarray(vertical_error_m, float))
+    dh = np.abs(np.asarray(horizontal_error_m, float))
+    out = np.zeros((len(ORDERS), d.size), bool)
+    with np.errstate(invalid="ignore"):
+        for k, order in enumerate(ORDERS):
+            tvu, thu = order.tvu_max_m(d), order.thu_max_m(d)
+            ok = (dz <= tvu) & (dh <= thu)
+            for predicted, limit in ((tvu_m, tvu), (thu_m, thu)):
+                if predicted is not None:  # NaN: not predicted for this sounding, its true error decides
+                    predicted = np.asarray(predicted, float)
+                    ok &= np.isnan(predicted) | (predicted <= limit)
+            out[k] = ok
+    return out
+
+
+@dataclass(frozen=True)
+class ComplianceRule:
+    """min_soundings: soundings a cell needs; confidence: share of them that must meet the order."""
+
+    min_soundings: int = DEFAULT_MIN_SOUNDINGS
+    confidence: float = CONFIDENCE
+
+    def __post_init__(self):
+        if not (isinstance(self.min_soundings, (int, np.integer)) and self.min_soundings >= 1):
+            raise ParameterError(f"min_soundings = {self.min_soundings!r}: must be an integer >= 1")
+        if not (isinstance(self.confidence, float) and 0.0 < self.confidence <= 1.0):
+            raise ParameterError(f"confidence = {self.confidence!r}: must be a number in (0, 1]")
+
+    def complies(self, soundings, meeting) -> np.ndarray:
+        """(len(ORDERS), cells) bool from per-cell counts: soundings (cells,), meeting (len(ORDERS), cells)."""
+        n = np.asarray(soundings)
+        need = np.maximum(self.min_soundings, np.ceil(self.confidence * n - 1e-9))
+        return (n >= self.min_soundings) & (np.asarray(meeting) >= need)
+
+
+def strictest_order(complies: np.ndarray) -> np.ndarray:
+    """(cells,) int16: index into ORDERS of the strictest order each cell complies with, or NO_ORDER."""
+    c = np.asarray(complies, bool)
+    first = np.argmax(c, axis=0).astype(np.int16)
+    return np.where(c.any(axis=0), first, np.int16(NO_ORDER)).astype(np.int16)
+
+
+def order_figures(complies: np.ndarray, area_mask: np.ndarray, cell_area_m2: float) -> dict:
+    """Per order, the compliant cells within ``area_mask`` (cells,) bool: ``compliant_area_m2`` and
+    ``compliant_fraction`` of the masked area (None when the mask is empty)."""
+    mask = np.asarray(area_mask, bool)
+    total = int(mask.sum())
+    out = {}
+    for k, order in enumerate(ORDERS):
+        n = int((complies[k] & mask).sum())
+        out[order.name] = {"compliant_area_m2": n * cell_area_m2,
+                           "compliant_fraction": n / total if total else None}
+    return out
+
+
+class OrderTally:
+    """Per cell, soundings and those meeting each order, streamed chunk by chunk over ``n_cells`` cells."""
+
+    def __init__(self, n_cells: int):
+        self.soundings = np.zeros(n_cells, np.int64)
+        self.meeting = np.zeros((len(ORDERS), n_cells), np.int64)
+
+    def add(self, cell, depth_m, vertical_error_m, horizontal_error_m, tvu_m=None, thu_m=None) -> None:
+        """cell (n,) flat cell index of each sounding (-1: outside every cell); the rest as in
+        :func:`soundings_meeting`."""
+        cell = np.asarray(cell)
+        inside = cell >= 0
+        meets = soundings_meeting(depth_m, vertical_error_m, horizontal_error_m, tvu_m, thu_m)
+        n = self.soundings.size
+        self.soundings += np.bincount(cell[inside], minlength=n)
+        for k in range(len(ORDERS)):
+            self.meeting[k] += np.bincount(cell[inside & meets[k]], minlength=n)

@@ -1,0 +1,302 @@
+"""Point clouds rendered with pyvista over the faded truth mesh: off-screen to a PNG, or in a window (pyvista or
+open3d). Colours come from :mod:`scanner_sim.render.point_colours`."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from scanner_sim.io import atomic_path
+from scanner_sim.render.point_colours import SCALAR_COLOUR_MAPS, categorical_rgb
+
+#: Largest side of a point-cloud picture or window [px]: the largest framebuffer side GPU OpenGL drivers commonly
+#: render (GL_MAX_RENDERBUFFER_SIZE and the viewport are 16384 on most; Mesa's llvmpipe renders more).
+MAX_WINDOW_SIDE_PX = 16384
+#: Bytes VTK and the screenshot hold per pixel: 88 measured (peak RSS of scanner-sim view between 2000 x 2000 and
+#: 4000 x 4000, off-screen), rounded up. Past the memory VTK aborts (std::bad_alloc) and takes the process with it.
+WINDOW_BYTES_PER_PIXEL = 100
+
+
+def check_window_size(key: str, window_size: Sequence[int], available_bytes: int | None = None) -> None:
+    """Refuse, before VTK allocates it, a (width, height) [px] with a side beyond :data:`MAX_WINDOW_SIDE_PX` or a
+    picture needing more memory than a command may plan on (:func:`muls.memory.check_memory`): a ValueError
+    naming ``key``."""
+    from muls.memory import check_memory
+
+    w, h = (int(v) for v in window_size)
+    shown = f"{w} {h}"
+    if max(w, h) > MAX_WINDOW_SIDE_PX:
+        raise ValueError(f"{key} = {shown}: at most {MAX_WINDOW_SIDE_PX} px a side (the largest framebuffer OpenGL "
+                         "drivers commonly render)")
+    per = WINDOW_BYTES_PER_PIXEL
+    check_memory(key, shown, w * h * per, f"a {w:,} x {h:,} px picture",
+                 lambda budget: f"at most {int(budget // per):,} pixels (width x height) on this machine",
+                 available_bytes)
+
+
+_BACKGROUND = "#0b1a2a"  # deep-water navy: white panels and the grey truth mesh stay visible
+
+
+def _write_png(path_png, rgb: np.ndarray) -> None:
+    from matplotlib import image as mpimg
+
+    with atomic_path(path_png) as tmp:
+        with open(tmp, "wb") as fh:
+            mpimg.imsave(fh, rgb, format="png")
+
+
+def text_width_px(text: str, font_size: int) -> int:
+    """Width [px] that VTK's default font (Arial) takes for ``text`` at ``font_size``, rounded up: measured at 13,
+    "seabed, class 40" takes 217 px (13.6 px a character); 1.1 font sizes a character keeps wide letters in."""
+    return int(math.ceil(1.1 * font_size * len(text)))
+
+
+def _prefer_headless_vtk() -> None:
+    """Without a display, render through EGL straight away instead of failing over from X11 with a warning."""
+    import os
+
+    if not os.environ.get("DISPLAY"):
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+
+def points_polydata(points):
+    """A pyvista ``PolyData`` of :class:`scanner_sim.survey.point_records.PointRecords`: one vertex per point, every other
+    field as point data (by its field name)."""
+    import pyvista as pv
+
+    cloud = pv.PolyData(np.asarray(points.xyz, float))
+    for name, values in points.as_dict().items():
+        if name != "xyz":
+            cloud.point_data[name] = values
+    return cloud
+
+
+def show_open3d(xyz, rgb, *, truth_vertices=None, truth_faces=None, title: str = "muls-scanner") -> None:
+    """An interactive open3d window (the ``open3d`` extra): the points (n, 3) [m] in colours ``rgb`` (n, 3)
+    in [0, 1], over the grey truth mesh."""
+    from scanner_sim.metrics.swath import open3d
+
+    o3d = open3d()
+    centre = np.asarray(xyz, float).mean(axis=0) if len(xyz) else np.zeros(3)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(xyz, float) - centre))
+    cloud.colors = o3d.utility.Vector3dVector(np.asarray(rgb, float))
+    shown = [cloud]
+    if truth_vertices is not None and len(truth_faces):
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(truth_vertices, float) - centre),
+                                         o3d.utility.Vector3iVector(np.asarray(truth_faces, np.int32)))
+        mesh.compute_vertex_normals()
+        mesh.paint_uniform_color([0.55, 0.58, 0.62])
+        shown.append(mesh)
+    o3d.visualization.draw_geometries(shown, window_name=title)
+
+
+def render_point_cloud(
+    path_png,
+    xyz,
+    classification=None,
+    *,
+    truth_vertices=None,
+    truth_faces=None,
+    title: str | None = None,
+    color_by: str = "class",
+    scalars=None,
+    class_names: Mapping[int, str] | None = None,
+    window_size: Sequence[int] = (1600, 1000),
+    point_size: float = 3.0,
+    max_points: int = 2_000_000,
+) -> None:
+    """Render a point cloud off-screen to a PNG, over the faded truth mesh.
+
+    Parameters
+    ----------
+    path_png : str or PathLike
+        Output picture (written atomically).
+    xyz : (n, 3) float [m]
+        Points in the world frame.
+    classification : (n,) int or None
+        Class codes; required for ``color_by="class"``.
+    truth_vertices : (n_vertices, 3) float [m], truth_faces : (n_faces, 3) int, optional
+        Truth meshes, drawn light grey at opacity 0.25.
+    title : str, optional
+        Text at the top left.
+    color_by : str
+        ``"class"`` (colours of :data:`CLASS_COLOURS`, legend of the classes present), or a scalar
+        colouring with a scalar bar: ``"intensity"``, ``"channel"``, ``"range_error"`` (diverging,
+        symmetric about 0), ``"snr"``, ``"amplitude"``, ``"incidence"``, or any other name (viridis);
+        then ``scalars`` (n,) gives the values.
+    class_names : dict code -> name, optional
+        Overrides the scene label table for names and colours.
+    window_size : (width, height) pixels
+    point_size : float [pixels]
+    max_points : int
+        Larger clouds are thinned by a fixed stride (deterministic) before rendering.
+
+    The camera looks at the points' bounding box obliquely from the south-west and above (z up),
+    fitted to the points, not to the (usually larger) truth mesh. Coordinates are shifted to the
+    points' centre before they reach VTK, so large world coordinates render without float32 jitter.
+    """
+    plotter = _point_cloud_plotter(
+        xyz, classification, off_screen=True, truth_vertices=truth_vertices, truth_faces=truth_faces,
+        title=title, color_by=color_by, scalars=scalars, class_names=class_names, window_size=window_size,
+        point_size=point_size, max_points=max_points,
+    )
+    try:
+        img = plotter.screenshot(return_img=True)
+    finally:
+        plotter.close()
+    _write_png(path_png, np.ascontiguousarray(img[..., :3]))
+
+
+def show_point_cloud(
+    xyz,
+    classification=None,
+    *,
+    truth_vertices=None,
+    truth_faces=None,
+    title: str | None = None,
+    color_by: str = "class",
+    scalars=None,
+    class_names: Mapping[int, str] | None = None,
+    window_size: Sequence[int] = (1600, 1000),
+    point_size: float = 3.0,
+    max_points: int = 2_000_000,
+) -> None:
+    """The picture of :func:`render_point_cloud` in an interactive pyvista window; returns when it is closed.
+
+    Same parameters as :func:`render_point_cloud`, without ``path_png``. Needs a display.
+    """
+    plotter = _point_cloud_plotter(
+        xyz, classification, off_screen=False, truth_vertices=truth_vertices, truth_faces=truth_faces,
+        title=title, color_by=color_by, scalars=scalars, class_names=class_names, window_size=window_size,
+        point_size=point_size, max_points=max_points,
+    )
+    try:
+        plotter.show(title=title or "scanner-sim")
+    finally:
+        plotter.close()
+
+
+def _point_cloud_plotter(
+    xyz,
+    classification,
+    *,
+    off_screen: bool,
+    truth_vertices,
+    truth_faces,
+    title: str | None,
+    color_by: str,
+    scalars,
+    class_names: Mapping[int, str] | None,
+    window_size: Sequence[int],
+    point_size: float,
+    max_points: int,
+):
+    """A ``pv.Plotter`` holding the points, their colouring and legend or scalar bar, the truth mesh,
+    the title and the camera (parameters as :func:`render_point_cloud`). The caller closes it.
+    """
+    pts = np.asarray(xyz, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"xyz: shape {pts.shape} is not allowed; expected (n, 3)")
+    n = pts.shape[0]
+    if color_by == "class":
+        if classification is None:
+            raise ValueError("classification: required when color_by='class'")
+        values = np.asarray(classification)
+        name = "classification"
+    else:
+        if scalars is None:
+            raise ValueError(f"scalars: required when color_by={color_by!r} (one value per point)")
+        values = np.asarray(scalars, dtype=np.float64)
+        name = "scalars"
+    if values.shape != (n,):
+        raise ValueError(f"{name}: shape {values.shape} is not allowed; expected ({n},)")
+    if (truth_vertices is None) != (truth_faces is None):
+        raise ValueError("truth_vertices and truth_faces: give both or neither")
+    if len(window_size) != 2 or min(window_size) < 16:
+        raise ValueError(f"window_size: {window_size!r} is not allowed; expected (width, height) >= 16 pixels")
+    check_window_size("window_size", window_size)
+    if max_points < 1:
+        raise ValueError(f"max_points: {max_points!r} is not allowed; expected >= 1")
+    if not point_size > 0:
+        raise ValueError(f"point_size: {point_size!r} is not allowed; expected > 0 pixels")
+
+    if off_screen:
+        _prefer_headless_vtk()
+    import pyvista as pv
+
+    if n > max_points:
+        stride = int(np.ceil(n / max_points))
+        pts, values = pts[::stride], values[::stride]
+    finite = np.all(np.isfinite(pts), axis=1)
+    pts, values = pts[finite], values[finite]
+    if len(pts):
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+    elif truth_vertices is not None and len(truth_vertices):
+        tv = np.asarray(truth_vertices, dtype=np.float64)
+        lo, hi = tv.min(axis=0), tv.max(axis=0)
+    else:
+        lo, hi = np.zeros(3), np.ones(3)
+    centre = (lo + hi) / 2.0
+    half = np.maximum((hi - lo) / 2.0, 0.5)
+
+    plotter = pv.Plotter(off_screen=off_screen, window_size=[int(window_size[0]), int(window_size[1])])
+    try:
+        plotter.set_background(_BACKGROUND)
+        if truth_vertices is not None:
+            tv = np.asarray(truth_vertices, dtype=np.float64) - centre
+            tf = np.asarray(truth_faces, dtype=np.int64)
+            if tv.ndim != 2 or tv.shape[1] != 3 or tf.ndim != 2 or tf.shape[1] != 3:
+                raise ValueError(
+                    f"truth_vertices {tv.shape} / truth_faces {tf.shape}: expected (n_vertices, 3) and (n_faces, 3)"
+                )
+            if len(tf):
+                cells = np.column_stack([np.full(len(tf), 3, dtype=np.int64), tf]).ravel()
+                plotter.add_mesh(pv.PolyData(tv, cells), color="lightgrey", opacity=0.25,
+                                 smooth_shading=False, show_edges=False)
+        if len(pts):
+            cloud = pv.PolyData(pts - centre)
+            if color_by in ("class", "channel"):  # categories: one colour each, named in a legend
+                rgb, lut = categorical_rgb(values, color_by, class_names)
+                cloud["rgb"] = rgb
+                plotter.add_mesh(cloud, scalars="rgb", rgb=True, point_size=point_size,
+                                 render_points_as_spheres=False)
+                # One coloured line per category at the upper right (VTK's legend box clips long labels), its
+                # left edge far enough in for the longest label (text_width_px) to end inside the window.
+                w, h = int(window_size[0]), int(window_size[1])
+                size = 13 if w >= 1200 else 11
+                left = max(8, w - 12 - max((text_width_px(label, size) for _, label in lut.values()), default=0))
+                for i, (col, label) in enumerate(lut.values()):
+                    plotter.add_text(label, position=(left, int(h - 40 - 2.3 * size * i)), font_size=size,
+                                     color=tuple(np.array(col) / 255.0))
+            else:
+                cmap, bar_title, symmetric = SCALAR_COLOUR_MAPS.get(color_by, ("viridis", color_by, False))
+                good = values[np.isfinite(values)]
+                if good.size == 0:
+                    clim = (0.0, 1.0)
+                elif symmetric:
+                    m = float(np.percentile(np.abs(good), 99)) or 1.0
+                    clim = (-m, m)
+                else:
+                    a, b = np.percentile(good, [1, 99])
+                    clim = (float(a), float(b) if b > a else float(a) + 1.0)
+                cloud[bar_title] = values
+                plotter.add_mesh(cloud, scalars=bar_title, cmap=cmap, clim=clim, point_size=point_size,
+                                 render_points_as_spheres=False, nan_color="magenta",
+                                 scalar_bar_args={"title": bar_title, "vertical": True, "color": "white"})
+        if title:
+            plotter.add_text(title, position="upper_left", font_size=14, color="white")
+
+        view = np.array([-0.55, -1.0, 0.85])
+        view /= np.linalg.norm(view)
+        radius = float(np.linalg.norm(half))
+        plotter.camera.focal_point = (0.0, 0.0, 0.0)
+        plotter.camera.position = tuple(view * radius * 3.0)
+        plotter.camera.up = (0.0, 0.0, 1.0)
+        plotter.reset_camera(bounds=(-half[0], half[0], -half[1], half[1], -half[2], half[2]))
+        plotter.camera.zoom(1.15)
+    except BaseException:
+        plotter.close()
+        raise
+    return plotter
