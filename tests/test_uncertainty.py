@@ -127,7 +127,7 @@ def test_tvu_holds_90_to_99_percent_of_true_vertical_errors_on_every_seabed_scen
     error once in a 0.6 s pass, so its share is that of one draw; it is checked with the same sigmas decorrelated
     from pulse to pulse, which samples the distribution the TPU's variances describe (docs/uncertainty.md)."""
     cal = _calibration(*_setup(scene, water, 3000, DECORRELATED))  # no effect on a scene without navigation noise
-    assert cal["points"] > 1500
+    assert cal["points"] >= 500  # the share to about 1 % (binomial, 0.95)
     assert 0.90 <= cal["vertical_within_tvu"] <= 0.99, cal
 
 

@@ -118,15 +118,15 @@ def _add_run(sub):
     p.set_defaults(func=_cmd_run)
 
 
-def scene_overrides(args, config) -> dict:
-    """The scene keys that ``run``'s options set, by dotted name (validated later with the scene)."""
+def set_overrides(items: list[str]) -> dict:
+    """The scene keys that ``--set KEY=VALUE`` options set, by dotted name (validated later with the scene)."""
     import yaml
 
     from scanner_sim.config.errors import shown
     from scanner_sim.config.loading import load_strict_yaml
 
     changes = {}
-    for item in args.set:
+    for item in items:
         key, sep, text = item.partition("=")
         if not sep or not key.strip():
             raise ValueError(f"--set {item!r}: must be KEY=VALUE with a dotted scene key, e.g. platform.altitude_m=5")
@@ -135,6 +135,12 @@ def scene_overrides(args, config) -> dict:
         except yaml.YAMLError as exc:
             problem = getattr(exc, "problem", None) or str(exc)
             raise ValueError(f"--set {shown(item)}: not a YAML value ({' '.join(str(problem).split())})") from None
+    return changes
+
+
+def scene_overrides(args, config) -> dict:
+    """The scene keys that ``run``'s options set, by dotted name (validated later with the scene)."""
+    changes = set_overrides(args.set)
     if args.altitude_m is not None:
         changes["platform.altitude_m"] = args.altitude_m
     if args.gate_delay_ns is not None or args.gate_width_ns is not None:

@@ -22,17 +22,17 @@ def _add_uncertainty(sub):
                    help="set any scene key by its dotted name (YAML value), as `run --set`; repeatable")
     p.add_argument("--chart", type=output_file(), metavar="PNG", help="write the calibration chart to PNG")
     p.add_argument("--json", action="store_true", help="print the summary's uncertainty section as JSON")
-    p.set_defaults(func=_cmd_uncertainty, altitude_m=None, gate_delay_ns=None, gate_width_ns=None, split_lines=False)
+    p.set_defaults(func=_cmd_uncertainty)
 
 
 def _cmd_uncertainty(args) -> int:
-    from scanner_sim.cli.passes import scene_overrides
+    from scanner_sim.cli.passes import set_overrides
     from scanner_sim.config import load_scene
     from scanner_sim.survey.pipeline import simulate_pass
     from scanner_sim.survey.setup import PassOptions
 
     config = load_scene(args.scene)
-    config = config.with_overrides(scene_overrides(args, config))  # --set, read as `run` reads it
+    config = config.with_overrides(set_overrides(args.set))  # --set, read as `run` reads it
     options = PassOptions(water=args.water, seed=args.seed, fidelity=args.fidelity, max_pulses=args.max_pulses,
                           progress=False, render=False)
     summary = simulate_pass(config, options).summary
