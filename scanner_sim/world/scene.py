@@ -115,6 +115,10 @@ class Scene:
                 return o
         raise ParameterError(f"object = {name!r}: the scene has {', '.join(o.name for o in self.objects)}")
 
+#: A seabed of more triangles than this is tiled (:class:`scanner_sim.world.site.SiteScene`); smaller scenes are one
+#: mesh. Two million triangles hold about 0.6 GB of mesh, face attributes and BVH at once (docs/design.md).
+TILED_ABOVE_TRIANGLES = 2_000_000
+
 #: A triangle with twice its area below this times the square of its mesh's size is degenerate.
 DEGENERATE_AREA = 1e-14
 
@@ -310,8 +314,10 @@ def panel_mesh(center_m, size_m, normal, up):
 # Scene from a validated config
 # ------------------------------------------------------------------------------------------------------
 
-def build_scene(config) -> Scene:
-    """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds)."""
+def build_scene(config, tile_m: float | None = None) -> Scene:
+    """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds); a seabed of
+    more than :data:`TILED_ABOVE_TRIANGLES` triangles gives a :class:`scanner_sim.world.site.SiteScene` instead, in
+    tiles of about :data:`scanner_sim.world.site.TILE_M`, or of ``tile_m`` [m] when given (any seabed then)."""
     if not isinstance(config, SceneConfig):
         raise TypeError(f"config must be a SceneConfig (scanner_sim.load_scene(name_or_path) gives one), not "
                         f"{type(config).__name__} {config!r:.60}")
@@ -323,8 +329,9 @@ def build_scene(config) -> Scene:
         hf = generate_heightfield(sb.center_m, sb.size_m, sb.resolution_m, sb.depth_m, sb.relief.rms_m,
                                   sb.relief.wavelength_m, sb.relief.hurst, sb.ripples.amplitude_m,
                                   sb.ripples.wavelength_m, sb.ripples.crest_deg, sb.ripples.sinuosity, rng)
-        v, f = hf.mesh()
-        parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True))
+        if not (tile_m or tiled(hf)):
+            v, f = hf.mesh()
+            parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True))
         rk = sb.rocks
         if rk.count:
             rocks = rock_meshes(hf, rk.count, (rk.radius_min_m, rk.radius_max_m), rng)
@@ -382,7 +389,18 @@ def build_scene(config) -> Scene:
             raise ConfigError(f"objects[{index}] ({obj.name!r}): its sizes and position give coordinates that are not "
                               f"finite or beyond +-{MAX_COORDINATE_M:.0e} m; check them (metres)")
         parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline))
+    if hf is not None and (tile_m or tiled(hf)):
+        from scanner_sim.world.site import TILE_M, SiteScene  # the site's module builds on this one
+
+        return SiteScene(hf, LABELS[sb.label], reflectance_of(sb), parts, tile_m or TILE_M)
     return Scene(parts, hf)
+
+
+def tiled(heightfield: HeightField) -> bool:
+    """Whether a seabed is tiled (:class:`scanner_sim.world.site.SiteScene`): more triangles than
+    :data:`TILED_ABOVE_TRIANGLES`."""
+    ny, nx = heightfield.shape
+    return 2 * (nx - 1) * (ny - 1) > TILED_ABOVE_TRIANGLES
 
 
 def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]:

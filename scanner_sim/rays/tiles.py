@@ -1,0 +1,238 @@
+"""The ray stage over a site-scale scene (:class:`scanner_sim.world.site.SiteScene`): each chunk's rays are cast
+into a window of the site's tiles that holds everything they can meet, built when the pass first needs it and
+released when the pass has moved on (a few windows are kept, :data:`KEPT_WINDOWS`).
+
+Exactness. A window holds the whole scene's faces over its tiles, each as the whole scene has it, and every other
+object whole. A chunk's window holds, for each pulse, the disc within which any of its sub-rays can meet anything
+(:func:`reach_boxes`: from the beam's origin down to the lowest geometry near it, at the steepest angle off the
+vertical any sub-ray has, plus the beam's radius) and its receiver, so each first hit, and each shadow ray (from a
+hit to the receiver), is the whole scene's. The seabed's proof grid of a window is the whole scene's grid cut out at
+whole super cells; a proof looks only within a box around the pulse's hits (:func:`proof_boxes`, a bound on the one
+:func:`scanner_sim.rays.seabed_kernels._bundle_clear` walks), and a chunk whose boxes leave its window is cast again
+in a window that holds them. So the hits are those of the whole scene's mesh, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from scanner_sim.rays.auto import cast_auto
+from scanner_sim.rays.cast import BeamCast, CastScene, cast_beams
+from scanner_sim.rays.caster import RayCaster
+from scanner_sim.rays.hits import Hits
+from scanner_sim.rays.seabed_grid import seabed_grid
+
+#: Windows a pass keeps built at once (the chunks in flight share them; the least recently used goes first).
+KEPT_WINDOWS = 3
+#: Tiles a window reaches past what a chunk needs, on every side: a pass moving on along its line keeps its window
+#: until it has gone this many tiles further.
+WINDOW_PAD_TILES = 1
+#: [m] Added around a pulse's hits for its proof box (:func:`proof_boxes`).
+FOOTPRINT_SLACK_M = 0.5
+#: Most tiles of one window for :meth:`TiledTarget.first_hits` (rays spread over a pass are cast in groups).
+FIRST_HITS_TILES = 16
+
+
+class TiledTarget:
+    """What the ray stage casts into over a :class:`~scanner_sim.world.site.SiteScene`: windows of its tiles as
+    :class:`~scanner_sim.rays.cast.CastScene` s, built on demand and kept :data:`KEPT_WINDOWS` at a time (thread-safe),
+    and ``caster``: first hits of any rays (:meth:`first_hits`) with their faces numbered as in the whole scene."""
+
+    def __init__(self, site, backend: str = "auto"):
+        self.scene, self.backend = site, backend
+        self.seabed_grid = True  # the proof grid exists, per window
+        self._windows: OrderedDict[tuple, CastScene] = OrderedDict()
+        self._lock = threading.Lock()
+        self.windows_built = 0
+        self.caster = self
+
+    def window_for(self, box: np.ndarray) -> CastScene:
+        """A window holding ``box`` (x_min, x_max, y_min, y_max) local [m]: a kept one if one holds it, else one
+        built over it padded by :data:`WINDOW_PAD_TILES` tiles."""
+        need = self._cells(box, 0)
+        with self._lock:
+            for key, target in reversed(self._windows.items()):
+                if key[0] <= need[0] and need[1] <= key[1] and key[2] <= need[2] and need[3] <= key[3]:
+                    self._windows.move_to_end(key)
+                    return target
+            key = self._cells(box, WINDOW_PAD_TILES)
+            window = self.scene.window(*key)
+            caster = RayCaster.for_scene(window, self.backend)
+            target = CastScene(window, caster, seabed_grid(window, caster, self.scene.z_top_local))
+            self._windows[key] = target
+            self.windows_built += 1
+            while len(self._windows) > KEPT_WINDOWS:
+                self._windows.popitem(last=False)
+            return target
+
+    def _cells(self, box, pad_tiles: int) -> tuple[int, int, int, int]:
+        """(j0, j1, i0, i1): cell columns and rows of the site covering ``box`` local [m] (plus one cell), snapped
+        out to whole tiles and ``pad_tiles`` more (never past the site)."""
+        hf, t = self.scene.heightfield, self.scene.tile_cells
+        ny, nx = hf.shape
+        x0, y0 = hf.x0_m - self.scene.local_origin[0], hf.y0_m - self.scene.local_origin[1]
+        s = hf.spacing_m
+        box = np.clip(box, [x0, x0, y0, y0], [x0 + (nx - 1) * s] * 2 + [y0 + (ny - 1) * s] * 2)  # nothing beyond
+        j0 = (math.floor((box[0] - x0) / s) - 1) // t - pad_tiles
+        j1 = -(-(math.floor((box[1] - x0) / s) + 2) // t) + pad_tiles
+        i0 = (math.floor((box[2] - y0) / s) - 1) // t - pad_tiles
+        i1 = -(-(math.floor((box[3] - y0) / s) + 2) // t) + pad_tiles
+        return (max(0, j0 * t), min(nx - 1, max(1, j1) * t), max(0, i0 * t), min(ny - 1, max(1, i1) * t))
+
+    def holds(self, target: CastScene, boxes: np.ndarray) -> np.ndarray:
+        """(n,) bool: which ``boxes`` (n, 4) local [m] lie inside ``target``'s window with a cell to spare, or reach
+        past it only where the window's edge is the site's (where the whole scene ends too)."""
+        j0, j1, i0, i1 = target.scene.cells
+        hf, s = self.scene.heightfield, self.scene.heightfield.spacing_m
+        ny, nx = hf.shape
+        x0, y0 = hf.x0_m - self.scene.local_origin[0], hf.y0_m - self.scene.local_origin[1]
+        return (((boxes[:, 0] >= x0 + (j0 + 1) * s) | (j0 == 0)) & ((boxes[:, 1] <= x0 + (j1 - 1) * s) | (j1 == nx - 1))
+                & ((boxes[:, 2] >= y0 + (i0 + 1) * s) | (i0 == 0)) & ((boxes[:, 3] <= y0 + (i1 - 1) * s) | (i1 == ny - 1)))
+
+    def floor_under(self, box) -> float:
+        """[m] local: below it, nothing over ``box`` (the lowest seabed node of the tiles under it, or of anything
+        else anywhere)."""
+        t = self.scene.tile_cells
+        j0, j1, i0, i1 = self._cells(box, 0)
+        low = self.scene.tile_low[i0 // t:max(i0 // t + 1, -(-i1 // t)), j0 // t:max(j0 // t + 1, -(-j1 // t))]
+        parts_low = self.scene.z_low_local if self.scene.parts is not None else np.inf
+        return float(min(low.min(), parts_low)) - 1e-3
+
+    def first_hits(self, origins: np.ndarray, directions: np.ndarray):
+        """First hit of each ray, as :meth:`scanner_sim.rays.caster.RayCaster.first_hits` gives it over the whole
+        scene: (ray_index (k,), tri_index (k,) numbered as in the whole scene, distance (k,) float32). The rays are
+        cast in groups of neighbours, each into a window of at most :data:`FIRST_HITS_TILES` tiles that holds their
+        reach (or of its single ray's)."""
+        origins = np.ascontiguousarray(origins, np.float32)
+        directions = np.ascontiguousarray(directions, np.float32)
+        boxes = reach_boxes(self, origins.astype(np.float64), directions.astype(np.float64), origins, 0.0, 0.0)
+        found = [(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float32))]
+        todo = [np.arange(origins.shape[0])]
+        while todo:
+            rays = todo.pop()
+            if not rays.size:
+                continue
+            box = union(boxes[rays])
+            j0, j1, i0, i1 = self._cells(box, 0)
+            tiles = ((j1 - j0) / self.scene.tile_cells) * ((i1 - i0) / self.scene.tile_cells)
+            if tiles > FIRST_HITS_TILES and rays.size > 1:
+                todo += np.array_split(rays, 2)
+                continue
+            target = self.window_for(box)
+            ray, tri, dist = target.caster.first_hits(origins[rays], directions[rays])
+            found.append((rays[ray], self.scene.site_faces(target.scene, tri), dist))
+        ray, tri, dist = (np.concatenate(column) for column in zip(*found))
+        order = np.argsort(ray, kind="stable")
+        return ray[order], tri[order], dist[order]
+
+
+def union(boxes: np.ndarray) -> np.ndarray:
+    """The box (4,) holding every box of ``boxes`` (n, 4): (x_min, x_max, y_min, y_max)."""
+    return np.array([boxes[:, 0].min(), boxes[:, 1].max(), boxes[:, 2].min(), boxes[:, 3].max()])
+
+
+def reach_boxes(target: TiledTarget, beam_origin, beam_dir, rx_origin, beam_radius_m: float, tan_half_divergence: float
+                ) -> np.ndarray:
+    """(n, 4) local [m]: for each pulse, a box holding every point where one of its sub-rays (origins within
+    ``beam_radius_m`` of ``beam_origin`` (n, 3) local, directions within the half divergence of ``beam_dir`` (n, 3))
+    can meet anything, and its receiver ``rx_origin`` (n, 3) local.
+
+    Below the floor of everything near the chunk (:meth:`TiledTarget.floor_under` of the box the whole site's floor
+    gives) a ray meets nothing, so a sub-ray descending at up to angle a off the vertical meets anything within
+    r + (z - floor) tan a of the beam's origin horizontally; a sub-ray that can run level or climb can reach the
+    whole site."""
+    site = target.scene
+    hf = site.heightfield
+    x_lo, x_hi, y_lo, y_hi = hf.extent_m
+    site_box = np.array([x_lo, x_hi, y_lo, y_hi]) - site.local_origin[[0, 0, 1, 1]]
+    if site.parts is not None:
+        v = site.parts.vertices - site.local_origin
+        site_box = np.array([min(site_box[0], v[:, 0].min()), max(site_box[1], v[:, 0].max()),
+                             min(site_box[2], v[:, 1].min()), max(site_box[3], v[:, 1].max())])
+    off_vertical = np.arccos(np.clip(-beam_dir[:, 2], -1.0, 1.0)) + math.atan(tan_half_divergence)
+    floor = site.z_low_local - 1e-3
+    for _ in range(2):  # the whole site's floor, then the floor under the box that one gives
+        drop = np.maximum(beam_origin[:, 2] - floor, 0.0) + beam_radius_m
+        reach = np.where(off_vertical < math.radians(89.9), beam_radius_m + drop * np.tan(np.minimum(
+            off_vertical, math.radians(89.9))), np.inf)
+        boxes = np.c_[beam_origin[:, 0] - reach, beam_origin[:, 0] + reach, beam_origin[:, 1] - reach,
+                      beam_origin[:, 1] + reach]
+        boxes = np.c_[np.minimum(boxes[:, 0], rx_origin[:, 0]), np.maximum(boxes[:, 1], rx_origin[:, 0]),
+                      np.minimum(boxes[:, 2], rx_origin[:, 1]), np.maximum(boxes[:, 3], rx_origin[:, 1])]
+        boxes = np.c_[np.maximum(boxes[:, 0], site_box[0]), np.minimum(boxes[:, 1], site_box[1]),
+                      np.maximum(boxes[:, 2], site_box[2]), np.minimum(boxes[:, 3], site_box[3])]
+        boxes[:, 1] = np.maximum(boxes[:, 1], boxes[:, 0])  # a pulse beside the site: an empty box at its edge
+        boxes[:, 3] = np.maximum(boxes[:, 3], boxes[:, 2])
+        if not boxes.size:
+            return boxes
+        floor = target.floor_under(union(boxes))
+    return boxes
+
+
+def proof_boxes(hits: Hits, local_origin, beam_origin, beam_dir, rx_origin, beam_radius_m: float,
+                tan_half_divergence: float, floor: float) -> np.ndarray:
+    """(p, 4) local [m]: for each pulse with hits, a box holding the coarse cells the seabed grid's proofs of its
+    hits can read (:func:`scanner_sim.rays.seabed_kernels._bundle_clear`: the footprint, around its first hit by the
+    farthest other, then the run of the least steep segment, sub-ray or hit to receiver, from the floor ``floor``
+    local up to the beam or receiver). The footprint is the hits' box widened by the beam's radius at their range
+    and :data:`FOOTPRINT_SLACK_M` (a pulse the ``auto`` level collapsed keeps three of its hits, all within an echo
+    bin of range). Rows follow the pulses that have hits, in order."""
+    pulse = hits.pulse_index
+    if not pulse.size:
+        return np.zeros((0, 4))
+    first = np.r_[0, np.flatnonzero(np.diff(pulse)) + 1]
+    p = pulse[first]
+    xy = hits.point[:, :2] - local_origin[:2]
+    lo_x, hi_x = np.minimum.reduceat(xy[:, 0], first), np.maximum.reduceat(xy[:, 0], first)
+    lo_y, hi_y = np.minimum.reduceat(xy[:, 1], first), np.maximum.reduceat(xy[:, 1], first)
+    spread = beam_radius_m + np.maximum.reduceat(hits.range_m, first) * tan_half_divergence + FOOTPRINT_SLACK_M
+    lo_x, hi_x, lo_y, hi_y = lo_x - spread, hi_x + spread, lo_y - spread, hi_y + spread
+    size = 1.5 * np.maximum(hi_x - lo_x, hi_y - lo_y)  # the farthest hit from the first: under sqrt(2) sides
+    rx = rx_origin[pulse]
+    up = rx[:, 2] - (hits.point[:, 2] - local_origin[2])
+    across = np.hypot(rx[:, 0] - xy[:, 0], rx[:, 1] - xy[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shadow_rise = np.where(up > 0.0, up / across, np.inf)  # a segment that does not rise fails the proof anyway
+    off_vertical = np.arccos(np.clip(-beam_dir[p, 2], -1.0, 1.0)) + math.atan(tan_half_divergence)
+    ray_rise = np.where(off_vertical < math.radians(89.9), 1.0 / np.tan(np.clip(off_vertical, 1e-12, None)), 0.0)
+    slope = np.minimum(ray_rise, np.minimum.reduceat(shadow_rise, first))
+    high = np.maximum(beam_origin[p, 2], rx_origin[p, 2]) + beam_radius_m - floor
+    with np.errstate(divide="ignore", invalid="ignore"):
+        run = np.where(slope > 0.0, np.maximum(high, 0.0) / slope, np.inf)
+    grow = size + run
+    return np.c_[lo_x - grow, hi_x + grow, lo_y - grow, hi_y + grow]
+
+
+@dataclass(frozen=True)
+class TiledCast(BeamCast):
+    """A level's ray stage over a site (``target``: a :class:`TiledTarget`): each chunk cast into a window holding
+    its reach (:func:`reach_boxes`) and its proofs (:func:`proof_boxes`), by the level's own cast (``adaptive``:
+    :func:`scanner_sim.rays.auto.cast_auto`, else :func:`scanner_sim.rays.cast.cast_beams`)."""
+
+    adaptive: bool = False
+
+    def __call__(self, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir) -> Hits:
+        tiled: TiledTarget = self.target
+        site = tiled.scene
+        o_local, rx_local = beam_origin - site.local_origin, rx_origin - site.local_origin
+        r_t = 0.5 * self.geometry.beam_diameter_m
+        tan_h = math.tan(0.5 * self.geometry.beam_divergence_full_rad)
+        box = union(reach_boxes(tiled, o_local, beam_dir, rx_local, r_t, tan_h))
+        cast = cast_auto if self.adaptive else cast_beams
+        while True:
+            target = tiled.window_for(box)
+            hits = cast(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, self.pattern, self.geometry,
+                        self.shadow_rays)
+            if target.seabed_grid is None:
+                return hits
+            proofs = proof_boxes(hits, site.local_origin, o_local, beam_dir, rx_local, r_t, tan_h,
+                                 tiled.floor_under(box))
+            inside = tiled.holds(target, proofs)
+            if inside.all():
+                return hits
+            box = union(np.r_[box[None, :], proofs[~inside]])
