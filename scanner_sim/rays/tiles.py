@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from muls.runtime import release_free_heap
 from scanner_sim.rays.auto import cast_auto
 from scanner_sim.rays.cast import BeamCast, CastScene, cast_beams
 from scanner_sim.rays.caster import RayCaster
@@ -29,13 +30,15 @@ from scanner_sim.rays.seabed_grid import seabed_grid
 
 #: Windows a pass keeps built at once (the chunks in flight share them; the least recently used goes first).
 KEPT_WINDOWS = 3
-#: Tiles a window reaches past what a chunk needs, on every side: a pass moving on along its line keeps its window
-#: until it has gone this many tiles further.
+#: Tiles a window reaches past what it is built for, on every side (:meth:`TiledTarget.window_for`).
 WINDOW_PAD_TILES = 1
+#: [m] How much further a chunk's new window reaches along the way the pass goes: the pass keeps it until it has
+#: gone about this far (a window's BVH is built once per this much of the line, not once per tile).
+WINDOW_AHEAD_M = 160.0
 #: [m] Added around a pulse's hits for its proof box (:func:`proof_boxes`).
 FOOTPRINT_SLACK_M = 0.5
 #: Most tiles of one window for :meth:`TiledTarget.first_hits` (rays spread over a pass are cast in groups).
-FIRST_HITS_TILES = 16
+FIRST_HITS_TILES = 4
 
 
 class TiledTarget:
@@ -51,16 +54,18 @@ class TiledTarget:
         self.windows_built = 0
         self.caster = self
 
-    def window_for(self, box: np.ndarray) -> CastScene:
+    def window_for(self, box: np.ndarray, build_box: np.ndarray | None = None, pad_tiles: int = WINDOW_PAD_TILES
+                   ) -> CastScene:
         """A window holding ``box`` (x_min, x_max, y_min, y_max) local [m]: a kept one if one holds it, else one
-        built over it padded by :data:`WINDOW_PAD_TILES` tiles."""
+        built over ``build_box`` (default ``box``; it holds ``box``) padded by ``pad_tiles`` tiles."""
         need = self._cells(box, 0)
         with self._lock:
             for key, target in reversed(self._windows.items()):
                 if key[0] <= need[0] and need[1] <= key[1] and key[2] <= need[2] and need[3] <= key[3]:
                     self._windows.move_to_end(key)
                     return target
-            key = self._cells(box, WINDOW_PAD_TILES)
+            key = self._cells(box if build_box is None else build_box, pad_tiles)
+            release_free_heap()  # what the windows let go of earlier: the pass's memory stays flat as it moves on
             window = self.scene.window(*key)
             caster = RayCaster.for_scene(window, self.backend)
             target = CastScene(window, caster, seabed_grid(window, caster, self.scene.z_top_local))
@@ -123,7 +128,7 @@ class TiledTarget:
             if tiles > FIRST_HITS_TILES and rays.size > 1:
                 todo += np.array_split(rays, 2)
                 continue
-            target = self.window_for(box)
+            target = self.window_for(box, pad_tiles=0)
             ray, tri, dist = target.caster.first_hits(origins[rays], directions[rays])
             found.append((rays[ray], self.scene.site_faces(target.scene, tri), dist))
         ray, tri, dist = (np.concatenate(column) for column in zip(*found))
@@ -175,13 +180,13 @@ def reach_boxes(target: TiledTarget, beam_origin, beam_dir, rx_origin, beam_radi
 
 
 def proof_boxes(hits: Hits, local_origin, beam_origin, beam_dir, rx_origin, beam_radius_m: float,
-                tan_half_divergence: float, floor: float) -> np.ndarray:
+                tan_half_divergence: float, floor: float, top: float) -> np.ndarray:
     """(p, 4) local [m]: for each pulse with hits, a box holding the coarse cells the seabed grid's proofs of its
-    hits can read (:func:`scanner_sim.rays.seabed_kernels._bundle_clear`: the footprint, around its first hit by the
-    farthest other, then the run of the least steep segment, sub-ray or hit to receiver, from the floor ``floor``
-    local up to the beam or receiver). The footprint is the hits' box widened by the beam's radius at their range
-    and :data:`FOOTPRINT_SLACK_M` (a pulse the ``auto`` level collapsed keeps three of its hits, all within an echo
-    bin of range). Rows follow the pulses that have hits, in order."""
+    hits can read (:func:`scanner_sim.rays.seabed_kernels._bundle_clear`): the footprint, around its first hit by the
+    farthest other, then the run of the least steep segment (sub-ray, or hit to receiver) from the floor ``floor``
+    local up to the beam or receiver, or to the top of the whole scene ``top`` local if lower. The footprint is the
+    hits' box widened by the beam's radius at their range and :data:`FOOTPRINT_SLACK_M` (a pulse the ``auto`` level
+    collapsed keeps three of its hits, all within an echo bin of range). Rows follow the pulses that have hits."""
     pulse = hits.pulse_index
     if not pulse.size:
         return np.zeros((0, 4))
@@ -201,7 +206,7 @@ def proof_boxes(hits: Hits, local_origin, beam_origin, beam_dir, rx_origin, beam
     off_vertical = np.arccos(np.clip(-beam_dir[p, 2], -1.0, 1.0)) + math.atan(tan_half_divergence)
     ray_rise = np.where(off_vertical < math.radians(89.9), 1.0 / np.tan(np.clip(off_vertical, 1e-12, None)), 0.0)
     slope = np.minimum(ray_rise, np.minimum.reduceat(shadow_rise, first))
-    high = np.maximum(beam_origin[p, 2], rx_origin[p, 2]) + beam_radius_m - floor
+    high = np.minimum(np.maximum(beam_origin[p, 2], rx_origin[p, 2]) + beam_radius_m, top + 2e-3) - floor
     with np.errstate(divide="ignore", invalid="ignore"):
         run = np.where(slope > 0.0, np.maximum(high, 0.0) / slope, np.inf)
     grow = size + run
@@ -222,17 +227,29 @@ class TiledCast(BeamCast):
         o_local, rx_local = beam_origin - site.local_origin, rx_origin - site.local_origin
         r_t = 0.5 * self.geometry.beam_diameter_m
         tan_h = math.tan(0.5 * self.geometry.beam_divergence_full_rad)
-        box = union(reach_boxes(tiled, o_local, beam_dir, rx_local, r_t, tan_h))
+        reach = reach_boxes(tiled, o_local, beam_dir, rx_local, r_t, tan_h)
+        box = union(reach)
+        # What the proofs of the hits will read (proof_boxes), foreseen: up from the floor to the top of the site at
+        # the least steep sub-ray's slope, from the reach of each pulse.
+        floor = tiled.floor_under(box)
+        steepest = float(np.arccos(np.clip(-beam_dir[:, 2], -1.0, 1.0)).max()) + math.atan(tan_h)
+        if steepest < math.radians(89.9):
+            run = (site.z_top_local - floor) * math.tan(steepest) + FOOTPRINT_SLACK_M
+            box = box + np.array([-run, run, -run, run])
         cast = cast_auto if self.adaptive else cast_beams
+        motion = o_local[-1, :2] - o_local[0, :2]  # a new window reaches on along the way the pass goes
+        step = motion * (WINDOW_AHEAD_M / max(float(np.hypot(*motion)), 1e-9))
+        ahead = union(np.array([box - motion[[0, 0, 1, 1]], box + step[[0, 0, 1, 1]]]))  # and a chunk behind
         while True:
-            target = tiled.window_for(box)
+            target = tiled.window_for(box, ahead, pad_tiles=0)
             hits = cast(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, self.pattern, self.geometry,
                         self.shadow_rays)
             if target.seabed_grid is None:
                 return hits
-            proofs = proof_boxes(hits, site.local_origin, o_local, beam_dir, rx_local, r_t, tan_h,
-                                 tiled.floor_under(box))
+            proofs = proof_boxes(hits, site.local_origin, o_local, beam_dir, rx_local, r_t, tan_h, floor,
+                                 site.z_top_local)
             inside = tiled.holds(target, proofs)
             if inside.all():
                 return hits
             box = union(np.r_[box[None, :], proofs[~inside]])
+            ahead = union(np.array([ahead, box]))

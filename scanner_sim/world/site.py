@@ -23,8 +23,8 @@ from scanner_sim.world.scene import Part, Scene, SceneObject, _face_geometry
 from scanner_sim.world.terrain import HeightField
 
 #: [m] Side of a tile, about: rounded up to whole blocks of the proof grid's super cells (so that a window's proof
-#: grid is the whole scene's, cut out). 32 m at 0.25 m cells is 32,768 triangles a tile.
-TILE_M = 32.0
+#: grid is the whole scene's, cut out). 16 m at 0.25 m cells is 8,192 triangles a tile.
+TILE_M = 16.0
 
 
 @dataclass(frozen=True)
