@@ -7,7 +7,7 @@ object whole. A chunk's window holds, for each pulse, the disc within which any 
 (:func:`reach_boxes`: from the beam's origin down to the lowest geometry near it, at the steepest angle off the
 vertical any sub-ray has, plus the beam's radius) and its receiver, so each first hit, and each shadow ray (from a
 hit to the receiver), is the whole scene's. The seabed's proof grid of a window is the whole scene's grid cut out at
-whole super cells; a proof looks only within a box around the pulse's hits (:func:`proof_boxes`, a bound on the one
+whole super cells; a proof looks only within a box around the pulse's hits (:func:`proof_box`, a bound on the one
 :func:`scanner_sim.rays.seabed_kernels._bundle_clear` walks), and a chunk whose boxes leave its window is cast again
 in a window that holds them. So the hits are those of the whole scene's mesh, bit for bit.
 """
@@ -29,13 +29,13 @@ from scanner_sim.rays.hits import Hits
 from scanner_sim.rays.seabed_grid import seabed_grid
 
 #: Windows a pass keeps built at once (the chunks in flight share them; the least recently used goes first).
-KEPT_WINDOWS = 3
+KEPT_WINDOWS = 2
 #: Tiles a window reaches past what it is built for, on every side (:meth:`TiledTarget.window_for`).
 WINDOW_PAD_TILES = 1
 #: [m] How much further a chunk's new window reaches along the way the pass goes: the pass keeps it until it has
 #: gone about this far (a window's BVH is built once per this much of the line, not once per tile).
-WINDOW_AHEAD_M = 160.0
-#: [m] Added around a pulse's hits for its proof box (:func:`proof_boxes`).
+WINDOW_AHEAD_M = 120.0
+#: [m] Added around a pulse's hits for the box its proofs read (:func:`proof_box`).
 FOOTPRINT_SLACK_M = 0.5
 #: Most tiles of one window for :meth:`TiledTarget.first_hits` (rays spread over a pass are cast in groups).
 FIRST_HITS_TILES = 4
@@ -50,7 +50,7 @@ class TiledTarget:
         self.scene, self.backend = site, backend
         self.seabed_grid = True  # the proof grid exists, per window
         self._windows: OrderedDict[tuple, CastScene] = OrderedDict()
-        self._lock = threading.Lock()
+        self._lock, self._building = threading.Lock(), threading.Lock()
         self.windows_built = 0
         self.caster = self
 
@@ -59,21 +59,34 @@ class TiledTarget:
         """A window holding ``box`` (x_min, x_max, y_min, y_max) local [m]: a kept one if one holds it, else one
         built over ``build_box`` (default ``box``; it holds ``box``) padded by ``pad_tiles`` tiles."""
         need = self._cells(box, 0)
+        kept = self._kept(need)
+        if kept is not None:
+            return kept
+        with self._building:  # one build at a time; chunks whose window is kept go on meanwhile
+            kept = self._kept(need)
+            if kept is not None:
+                return kept
+            key = self._cells(box if build_box is None else build_box, pad_tiles)
+            release_free_heap()  # what the windows let go of earlier: the pass's memory stays flat as it moves on
+            window = self.scene.window(*key)
+            caster = RayCaster.for_scene(window, self.backend)
+            grid = seabed_grid(window, caster, self.scene.z_top_local)
+            target = CastScene(window.without_mesh(), caster, grid)  # the caster holds the mesh from here on
+            with self._lock:
+                self._windows[key] = target
+                self.windows_built += 1
+                while len(self._windows) > KEPT_WINDOWS:
+                    self._windows.popitem(last=False)
+            return target
+
+    def _kept(self, need) -> CastScene | None:
+        """A kept window holding the cells ``need`` (j0, j1, i0, i1), the most recent first; None if none does."""
         with self._lock:
             for key, target in reversed(self._windows.items()):
                 if key[0] <= need[0] and need[1] <= key[1] and key[2] <= need[2] and need[3] <= key[3]:
                     self._windows.move_to_end(key)
                     return target
-            key = self._cells(box if build_box is None else build_box, pad_tiles)
-            release_free_heap()  # what the windows let go of earlier: the pass's memory stays flat as it moves on
-            window = self.scene.window(*key)
-            caster = RayCaster.for_scene(window, self.backend)
-            target = CastScene(window, caster, seabed_grid(window, caster, self.scene.z_top_local))
-            self._windows[key] = target
-            self.windows_built += 1
-            while len(self._windows) > KEPT_WINDOWS:
-                self._windows.popitem(last=False)
-            return target
+        return None
 
     def _cells(self, box, pad_tiles: int) -> tuple[int, int, int, int]:
         """(j0, j1, i0, i1): cell columns and rows of the site covering ``box`` local [m] (plus one cell), snapped
@@ -179,44 +192,40 @@ def reach_boxes(target: TiledTarget, beam_origin, beam_dir, rx_origin, beam_radi
     return boxes
 
 
-def proof_boxes(hits: Hits, local_origin, beam_origin, beam_dir, rx_origin, beam_radius_m: float,
-                tan_half_divergence: float, floor: float, top: float) -> np.ndarray:
-    """(p, 4) local [m]: for each pulse with hits, a box holding the coarse cells the seabed grid's proofs of its
-    hits can read (:func:`scanner_sim.rays.seabed_kernels._bundle_clear`): the footprint, around its first hit by the
-    farthest other, then the run of the least steep segment (sub-ray, or hit to receiver) from the floor ``floor``
-    local up to the beam or receiver, or to the top of the whole scene ``top`` local if lower. The footprint is the
-    hits' box widened by the beam's radius at their range and :data:`FOOTPRINT_SLACK_M` (a pulse the ``auto`` level
-    collapsed keeps three of its hits, all within an echo bin of range). Rows follow the pulses that have hits."""
+def proof_box(hits: Hits, local_origin, beam_origin, beam_dir, rx_origin, beam_radius_m: float,
+              tan_half_divergence: float, floor: float, top: float) -> np.ndarray | None:
+    """(4,) local [m]: a box holding the coarse cells the seabed grid's proofs of the chunk's hits can read
+    (:func:`scanner_sim.rays.seabed_kernels._bundle_clear`), None without hits. A proof reads around a pulse's first
+    hit as far as the farthest other (its footprint), and further by the run of the least steep segment (sub-ray, or
+    hit to receiver) from the floor ``floor`` local up to the beam or receiver, or to the top of the whole scene
+    ``top`` local if lower. Bounded here over the chunk: the largest footprint and the longest run around every hit.
+    A footprint is its hits' box widened by the beam's radius at their range and :data:`FOOTPRINT_SLACK_M` (a pulse
+    the ``auto`` level collapsed keeps three of its hits, all within an echo bin of range)."""
     pulse = hits.pulse_index
     if not pulse.size:
-        return np.zeros((0, 4))
+        return None
     first = np.r_[0, np.flatnonzero(np.diff(pulse)) + 1]
-    p = pulse[first]
     xy = hits.point[:, :2] - local_origin[:2]
-    lo_x, hi_x = np.minimum.reduceat(xy[:, 0], first), np.maximum.reduceat(xy[:, 0], first)
-    lo_y, hi_y = np.minimum.reduceat(xy[:, 1], first), np.maximum.reduceat(xy[:, 1], first)
-    spread = beam_radius_m + np.maximum.reduceat(hits.range_m, first) * tan_half_divergence + FOOTPRINT_SLACK_M
-    lo_x, hi_x, lo_y, hi_y = lo_x - spread, hi_x + spread, lo_y - spread, hi_y + spread
-    size = 1.5 * np.maximum(hi_x - lo_x, hi_y - lo_y)  # the farthest hit from the first: under sqrt(2) sides
+    spread = beam_radius_m + float(hits.range_m.max()) * tan_half_divergence + FOOTPRINT_SLACK_M
+    size = 2.0 * spread + max(float((np.maximum.reduceat(xy[:, a], first) - np.minimum.reduceat(xy[:, a], first)).max())
+                              for a in (0, 1))
     rx = rx_origin[pulse]
     up = rx[:, 2] - (hits.point[:, 2] - local_origin[2])
-    across = np.hypot(rx[:, 0] - xy[:, 0], rx[:, 1] - xy[:, 1])
+    off_vertical = np.arccos(np.clip(-beam_dir[:, 2], -1.0, 1.0)) + math.atan(tan_half_divergence)
     with np.errstate(divide="ignore", invalid="ignore"):
-        shadow_rise = np.where(up > 0.0, up / across, np.inf)  # a segment that does not rise fails the proof anyway
-    off_vertical = np.arccos(np.clip(-beam_dir[p, 2], -1.0, 1.0)) + math.atan(tan_half_divergence)
-    ray_rise = np.where(off_vertical < math.radians(89.9), 1.0 / np.tan(np.clip(off_vertical, 1e-12, None)), 0.0)
-    slope = np.minimum(ray_rise, np.minimum.reduceat(shadow_rise, first))
-    high = np.minimum(np.maximum(beam_origin[p, 2], rx_origin[p, 2]) + beam_radius_m, top + 2e-3) - floor
-    with np.errstate(divide="ignore", invalid="ignore"):
-        run = np.where(slope > 0.0, np.maximum(high, 0.0) / slope, np.inf)
-    grow = size + run
-    return np.c_[lo_x - grow, hi_x + grow, lo_y - grow, hi_y + grow]
+        shadow_rise = np.where(up > 0.0, up / np.hypot(rx[:, 0] - xy[:, 0], rx[:, 1] - xy[:, 1]), np.inf)
+        ray_rise = np.where(off_vertical < math.radians(89.9), 1.0 / np.tan(off_vertical), 0.0)[pulse]
+        high = np.minimum(np.maximum(beam_origin[:, 2], rx_origin[:, 2]) + beam_radius_m, top + 2e-3)[pulse] - floor
+        slope = np.minimum(ray_rise, shadow_rise)  # a segment that does not rise fails the proof anyway
+        run = float(np.where(slope > 0.0, np.maximum(high, 0.0) / slope, np.inf).max())
+    grow = spread + 1.5 * size + run  # the farthest hit from the first: under sqrt(2) footprint sides
+    return np.array([xy[:, 0].min() - grow, xy[:, 0].max() + grow, xy[:, 1].min() - grow, xy[:, 1].max() + grow])
 
 
 @dataclass(frozen=True)
 class TiledCast(BeamCast):
     """A level's ray stage over a site (``target``: a :class:`TiledTarget`): each chunk cast into a window holding
-    its reach (:func:`reach_boxes`) and its proofs (:func:`proof_boxes`), by the level's own cast (``adaptive``:
+    its reach (:func:`reach_boxes`) and its proofs (:func:`proof_box`), by the level's own cast (``adaptive``:
     :func:`scanner_sim.rays.auto.cast_auto`, else :func:`scanner_sim.rays.cast.cast_beams`)."""
 
     adaptive: bool = False
@@ -229,7 +238,7 @@ class TiledCast(BeamCast):
         tan_h = math.tan(0.5 * self.geometry.beam_divergence_full_rad)
         reach = reach_boxes(tiled, o_local, beam_dir, rx_local, r_t, tan_h)
         box = union(reach)
-        # What the proofs of the hits will read (proof_boxes), foreseen: up from the floor to the top of the site at
+        # What the proofs of the hits will read (proof_box), foreseen: up from the floor to the top of the site at
         # the least steep sub-ray's slope, from the reach of each pulse.
         floor = tiled.floor_under(box)
         steepest = float(np.arccos(np.clip(-beam_dir[:, 2], -1.0, 1.0)).max()) + math.atan(tan_h)
@@ -246,10 +255,9 @@ class TiledCast(BeamCast):
                         self.shadow_rays)
             if target.seabed_grid is None:
                 return hits
-            proofs = proof_boxes(hits, site.local_origin, o_local, beam_dir, rx_local, r_t, tan_h, floor,
-                                 site.z_top_local)
-            inside = tiled.holds(target, proofs)
-            if inside.all():
+            proofs = proof_box(hits, site.local_origin, o_local, beam_dir, rx_local, r_t, tan_h, floor,
+                               site.z_top_local)
+            if proofs is None or tiled.holds(target, proofs[None, :])[0]:
                 return hits
-            box = union(np.r_[box[None, :], proofs[~inside]])
+            box = union(np.array([box, proofs]))
             ahead = union(np.array([ahead, box]))

@@ -12,6 +12,7 @@ scene, bit for bit.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -23,8 +24,8 @@ from scanner_sim.world.scene import Part, Scene, SceneObject, _face_geometry
 from scanner_sim.world.terrain import HeightField
 
 #: [m] Side of a tile, about: rounded up to whole blocks of the proof grid's super cells (so that a window's proof
-#: grid is the whole scene's, cut out). 16 m at 0.25 m cells is 8,192 triangles a tile.
-TILE_M = 16.0
+#: grid is the whole scene's, cut out). 8 m at 0.25 m cells is 2,048 triangles a tile.
+TILE_M = 8.0
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,12 @@ class WindowScene:
 
     @property
     def n_faces(self) -> int:
-        return int(self.faces.shape[0])
+        return int(self.face_object.shape[0])
+
+    def without_mesh(self) -> WindowScene:
+        """This window without its vertices and faces (emptied): what the ray stage reads once the window's caster
+        and proof grid are built, which hold the mesh themselves (float32, local)."""
+        return dataclasses.replace(self, vertices=np.zeros((0, 3)), faces=np.zeros((0, 3), np.int64))
 
 
 class SiteScene:
