@@ -1,7 +1,10 @@
 """``scanner-sim bench-site``: a survey pass over a site-scale seabed (1 km x 200 m at 0.25 m, 6.4 million
 triangles, tiled: :mod:`scanner_sim.world.site`) beside the same survey over a small seabed, in one run.
 
-Each case runs in a fresh process, so its peak resident memory (``ru_maxrss``) is its own. The site's pass follows a
+Each case runs in a fresh process, so its peak resident memory (``ru_maxrss``) is its own; the small scene's pass runs
+before and after the site's, and its rates are the mean of the two (on a shared machine the load drifts). Beside
+pulses per second of wall time, the bench gives pulses per CPU second of the process (less moved by other
+processes' load) and the cores the pass kept busy. The site's pass follows a
 lawnmower along the site's length for :data:`SITE_MINUTES` minutes of survey; the resident memory is read as the
 pass reaches each of :data:`RSS_MINUTES` minutes. Both passes fire :data:`PULSE_RATE_HZ` pulses a second, half the
 instrument's 5 kHz, so that an hour of survey runs in a few minutes: every other pulse of the real survey is left
@@ -89,11 +92,14 @@ def _pass_figures(size_m, spacing_m: float, fidelity: str, duration_s: float, rs
     setup_s = time.perf_counter() - t0
     warm_up(setup, options)
     probe = _ResidentProbe(setup.scanner.pulse_rate_hz, setup.first_slot, rss_minutes)
+    cpu0 = time.process_time()
     stats, _, wall_s = stream_pass(setup, pass_chunks(setup, options), [probe], options)
+    cpu_s = time.process_time() - cpu0
     probe.finish(duration_s)
     return {"triangles": int(setup.scene.n_faces), "setup_s": round(setup_s, 2),
             "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
-            "pulses_per_s": round(stats.pulses / wall_s, 1), "pulses": int(stats.pulses),
+            "pulses_per_s": round(stats.pulses / wall_s, 1), "pulses_per_cpu_s": round(stats.pulses / cpu_s, 1),
+            "cores_used": round(cpu_s / wall_s, 2), "pulses": int(stats.pulses),
             "windows_built": getattr(setup.target, "windows_built", 0), "rss_mb_by_minutes": probe.found}
 
 
@@ -102,13 +108,18 @@ def bench_site(fidelity: str = "balanced", minutes: int = SITE_MINUTES) -> dict:
     "setup_s", "peak_rss_mb", "pulses_per_s", ...}, "small": {"pulses_per_s", ...}, "rss_mb_by_minutes": {"10",
     "60"}, ...}`` with the ratios the targets are judged on."""
     marks = [m for m in RSS_MINUTES if m <= minutes]
-    site = _in_fresh_process(_pass_figures, SITE_SIZE_M, SITE_SPACING_M, fidelity, 60.0 * minutes, marks)
-    small = _in_fresh_process(_pass_figures, SMALL_SIZE_M, SITE_SPACING_M, fidelity, SMALL_SECONDS, [])
+    before = _in_fresh_process(_pass_figures, SMALL_SIZE_M, SITE_SPACING_M, fidelity, SMALL_SECONDS, [])
+    site = _in_fresh_process(_pass_figures, SITE_SIZE_M, SITE_SPACING_M, fidelity,
+                             60.0 * minutes, marks)
+    after = _in_fresh_process(_pass_figures, SMALL_SIZE_M, SITE_SPACING_M, fidelity, SMALL_SECONDS, [])
     by_minutes = site.pop("rss_mb_by_minutes")
+    small = {**after, **{k: round(0.5 * (before[k] + after[k]), 1) for k in ("pulses_per_s", "pulses_per_cpu_s")},
+             "pulses_per_s_before_after": [before["pulses_per_s"], after["pulses_per_s"]]}
     small.pop("rss_mb_by_minutes")
     first, last = (by_minutes.get(str(m)) for m in (marks[0], marks[-1])) if marks else (None, None)
     return {"site": site, "small": small, "rss_mb_by_minutes": by_minutes,
             "site_over_small_pulses_per_s": round(site["pulses_per_s"] / small["pulses_per_s"], 3),
+            "site_over_small_pulses_per_cpu_s": round(site["pulses_per_cpu_s"] / small["pulses_per_cpu_s"], 3),
             "rss_growth_last_over_first": round(last / first - 1.0, 3) if first and last else None,
             "fidelity": fidelity, "pulse_rate_hz": PULSE_RATE_HZ,
             "subsampling": f"pulses fired at {PULSE_RATE_HZ:g} Hz, half the instrument's 5 kHz: the survey's track, "
