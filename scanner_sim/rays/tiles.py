@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.runtime import release_free_heap
+from muls.runtime import kernel, release_free_heap
 from scanner_sim.rays.auto import cast_auto
 from scanner_sim.rays.cast import BeamCast, CastScene, cast_beams
 from scanner_sim.rays.caster import RayCaster
@@ -201,25 +201,46 @@ def proof_box(hits: Hits, local_origin, beam_origin, beam_dir, rx_origin, beam_r
     ``top`` local if lower. Bounded here over the chunk: the largest footprint and the longest run around every hit.
     A footprint is its hits' box widened by the beam's radius at their range and :data:`FOOTPRINT_SLACK_M` (a pulse
     the ``auto`` level collapsed keeps three of its hits, all within an echo bin of range)."""
-    pulse = hits.pulse_index
-    if not pulse.size:
+    if not hits.pulse_index.size:
         return None
-    first = np.r_[0, np.flatnonzero(np.diff(pulse)) + 1]
-    xy = hits.point[:, :2] - local_origin[:2]
-    spread = beam_radius_m + float(hits.range_m.max()) * tan_half_divergence + FOOTPRINT_SLACK_M
-    size = 2.0 * spread + max(float((np.maximum.reduceat(xy[:, a], first) - np.minimum.reduceat(xy[:, a], first)).max())
-                              for a in (0, 1))
-    rx = rx_origin[pulse]
-    up = rx[:, 2] - (hits.point[:, 2] - local_origin[2])
-    off_vertical = np.arccos(np.clip(-beam_dir[:, 2], -1.0, 1.0)) + math.atan(tan_half_divergence)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        shadow_rise = np.where(up > 0.0, up / np.hypot(rx[:, 0] - xy[:, 0], rx[:, 1] - xy[:, 1]), np.inf)
-        ray_rise = np.where(off_vertical < math.radians(89.9), 1.0 / np.tan(off_vertical), 0.0)[pulse]
-        high = np.minimum(np.maximum(beam_origin[:, 2], rx_origin[:, 2]) + beam_radius_m, top + 2e-3)[pulse] - floor
-        slope = np.minimum(ray_rise, shadow_rise)  # a segment that does not rise fails the proof anyway
-        run = float(np.where(slope > 0.0, np.maximum(high, 0.0) / slope, np.inf).max())
-    grow = spread + 1.5 * size + run  # the farthest hit from the first: under sqrt(2) footprint sides
-    return np.array([xy[:, 0].min() - grow, xy[:, 0].max() + grow, xy[:, 1].min() - grow, xy[:, 1].max() + grow])
+    extent = np.empty(7)
+    _proof_extent(hits.pulse_index, hits.point, hits.range_m, beam_origin, beam_dir, rx_origin, local_origin,
+                  beam_radius_m, math.atan(tan_half_divergence), floor, top + 2e-3, extent)
+    x_min, x_max, y_min, y_max, footprint, run, range_max = extent
+    spread = beam_radius_m + range_max * tan_half_divergence + FOOTPRINT_SLACK_M
+    grow = spread + 1.5 * (footprint + 2.0 * spread) + run  # the farthest hit from the first: under sqrt(2) sides
+    return np.array([x_min - grow, x_max + grow, y_min - grow, y_max + grow])
+
+
+@kernel(nogil=True, error_model="numpy")
+def _proof_extent(pulse, point, range_m, beam_origin, beam_dir, rx, local_origin, beam_radius, half_divergence,
+                  floor, top, out):
+    """For :func:`proof_box`, over hit rows in scan order (``pulse`` (r,), ``point`` (r, 3) world, ``range_m`` (r,);
+    per pulse (n, 3) local: ``beam_origin``, ``beam_dir``, receiver ``rx``): out = (x_min, x_max, y_min, y_max) local of
+    the hits, the widest side of a pulse's hits' box, the longest run of a pulse's least steep segment (module doc of
+    :func:`proof_box`; inf where one runs level), the longest range."""
+    x_min, x_max, y_min, y_max, footprint, run, range_max = np.inf, -np.inf, np.inf, -np.inf, 0.0, 0.0, 0.0
+    c = 0
+    while c < pulse.shape[0]:
+        p = pulse[c]
+        off_vertical = math.acos(min(1.0, max(-1.0, -beam_dir[p, 2]))) + half_divergence
+        slope = 1.0 / math.tan(off_vertical) if off_vertical < math.radians(89.9) else 0.0
+        high = max(0.0, min(max(beam_origin[p, 2], rx[p, 2]) + beam_radius, top) - floor)
+        px0, px1, py0, py1 = np.inf, -np.inf, np.inf, -np.inf
+        while c < pulse.shape[0] and pulse[c] == p:
+            x, y = point[c, 0] - local_origin[0], point[c, 1] - local_origin[1]
+            px0, px1, py0, py1 = min(px0, x), max(px1, x), min(py0, y), max(py1, y)
+            range_max = max(range_max, range_m[c])
+            up = rx[p, 2] - (point[c, 2] - local_origin[2])
+            if up > 0.0:  # a segment to the receiver that does not rise fails the proof anyway
+                across = math.sqrt((rx[p, 0] - x) ** 2 + (rx[p, 1] - y) ** 2)
+                if across > 0.0:
+                    slope = min(slope, up / across)
+            c += 1
+        x_min, x_max, y_min, y_max = min(x_min, px0), max(x_max, px1), min(y_min, py0), max(y_max, py1)
+        footprint = max(footprint, px1 - px0, py1 - py0)
+        run = max(run, high / slope if slope > 0.0 else np.inf)
+    out[0], out[1], out[2], out[3], out[4], out[5], out[6] = x_min, x_max, y_min, y_max, footprint, run, range_max
 
 
 @dataclass(frozen=True)
