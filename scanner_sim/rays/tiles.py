@@ -30,6 +30,10 @@ from scanner_sim.rays.seabed_grid import seabed_grid
 
 #: Windows a pass keeps built at once (the chunks in flight share them; the least recently used goes first).
 KEPT_WINDOWS = 2
+#: Chunks that give the free heap back to the system as they finish, after a window is let go (one per worker: the
+#: window is freed when the last chunk casting into it is done). glibc otherwise keeps up to 512 MB of freed memory
+#: for reuse (muls.runtime), which the windows' arrays, freed as the pass moves on, would fill.
+TRIMS_AFTER_RELEASE = 2
 #: Tiles a window reaches past what it is built for, on every side (:meth:`TiledTarget.window_for`).
 WINDOW_PAD_TILES = 1
 #: [m] How much further a chunk's new window reaches along the way the pass goes: the pass keeps it until it has
@@ -51,6 +55,7 @@ class TiledTarget:
         self.seabed_grid = True  # the proof grid exists, per window
         self._windows: OrderedDict[tuple, CastScene] = OrderedDict()
         self._lock, self._building = threading.Lock(), threading.Lock()
+        self._trims_due = 0
         self.windows_built = 0
         self.caster = self
 
@@ -67,7 +72,6 @@ class TiledTarget:
             if kept is not None:
                 return kept
             key = self._cells(box if build_box is None else build_box, pad_tiles)
-            release_free_heap()  # what the windows let go of earlier: the pass's memory stays flat as it moves on
             window = self.scene.window(*key)
             caster = RayCaster.for_scene(window, self.backend)
             grid = seabed_grid(window, caster, self.scene.z_top_local)
@@ -77,7 +81,16 @@ class TiledTarget:
                 self.windows_built += 1
                 while len(self._windows) > KEPT_WINDOWS:
                     self._windows.popitem(last=False)
+                    self._trims_due = TRIMS_AFTER_RELEASE
             return target
+
+    def chunk_done(self) -> None:
+        """A chunk has finished with its window: after a window was let go, the next chunks to finish (by then no
+        chunk casts into it, and its arrays are freed) give the free heap back to the system."""
+        with self._lock:
+            due, self._trims_due = self._trims_due, max(0, self._trims_due - 1)
+        if due:
+            release_free_heap()
 
     def _kept(self, need) -> CastScene | None:
         """A kept window holding the cells ``need`` (j0, j1, i0, i1), the most recent first; None if none does."""
@@ -275,10 +288,12 @@ class TiledCast(BeamCast):
             hits = cast(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, self.pattern, self.geometry,
                         self.shadow_rays)
             if target.seabed_grid is None:
+                tiled.chunk_done()
                 return hits
             proofs = proof_box(hits, site.local_origin, o_local, beam_dir, rx_local, r_t, tan_h, floor,
                                site.z_top_local)
             if proofs is None or tiled.holds(target, proofs[None, :])[0]:
+                tiled.chunk_done()
                 return hits
             box = union(np.array([box, proofs]))
             ahead = union(np.array([ahead, box]))
