@@ -14,7 +14,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from muls.errors import ParameterError
-from muls.runtime import kernel
 from scanner_sim.config import (
     CableObject,
     ConeMineObject,
@@ -27,6 +26,7 @@ from scanner_sim.config import (
     reflectance_of,
 )
 from scanner_sim.io.ply import ply_element_counts
+from scanner_sim.world.facets import face_geometry
 from scanner_sim.world.materials import LABELS
 from scanner_sim.world.terrain import HeightField, generate_heightfield, rock_meshes
 
@@ -85,7 +85,7 @@ class Scene:
         # Local origin: the bounding box centre rounded to whole metres (a readable number).
         self.local_origin = np.round(0.5 * (lo + hi)) if local_origin is None else np.asarray(local_origin, float)
         local = self.vertices - self.local_origin
-        normal, area2 = _face_geometry(local, faces)
+        normal, area2 = face_geometry(local, faces)
         scale = np.array([_mesh_scale(v) for v in verts])
         keep = area2 > DEGENERATE_AREA * scale[part] ** 2  # degenerate triangles go: Embree and normals need area
         self.faces, part, self.face_normal = faces[keep], part[keep], normal[keep]
@@ -156,32 +156,9 @@ def _mesh_scale(v: np.ndarray) -> float:
     return max(1e-12, float(np.ptp(v, axis=0).max()) if len(v) else 1.0)
 
 
-@kernel(nogil=True)
-def _face_geometry(vertices, faces):
-    """Unit normal (n, 3) (right-hand winding; nan for a degenerate face) and twice the area (n,) of each face
-    (n, 3) of ``vertices`` (m, 3) float64, in one pass: the same arithmetic as numpy's cross and norm."""
-    n = faces.shape[0]
-    normal = np.empty((n, 3))
-    area2 = np.empty(n)
-    for i in range(n):
-        a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
-        e1x, e1y, e1z = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
-        e2x, e2y, e2z = vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1], vertices[c, 2] - vertices[a, 2]
-        nx = e1y * e2z - e1z * e2y
-        ny = e1z * e2x - e1x * e2z
-        nz = e1x * e2y - e1y * e2x
-        length = math.sqrt(nx * nx + ny * ny + nz * nz)
-        area2[i] = length
-        if length > 0.0:
-            normal[i, 0], normal[i, 1], normal[i, 2] = nx / length, ny / length, nz / length
-        else:
-            normal[i, 0], normal[i, 1], normal[i, 2] = np.nan, np.nan, np.nan
-    return normal, area2
-
-
 def _nondegenerate(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     """(m,) bool: the faces f (m, 3) of vertices v (n, 3) that are not degenerate."""
-    return _face_geometry(np.ascontiguousarray(v, np.float64), np.ascontiguousarray(f, np.int64))[1] > (
+    return face_geometry(np.ascontiguousarray(v, np.float64), np.ascontiguousarray(f, np.int64))[1] > (
         DEGENERATE_AREA * _mesh_scale(v) ** 2)
 
 
@@ -390,10 +367,25 @@ def build_scene(config, tile_m: float | None = None) -> Scene:
                               f"finite or beyond +-{MAX_COORDINATE_M:.0e} m; check them (metres)")
         parts.append(Part(obj.name, obj.type, v, f, label, refl, centreline))
     if hf is not None and (tile_m or tiled(hf)):
-        from scanner_sim.world.site import TILE_M, SiteScene  # the site's module builds on this one
-
-        return SiteScene(hf, LABELS[sb.label], reflectance_of(sb), parts, tile_m or TILE_M)
+        return site_scene(hf, SceneObject(0, "seabed", "seabed", LABELS[sb.label], reflectance_of(sb), 0, 0), parts,
+                          tile_m)
     return Scene(parts, hf)
+
+
+def site_scene(heightfield: HeightField, seabed: SceneObject, parts: list[Part], tile_m: float | None = None):
+    """The :class:`scanner_sim.world.site.SiteScene` of a seabed (``seabed``: object 0, no faces of its own) and the
+    other ``parts``, in the frame the whole :class:`Scene` of them would have (its local origin: the bounding box
+    centre in whole metres; its extent)."""
+    from scanner_sim.world.site import SiteScene  # the site's module builds on this one's objects, not on it
+
+    x_lo, x_hi, y_lo, y_hi = heightfield.extent_m
+    lo = np.array([x_lo, y_lo, heightfield.heights_m.min()])
+    hi = np.array([x_hi, y_hi, heightfield.heights_m.max()])
+    for p in parts:
+        lo, hi = np.minimum(lo, p.vertices.min(axis=0)), np.maximum(hi, p.vertices.max(axis=0))
+    origin = np.round(0.5 * (lo + hi))
+    extent = float(np.abs(np.r_[lo - origin, hi - origin]).max())
+    return SiteScene(heightfield, seabed, Scene(parts, None, origin) if parts else None, origin, extent, tile_m)
 
 
 def tiled(heightfield: HeightField) -> bool:

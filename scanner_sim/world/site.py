@@ -20,7 +20,7 @@ import numpy as np
 
 from muls.errors import ParameterError
 from scanner_sim.rays.seabed_grid import COARSE_CELL_M, SUPER_CELL_M
-from scanner_sim.world.scene import Part, Scene, SceneObject, _face_geometry
+from scanner_sim.world.facets import face_geometry
 from scanner_sim.world.terrain import HeightField
 
 #: [m] Side of a tile, about: rounded up to whole blocks of the proof grid's super cells (so that a window's proof
@@ -60,8 +60,11 @@ class WindowScene:
 
 
 class SiteScene:
-    """A scene whose seabed is tiled: the height field whole, the other parts as one mesh (``parts``: a
-    :class:`~scanner_sim.world.scene.Scene` of them in the site's local frame, or None).
+    """A scene whose seabed is tiled: the height field whole, the other parts as one mesh. ``seabed``: the seabed's
+    :class:`~scanner_sim.world.scene.SceneObject` (object 0); ``parts``: a :class:`~scanner_sim.world.scene.Scene` of
+    the other parts in the site's frame, or None; ``local_origin`` (3,) [m] and ``local_extent_m``: the whole
+    scene's (:func:`scanner_sim.world.scene.site_scene` builds them all); ``tile_m``: about a tile's side [m]
+    (default :data:`TILE_M`).
 
     Like a :class:`~scanner_sim.world.scene.Scene` it has ``heightfield``, ``objects`` (the seabed first, object 0),
     ``local_origin``, ``local_extent_m``, ``n_faces`` (the whole scene's), :meth:`surface_height` and
@@ -70,20 +73,12 @@ class SiteScene:
     ``face_surface[f]`` answers for faces numbered as in the whole scene. ``tile_cells``: cells per tile side.
     """
 
-    def __init__(self, heightfield: HeightField, label: int, reflectance: float, parts: list[Part],
-                 tile_m: float = TILE_M):
+    def __init__(self, heightfield: HeightField, seabed, parts, local_origin: np.ndarray, local_extent_m: float,
+                 tile_m: float | None = None):
         hf = self.heightfield = heightfield
         ny, nx = hf.shape
         self.seabed_faces = 2 * (nx - 1) * (ny - 1)
-        self.seabed_label, self.seabed_reflectance = int(label), float(reflectance)
-        x_lo, x_hi, y_lo, y_hi = hf.extent_m
-        lo = np.array([x_lo, y_lo, hf.heights_m.min()])
-        hi = np.array([x_hi, y_hi, hf.heights_m.max()])
-        for p in parts:
-            lo, hi = np.minimum(lo, p.vertices.min(axis=0)), np.maximum(hi, p.vertices.max(axis=0))
-        self.local_origin = np.round(0.5 * (lo + hi))  # as Scene's: the bounding box centre in whole metres
-        self.local_extent_m = float(np.abs(np.r_[lo - self.local_origin, hi - self.local_origin]).max())
-        self.parts = Scene(parts, None, self.local_origin) if parts else None
+        self.local_origin, self.local_extent_m, self.parts = np.asarray(local_origin, float), local_extent_m, parts
         z32 = np.float32(hf.heights_m - self.local_origin[2])
         z_top, z_low = float(z32.max()), float(z32.min())
         if self.parts is not None:
@@ -93,18 +88,16 @@ class SiteScene:
         self.z_top_local, self.z_low_local = z_top, z_low
         k = max(1, round(COARSE_CELL_M / hf.spacing_m))
         block = k * max(1, round(SUPER_CELL_M / (k * hf.spacing_m)))  # cells per super cell of the proof grid
-        self.tile_cells = block * max(1, math.ceil(tile_m / (block * hf.spacing_m)))
+        self.tile_cells = block * max(1, math.ceil((tile_m or TILE_M) / (block * hf.spacing_m)))
         t = self.tile_cells
         pad = np.full((-(-(ny - 1) // t) * t, -(-(nx - 1) // t) * t), np.inf)  # each tile's lowest node
         pad[:ny - 1, :nx - 1] = np.minimum(np.minimum(hf.heights_m[:-1, :-1], hf.heights_m[1:, :-1]),
                                            np.minimum(hf.heights_m[:-1, 1:], hf.heights_m[1:, 1:]))
         #: (tiles y, tiles x) [m] local: the lowest seabed node of each tile (objects: ``z_low_local``).
         self.tile_low = pad.reshape(pad.shape[0] // t, t, pad.shape[1] // t, t).min(axis=(1, 3)) - self.local_origin[2]
-        seabed = SceneObject(0, "seabed", "seabed", self.seabed_label, self.seabed_reflectance, 0, 0)
-        others = [] if self.parts is None else [
-            SceneObject(o.object_id + 1, o.name, o.kind, o.label, o.reflectance, o.face_start, o.face_stop,
-                        o.centreline) for o in self.parts.objects]
+        others = [] if parts is None else [dataclasses.replace(o, object_id=o.object_id + 1) for o in parts.objects]
         self.objects = [seabed, *others]
+        self.seabed_label, self.seabed_reflectance = int(seabed.label), float(seabed.reflectance)
         empty = np.zeros((0, 3))
         self.vertices = empty if self.parts is None else self.parts.vertices
         self.faces = empty.astype(np.int64) if self.parts is None else self.parts.faces
@@ -120,7 +113,7 @@ class SiteScene:
         """Seabed z [m] at world (x, y) from the height field (rocks and objects not included)."""
         return self.heightfield.height(x_m, y_m)
 
-    def object_named(self, name: str) -> SceneObject:
+    def object_named(self, name: str):
         for o in self.objects:
             if o.name == name:
                 return o
@@ -139,15 +132,15 @@ class SiteScene:
         _, seabed_faces = window_hf.mesh()
         seabed_vertices = np.c_[gx.ravel(), gy.ravel(), heights.ravel()]
         n = seabed_faces.shape[0]
-        normal, _ = _face_geometry(seabed_vertices - self.local_origin, seabed_faces)
-        seabed = SceneObject(0, "seabed", "seabed", self.seabed_label, self.seabed_reflectance, 0, n)
+        normal, _ = face_geometry(seabed_vertices - self.local_origin, seabed_faces)
+        seabed = dataclasses.replace(self.objects[0], face_start=0, face_stop=n)
         o = self.parts
         if o is None:
             return WindowScene(seabed_vertices, seabed_faces, normal, np.full(n, self.seabed_reflectance),
                                np.full(n, self.seabed_label, np.int16), np.zeros(n, np.int32), np.zeros(n, np.int32),
                                self.local_origin, self.local_extent_m, window_hf, [seabed], (j0, j1, i0, i1))
-        others = [SceneObject(x.object_id, x.name, x.kind, x.label, x.reflectance, x.face_start + n, x.face_stop + n,
-                              x.centreline) for x in self.objects[1:]]
+        others = [dataclasses.replace(x, face_start=x.face_start + n, face_stop=x.face_stop + n)
+                  for x in self.objects[1:]]
         return WindowScene(
             np.concatenate([seabed_vertices, o.vertices]), np.concatenate([seabed_faces, o.faces + len(seabed_vertices)]),
             np.concatenate([normal, o.face_normal]), np.r_[np.full(n, self.seabed_reflectance), o.face_reflectance],
