@@ -10,8 +10,8 @@ from scanner_sim.rays.caster import RayCaster
 from scanner_sim.rays.tiles import TiledTarget
 from scanner_sim.survey.pipeline import simulate_pass
 from scanner_sim.survey.setup import PassOptions, PassSetup
-from scanner_sim.world.scene import TILED_ABOVE_TRIANGLES, Scene, build_scene, tiled
-from scanner_sim.world.site import SiteScene
+from scanner_sim.world.scene import Scene, build_scene
+from scanner_sim.world.site import TILED_ABOVE_TRIANGLES, SiteScene, tiled
 from scanner_sim.world.terrain import HeightField
 
 #: The lawnmower over rocks at a 25th of its pulses, in chunks of 2 s: 6,000 pulses reach 120 m of its track.
@@ -121,3 +121,10 @@ def test_pass_over_a_site_builds_windows_as_it_goes(lawnmower, monkeypatch):
     assert setup.target.windows_built > before + 5
     assert len(setup.target._windows) <= tiles.KEPT_WINDOWS
     assert isinstance(PassSetup.build(config, options, build_scene(config)).scene, Scene)
+
+
+def test_a_tile_size_that_is_not_positive_is_refused_in_one_line():
+    from muls.errors import ParameterError
+
+    with pytest.raises(ParameterError, match=r"^tile_m = -4\.0: must be a tile's side in metres, > 0"):
+        build_scene(load_scene("seabed_lawnmower"), tile_m=-4.0)

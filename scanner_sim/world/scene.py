@@ -28,6 +28,7 @@ from scanner_sim.config import (
 from scanner_sim.io.ply import ply_element_counts
 from scanner_sim.world.facets import face_geometry
 from scanner_sim.world.materials import LABELS
+from scanner_sim.world.site import SiteScene, tiled
 from scanner_sim.world.terrain import HeightField, generate_heightfield, rock_meshes
 
 #: Largest world coordinate [m]: beyond any place on Earth in a projected CRS (UTM northings reach 1e7 m);
@@ -114,10 +115,6 @@ class Scene:
             if o.name == name:
                 return o
         raise ParameterError(f"object = {name!r}: the scene has {', '.join(o.name for o in self.objects)}")
-
-#: A seabed of more triangles than this is tiled (:class:`scanner_sim.world.site.SiteScene`); smaller scenes are one
-#: mesh. Two million triangles hold about 0.6 GB of mesh, face attributes and BVH at once (docs/design.md).
-TILED_ABOVE_TRIANGLES = 2_000_000
 
 #: A triangle with twice its area below this times the square of its mesh's size is degenerate.
 DEGENERATE_AREA = 1e-14
@@ -293,8 +290,10 @@ def panel_mesh(center_m, size_m, normal, up):
 
 def build_scene(config, tile_m: float | None = None) -> Scene:
     """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds); a seabed of
-    more than :data:`TILED_ABOVE_TRIANGLES` triangles gives a :class:`scanner_sim.world.site.SiteScene` instead, in
+    more than :data:`~scanner_sim.world.site.TILED_ABOVE_TRIANGLES` triangles gives a :class:`SiteScene` instead, in
     tiles of about :data:`scanner_sim.world.site.TILE_M`, or of ``tile_m`` [m] when given (any seabed then)."""
+    if tile_m is not None and not tile_m > 0:
+        raise ParameterError(f"tile_m = {tile_m!r}: must be a tile's side in metres, > 0 (or None: tiled by size)")
     if not isinstance(config, SceneConfig):
         raise TypeError(f"config must be a SceneConfig (scanner_sim.load_scene(name_or_path) gives one), not "
                         f"{type(config).__name__} {config!r:.60}")
@@ -376,8 +375,6 @@ def site_scene(heightfield: HeightField, seabed: SceneObject, parts: list[Part],
     """The :class:`scanner_sim.world.site.SiteScene` of a seabed (``seabed``: object 0, no faces of its own) and the
     other ``parts``, in the frame the whole :class:`Scene` of them would have (its local origin: the bounding box
     centre in whole metres; its extent)."""
-    from scanner_sim.world.site import SiteScene  # the site's module builds on this one's objects, not on it
-
     x_lo, x_hi, y_lo, y_hi = heightfield.extent_m
     lo = np.array([x_lo, y_lo, heightfield.heights_m.min()])
     hi = np.array([x_hi, y_hi, heightfield.heights_m.max()])
@@ -386,13 +383,6 @@ def site_scene(heightfield: HeightField, seabed: SceneObject, parts: list[Part],
     origin = np.round(0.5 * (lo + hi))
     extent = float(np.abs(np.r_[lo - origin, hi - origin]).max())
     return SiteScene(heightfield, seabed, Scene(parts, None, origin) if parts else None, origin, extent, tile_m)
-
-
-def tiled(heightfield: HeightField) -> bool:
-    """Whether a seabed is tiled (:class:`scanner_sim.world.site.SiteScene`): more triangles than
-    :data:`TILED_ABOVE_TRIANGLES`."""
-    ny, nx = heightfield.shape
-    return 2 * (nx - 1) * (ny - 1) > TILED_ABOVE_TRIANGLES
 
 
 def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]:

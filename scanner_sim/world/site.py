@@ -2,7 +2,7 @@
 square tiles around where the pass's rays go, the other objects meshed whole.
 
 A :class:`SiteScene` is what :func:`scanner_sim.world.scene.build_scene` gives for a seabed of more than
-:data:`~scanner_sim.world.scene.TILED_ABOVE_TRIANGLES` triangles (docs/design.md#site-scale-scenes). It has the
+:data:`TILED_ABOVE_TRIANGLES` triangles (docs/design.md#site-scale-scenes). It has the
 local origin, local extent, objects, labels and surfaces the whole :class:`~scanner_sim.world.scene.Scene` would
 have; :meth:`SiteScene.window` builds the mesh of a rectangle of tiles (its seabed triangles, then every other
 object) as a :class:`WindowScene`, each face with the very normal, material, label, object and surface it has in
@@ -22,6 +22,10 @@ from muls.errors import ParameterError
 from scanner_sim.rays.seabed_grid import COARSE_CELL_M, SUPER_CELL_M
 from scanner_sim.world.facets import face_geometry
 from scanner_sim.world.terrain import HeightField
+
+#: A seabed of more triangles than this is tiled (a :class:`SiteScene`); smaller scenes are one mesh. Two million
+#: triangles hold about 0.6 GB of mesh, face attributes and BVH at once (docs/design.md#site-scale-scenes).
+TILED_ABOVE_TRIANGLES = 2_000_000
 
 #: [m] Side of a tile, about: rounded up to whole blocks of the proof grid's super cells (so that a window's proof
 #: grid is the whole scene's, cut out). 8 m at 0.25 m cells is 2,048 triangles a tile.
@@ -159,6 +163,12 @@ class SiteScene:
         i, j = np.divmod(cell, j1 - j0)
         seabed = upper * (self.seabed_faces // 2) + (i + i0) * (nx - 1) + (j + j0)
         return np.where(tri < 2 * cells, seabed, tri - 2 * cells + self.seabed_faces)
+
+
+def tiled(heightfield: HeightField) -> bool:
+    """Whether a seabed is tiled: more triangles than :data:`TILED_ABOVE_TRIANGLES`."""
+    ny, nx = heightfield.shape
+    return 2 * (nx - 1) * (ny - 1) > TILED_ABOVE_TRIANGLES
 
 
 class _SiteSurfaces:
