@@ -28,8 +28,10 @@ from scanner_sim.rays.caster import RayCaster
 from scanner_sim.rays.hits import Hits
 from scanner_sim.rays.seabed_grid import seabed_grid
 
-#: Windows a pass keeps built at once (the chunks in flight share them; the least recently used goes first).
-KEPT_WINDOWS = 2
+#: Windows a pass keeps built at once (the chunks in flight share them; the least recently used goes first). One is
+#: enough: a chunk still casting into a window let go holds it until it is done, and the chunks that follow are in
+#: the new one (a window reaches on along the line and a chunk behind).
+KEPT_WINDOWS = 1
 #: Chunks that give the free heap back to the system as they finish, after a window is let go (one per worker: the
 #: window is freed when the last chunk casting into it is done). glibc otherwise keeps up to 512 MB of freed memory
 #: for reuse (muls.runtime), which the windows' arrays, freed as the pass moves on, would fill.
