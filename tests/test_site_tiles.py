@@ -155,3 +155,21 @@ def test_a_chunks_coverage_tally_takes_memory_for_its_pulses_not_for_the_whole_g
     small.add(r, outcome, v)
     np.testing.assert_array_equal(small.reaching, 2 * np.bincount(r[r >= 0], minlength=50))
     np.testing.assert_array_equal(small.valid, 2 * np.bincount(v[v >= 0], minlength=50))
+
+
+def test_bench_site_reports_the_figures_its_targets_are_judged_on(monkeypatch):
+    """``scanner-sim bench-site --json``'s keys, on a small stand-in (in this process, a minute of survey): the
+    site's triangles, set-up, peak memory and pulses/s, the small scene's pulses/s, the memory by minutes of survey,
+    and the rule by which pulses were left out."""
+    from scanner_sim.perf import sitebench
+
+    monkeypatch.setattr(sitebench, "_in_fresh_process", lambda fn, *args: fn(*args))
+    monkeypatch.setattr(sitebench, "SITE_SIZE_M", (80.0, 40.0))
+    monkeypatch.setattr(sitebench, "SMALL_SIZE_M", (60.0, 40.0))
+    monkeypatch.setattr(sitebench, "SMALL_SECONDS", 10.0)
+    monkeypatch.setattr(sitebench, "RSS_MINUTES", (1,))
+    result = sitebench.bench_site("fast", minutes=1)
+    assert result["site"]["triangles"] == 2 * 320 * 160
+    assert {"setup_s", "peak_rss_mb", "pulses_per_s"} <= result["site"].keys() and result["site"]["pulses"] > 30000
+    assert result["small"]["pulses_per_s"] > 0 and list(result["rss_mb_by_minutes"]) == ["1"]
+    assert result["rss_mb_by_minutes"]["1"] > 50 and "every other pulse" in result["subsampling"]
