@@ -151,6 +151,18 @@ def _tune_malloc() -> bool:
         return False
 
 
+def release_free_heap() -> bool:
+    """Give the heap's free pages back to the system (glibc's ``malloc_trim``): the raised trim threshold keeps up
+    to :data:`TRIM_THRESHOLD_BYTES` of freed memory resident for reuse, which a pass that frees large arrays now and
+    then (a site's windows) would otherwise carry as it goes. False where malloc_trim is unavailable (not glibc)."""
+    try:
+        import ctypes
+
+        return bool(ctypes.CDLL("libc.so.6").malloc_trim(0))
+    except (OSError, AttributeError):
+        return False
+
+
 def _remove_stale_caches() -> None:
     base = cache_base()
     if os.environ.get("NUMBA_CACHE_DIR") or not base.is_dir():

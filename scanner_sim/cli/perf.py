@@ -1,4 +1,4 @@
-"""Subcommands that measure speed: ``bench`` and ``bench-rays``."""
+"""Subcommands that measure speed: ``bench``, ``bench-rays`` and ``bench-site``."""
 
 from __future__ import annotations
 
@@ -94,4 +94,33 @@ def _cmd_bench_rays(args) -> int:
     else:
         for k, v in result.items():
             print(f"{k:28s} {v}")
+    return 0
+
+
+# -- bench-site ---------------------------------------------------------------------------------------------
+@subcommand("bench-site")
+def _add_bench_site(sub):
+    p = sub.add_parser("bench-site", help="a site-scale pass (1 km x 200 m at 0.25 m, 6.4 M triangles, tiled) beside "
+                       "a small scene's: set-up, peak memory, pulses/s, memory after 10 and 60 minutes of survey")
+    p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), default="balanced", help="fidelity level of both passes")
+    p.add_argument("--minutes", type=positive_int(), default=60, help="minutes of survey of the site's pass")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_bench_site)
+
+
+def _cmd_bench_site(args) -> int:
+    from scanner_sim.perf.sitebench import bench_site
+
+    result = bench_site(args.fidelity, args.minutes)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    site, small = result["site"], result["small"]
+    print(f"site  {site['triangles']:,} triangles: set-up {site['setup_s']:.1f} s, peak {site['peak_rss_mb']:,.0f} MB, "
+          f"{site['pulses_per_s']:,.0f} pulses/s ({site['windows_built']} windows built)")
+    print(f"small {small['triangles']:,} triangles: {small['pulses_per_s']:,.0f} pulses/s; site/small "
+          f"{result['site_over_small_pulses_per_s']:.2f}")
+    print("resident memory by minutes of survey: " + ", ".join(f"{m} min {mb:,.0f} MB"
+                                                               for m, mb in result["rss_mb_by_minutes"].items()))
+    print(result["subsampling"])
     return 0

@@ -37,7 +37,9 @@ from scanner_sim.config.errors import checked_at, invalid
 from scanner_sim.config.sections import MAX_SEED, check_depth_m
 from scanner_sim.world.materials import LABELS, MATERIALS
 
-MAX_SEABED_TRIANGLES = 2_000_000
+#: A seabed above 2,000,000 triangles is tiled (scanner_sim.world.site): the pass holds its heights (8 bytes a node,
+#: about 4 a triangle) and meshes only windows of it; generating the relief takes about five times the heights.
+MAX_SEABED_TRIANGLES = 32_000_000
 
 
 def surface(default_material: str, default_label: str) -> type[StrictModel]:
@@ -111,7 +113,7 @@ class SeabedConfig(surface("terrigenous_sand", "seabed")):
     """x, y extent [m]."""
     center_m: Vector(2) = (0.0, 0.0)
     resolution_m: Positive = 0.1
-    """Node spacing [m]; at most 2,000,000 triangles."""
+    """Node spacing [m]; at most 32,000,000 triangles (above 2,000,000 the seabed is tiled)."""
     depth_m: NonNegative = 20.0
     """Mean level z = -depth_m [m]."""
     seed: Integer(ge=0, le=MAX_SEED) = 0

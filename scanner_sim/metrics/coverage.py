@@ -82,11 +82,11 @@ class BinTally:
     def add(self, reaching_bin, outcome, valid_bin) -> None:
         """reaching_bin (n,) and outcome (n,) per pulse (bin -1: none; outcome VALID or a failure code);
         valid_bin (m,) per valid point (-1: outside every bin)."""
-        n = self.n_bins
         reaching_bin, outcome, valid_bin = np.asarray(reaching_bin), np.asarray(outcome), np.asarray(valid_bin)
         inside = reaching_bin >= 0
-        self.reaching += np.bincount(reaching_bin[inside], minlength=n)
-        self.valid += np.bincount(valid_bin[valid_bin >= 0], minlength=n)
+        # Added where the chunk's pulses are, not as counts over every bin: a site's grid has millions of cells.
+        np.add.at(self.reaching, reaching_bin[inside], 1)
+        np.add.at(self.valid, valid_bin[valid_bin >= 0], 1)
         fail = inside & (outcome >= 0)
         np.add.at(self.failed, (reaching_bin[fail], outcome[fail]), 1)
 

@@ -16,9 +16,11 @@ COARSE_CELL_M = 0.1
 SUPER_CELL_M = 1.0
 
 
-def seabed_grid(scene, caster):
+def seabed_grid(scene, caster, z_top_m: float | None = None):
     """The :class:`scanner_sim.rays.seabed_kernels.SeabedGrid` of ``scene``'s seabed in ``caster``'s local frame, or None
-    where the scene has no height field or its seabed faces are not the height field's own, in its order."""
+    where the scene has no height field or its seabed faces are not the height field's own, in its order.
+    ``z_top_m``: the highest local float32 z of the whole scene when ``scene`` is a window of it (default: the
+    caster's own)."""
     hf = scene.heightfield
     seabeds = [o for o in scene.objects if o.kind == "seabed"]
     if hf is None or len(seabeds) != 1:
@@ -53,8 +55,9 @@ def seabed_grid(scene, caster):
     super_top = _block_max(np.maximum(seabed_top, object_top), sk)
     plane = np.empty((2 * cells, 4))
     seabed_planes(caster.vertices, caster.faces, sb.face_start, sb.face_stop, plane)
+    z_top = float(caster.vertices[:, 2].max()) if z_top_m is None else z_top_m
     return SeabedGrid(float(x0), float(y0), float(hf.spacing_m), int(nx), int(ny), int(sb.face_start), int(k),
-                      gradient, seabed_top, object_top, float(caster.vertices[:, 2].max()) + 1e-3, plane,
+                      gradient, seabed_top, object_top, z_top + 1e-3, plane,
                       int(sk), super_top, int(scene.face_object[sb.face_start]))
 
 

@@ -33,6 +33,7 @@ from scanner_sim.rays.auto import AutoCast
 from scanner_sim.rays.beams import BeamPattern, beam_pattern
 from scanner_sim.rays.cast import BeamCast, CastScene
 from scanner_sim.rays.hits import Hits
+from scanner_sim.rays.tiles import TiledCast, TiledTarget
 from scanner_sim.survey.budget import check_pass_budget
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.georeference import LinesOfSight, georeference
@@ -42,6 +43,7 @@ from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.ranging_precision import measure_ranging_precision, panel_ranges_m
 from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel, with_uncertainty
 from scanner_sim.world.scene import Scene, build_scene
+from scanner_sim.world.site import SiteScene
 
 
 @dataclass(frozen=True)
@@ -108,7 +110,7 @@ def check_pass_arguments(config, options, scene) -> None:
         raise _type_error("config", "a SceneConfig (scanner_sim.load_scene(name_or_path) gives one)", config)
     if not isinstance(options, PassOptions):
         raise _type_error("options", "a PassOptions (scanner_sim.PassOptions(max_pulses=...))", options)
-    if scene is not None and not isinstance(scene, Scene):
+    if scene is not None and not isinstance(scene, (Scene, SiteScene)):
         raise _type_error("scene", "a Scene built from this config (scanner_sim.build_scene(config)) or None", scene)
 
 
@@ -199,6 +201,8 @@ class Physics:
 def ray_stage(level: FidelityLevel, target: CastScene, pattern: BeamPattern, geometry) -> BeamCast:
     """The ray stage of ``level``: the ``auto`` level's (:class:`~scanner_sim.rays.auto.AutoCast`) or the beam cast
     every other level shares (:class:`~scanner_sim.rays.cast.BeamCast`)."""
+    if isinstance(target, TiledTarget):
+        return TiledCast(target, pattern, geometry, level.shadow_rays, level.adaptive)
     return (AutoCast if level.adaptive else BeamCast)(target, pattern, geometry, level.shadow_rays)
 
 
@@ -291,7 +295,8 @@ class PassSetup:
         survey = config.survey
         water = config.water_model()
         scene = build_scene(config) if scene is None else scene
-        target = CastScene.build(scene)  # the Embree BVH and the seabed's proof grid: set-up, not part of the pass
+        # The Embree BVH and the seabed's proof grid: set-up, not part of the pass (a site's: per window, as it goes).
+        target = TiledTarget(scene) if isinstance(scene, SiteScene) else CastScene.build(scene)
         trajectory = checked_trajectory(config, scene)
         scanner = Scanner.from_config(config.scanner, config.instrument.to_instrument(water))
         rate = scanner.pulse_rate_hz

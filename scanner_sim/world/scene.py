@@ -36,6 +36,7 @@ from scanner_sim.io.ply import ply_element_counts
 from scanner_sim.world.materials import LABELS
 from scanner_sim.world.mesh_seabed import seabed_of_meshes
 from scanner_sim.world.raster import load_raster_seabed, plan_bounds
+from scanner_sim.world.site import SiteScene, tiled
 from scanner_sim.world.terrain import HeightField, generate_heightfield, rock_meshes
 
 #: Largest world coordinate [m]: beyond any place on Earth in a projected CRS (UTM northings reach 1e7 m);
@@ -327,15 +328,23 @@ def panel_mesh(center_m, size_m, normal, up):
 # Scene from a validated config
 # ------------------------------------------------------------------------------------------------------
 
-def build_scene(config) -> Scene:
-    """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds)."""
+def build_scene(config, tile_m: float | None = None) -> Scene:
+    """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds); a procedural
+    seabed of more than :data:`~scanner_sim.world.site.TILED_ABOVE_TRIANGLES` triangles gives a :class:`SiteScene`
+    instead, in tiles of about :data:`scanner_sim.world.site.TILE_M`, or of ``tile_m`` [m] when given (any procedural
+    seabed then)."""
+    if tile_m is not None and not tile_m > 0:
+        raise ParameterError(f"tile_m = {tile_m!r}: must be a tile's side in metres, > 0 (or None: tiled by size)")
     if not isinstance(config, SceneConfig):
         raise TypeError(f"config must be a SceneConfig (scanner_sim.load_scene(name_or_path) gives one), not "
                         f"{type(config).__name__} {config!r:.60}")
     parts: list[Part] = []
-    hf, info = None, None
+    hf, info, site = None, None, False
     sb = config.seabed
     if isinstance(sb, RasterSeabedConfig):
+        if tile_m is not None:
+            raise ParameterError(f"tile_m = {tile_m!r}: tiles serve procedural seabeds; a raster seabed is read as one "
+                                 "window around the survey lines (seabed.margin_m)")
         raster = load_raster_seabed(sb, plan_bounds(config), config.crs)
         hf, info = raster.heightfield, raster.info
         v, f = hf.mesh()
@@ -349,8 +358,10 @@ def build_scene(config) -> Scene:
         hf = generate_heightfield(sb.center_m, sb.size_m, sb.resolution_m, sb.depth_m, sb.relief.rms_m,
                                   sb.relief.wavelength_m, sb.relief.hurst, sb.ripples.amplitude_m,
                                   sb.ripples.wavelength_m, sb.ripples.crest_deg, sb.ripples.sinuosity, rng)
-        v, f = hf.mesh()
-        parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True))
+        site = bool(tile_m) or tiled(hf)
+        if not site:
+            v, f = hf.mesh()
+            parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True))
         rk = sb.rocks
         if rk.count:
             rocks = rock_meshes(hf, rk.count, (rk.radius_min_m, rk.radius_max_m), rng)
@@ -408,7 +419,26 @@ def build_scene(config) -> Scene:
                               f"finite or beyond +-{MAX_COORDINATE_M:.0e} m; check them (metres)")
         kind = "seabed" if index in seabed_meshes else obj.type  # a mesh seabed is the background, as the procedural
         parts.append(Part(obj.name, kind, v, f, label, refl, centreline, one_surface=index in seabed_meshes))
+    if site:
+        return site_scene(hf, SceneObject(0, "seabed", "seabed", LABELS[sb.label], reflectance_of(sb), 0, 0), parts,
+                          tile_m, crs=to_crs(config.crs))
     return Scene(parts, hf, crs=to_crs(config.crs), seabed_info=info)
+
+
+def site_scene(heightfield: HeightField, seabed: SceneObject, parts: list[Part], tile_m: float | None = None,
+               crs=None):
+    """The :class:`scanner_sim.world.site.SiteScene` of a seabed (``seabed``: object 0, no faces of its own) and the
+    other ``parts``, in the frame the whole :class:`Scene` of them would have (its local origin: the bounding box
+    centre in whole metres; its extent); ``crs`` as :class:`Scene`'s."""
+    x_lo, x_hi, y_lo, y_hi = heightfield.extent_m
+    lo = np.array([x_lo, y_lo, heightfield.heights_m.min()])
+    hi = np.array([x_hi, y_hi, heightfield.heights_m.max()])
+    for p in parts:
+        lo, hi = np.minimum(lo, p.vertices.min(axis=0)), np.maximum(hi, p.vertices.max(axis=0))
+    origin = np.round(0.5 * (lo + hi))
+    extent = float(np.abs(np.r_[lo - origin, hi - origin]).max())
+    return SiteScene(heightfield, seabed, Scene(parts, None, origin) if parts else None, origin, extent, tile_m,
+                     crs=crs)
 
 
 def placed_mesh(obj: MeshObject, index: int, hf: HeightField | None) -> tuple[np.ndarray, np.ndarray]:
