@@ -36,7 +36,7 @@ def ensemble_calibration(config: SceneConfig, options: PassOptions, count: int) 
         raise ValueError(f"count: {count!r} is not allowed; the number of passes is an integer >= 1")
     base = PassSetup.build(config, options)
     warm_up(base, options)
-    pooled, members, pulses = UncertaintySink(base), [], 0
+    pooled, members, pulses, points = UncertaintySink(base), [], 0, 0
     for survey_seed, navigation_seed in ensemble_seeds(base.seed, count):
         setup = base.with_seeds(survey_seed, navigation_seed)
         own = UncertaintySink(setup)
@@ -44,6 +44,7 @@ def ensemble_calibration(config: SceneConfig, options: PassOptions, count: int) 
             own.add(chunk)
             pooled.add(chunk)
             pulses += chunk.slots.size
+            points += len(chunk.points.xyz)
         cal = own.figures()["calibration"]
         members.append({"seed": survey_seed, "navigation_seed": navigation_seed, "points": cal["points"],
                         "vertical_within_tvu": cal["vertical_within_tvu"],
@@ -51,5 +52,5 @@ def ensemble_calibration(config: SceneConfig, options: PassOptions, count: int) 
     shares = np.array([m["vertical_within_tvu"] for m in members if m["vertical_within_tvu"] is not None])
     spread = ({"min": float(shares.min()), "max": float(shares.max()), "std": round(float(shares.std()), 4)}
               if shares.size else {"min": None, "max": None, "std": None})
-    return {"scene": config.name, "water": base.water_name, "seed": base.seed, "pulses": pulses,
+    return {"scene": config.name, "water": base.water_name, "seed": base.seed, "pulses": pulses, "points": points,
             **pooled.figures(), "ensemble": {"members": count, "seeds": members, "vertical_within_tvu_spread": spread}}
