@@ -212,3 +212,17 @@ def test_uncertainty_command_prints_the_calibration_as_json(capsys, tmp_path):
     assert sum(v["points"] for v in cal["per_channel"].values()) == cal["points"]
     assert 0.90 <= cal["vertical_within_tvu"] <= 0.99
     assert chart.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_uncertainty_command_pools_passes_of_derived_seeds(capsys):
+    """`--seeds 3`: the JSON names the three passes' seeds (the derived ones), their points add up to the pool's and
+    their shares, weighted by points, make the pooled share; `--seeds 0` is refused in one line, exit 2."""
+    assert main(["uncertainty", "mine_field", "--max-pulses", "200", "--seeds", "3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    members = out["ensemble"]["seeds"]
+    assert [(m["seed"], m["navigation_seed"]) for m in members] == ensemble_seeds(out["seed"], 3)
+    assert sum(m["points"] for m in members) == out["calibration"]["points"] and out["pulses"] == 600
+    weighted = sum(m["points"] * m["vertical_within_tvu"] for m in members) / out["calibration"]["points"]
+    assert out["calibration"]["vertical_within_tvu"] == pytest.approx(weighted, abs=1e-4)
+    assert main(["uncertainty", "mine_field", "--seeds", "0"]) == 2
+    assert "--seeds: must be an integer >= 1, not '0'" in capsys.readouterr().err

@@ -8,7 +8,7 @@ words, halved, of ``SeedSequence(seed, spawn_key=(i,))`` (the rule a dataset dra
 :func:`~scanner_sim.runs.dataset_draw.scene_seeds`): its ``survey.seed`` (the instrument's noise) and its
 ``platform.navigation_noise.seed``. The members share the built scene, its BVH and the TPU model
 (:meth:`~scanner_sim.survey.setup.PassSetup.with_seeds`): each member's points are those ``scanner-sim run`` gives
-with its seeds, judged by one ranging table, measured once through the first pass's physics.
+with its seeds, judged by one ranging table, measured once with the seed they derive from.
 """
 
 from __future__ import annotations
