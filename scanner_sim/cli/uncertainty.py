@@ -16,6 +16,9 @@ def _add_uncertainty(sub):
     p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--water", type=nonempty(), help="water preset instead of the scene's")
     p.add_argument("--seed", type=seed(), help="seed of the pass (default: the scene's survey.seed)")
+    p.add_argument("--seeds", type=positive_int(), default=1, metavar="N",
+                   help="run N passes, their survey and navigation-noise seeds derived from the seed, and pool their "
+                        "points (default 1: the pass itself); the JSON lists each pass's seeds and shares")
     p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), help="fidelity level (default: the scene's)")
     p.add_argument("--max-pulses", type=positive_int(), help="stop after this many pulses (default: the whole pass)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -35,14 +38,21 @@ def _cmd_uncertainty(args) -> int:
     config = config.with_overrides(set_overrides(args.set))  # --set, read as `run` reads it
     options = PassOptions(water=args.water, seed=args.seed, fidelity=args.fidelity, max_pulses=args.max_pulses,
                           progress=False, render=False)
-    summary = simulate_pass(config, options).summary
-    figures = summary["uncertainty"]
+    if args.seeds > 1:
+        from scanner_sim.metrics.tpu_ensemble import ensemble_calibration
+
+        summary = ensemble_calibration(config, options, args.seeds)
+        figures = {k: v for k, v in summary.items() if k not in ("scene", "water", "seed", "pulses", "points")}
+    else:
+        summary = simulate_pass(config, options).summary
+        figures = summary["uncertainty"]
     cal = figures["calibration"]
+    passes = f"{args.seeds} passes of seeds derived from {summary['seed']}" if args.seeds > 1 else f"seed {summary['seed']}"
     if args.chart is not None:
         from scanner_sim.render.calibration_chart import plot_calibration
 
         plot_calibration(args.chart, cal, title=f"{summary['scene']} in {summary['water']}: {summary['pulses']:,} "
-                                                f"pulses, seed {summary['seed']}")
+                                                f"pulses, {passes}")
     if args.json:
         print(json.dumps({"scene": summary["scene"], "water": summary["water"], "seed": summary["seed"],
                           "pulses": summary["pulses"], "points": summary["points"], **figures}, indent=2))
@@ -58,6 +68,10 @@ def _cmd_uncertainty(args) -> int:
     for name, row in rows:
         print(f"{name:16s} {row['points']:8,d} {_share(row['vertical_within_tvu']):>12s} "
               f"{_share(row['horizontal_within_thu']):>10s}")
+    if args.seeds > 1:
+        spread = figures["ensemble"]["vertical_within_tvu_spread"]
+        print(f"{passes}: |dz| <= TVU per pass from {_share(spread['min'])} to {_share(spread['max'])}, "
+              f"standard deviation {_share(spread['std'])}")
     if args.chart is not None:
         print(args.chart)
     return 0

@@ -319,6 +319,18 @@ class PassSetup:
         return dataclasses.replace(self, plan=dataclasses.replace(self.plan, level=level), model=model, pattern=pattern,
                                    rays=rays, handoff=handoff, physics=physics, tpu=tpu)
 
+    def with_seeds(self, survey_seed: int, navigation_seed: int) -> PassSetup:
+        """This pass with ``survey.seed`` and ``platform.navigation_noise.seed`` set, without building the BVH
+        again: the trajectory (its navigation noise) is built again and the physics draws with the new seed, so the
+        points are those :meth:`build` gives for the scene with these seeds. The gate follows the true poses, which
+        no seed moves, and is kept; so is the TPU model, its ranging table measured once through this pass's
+        physics (a table of the instrument in its water, which a seed changes only by the sampling noise of its
+        8,960 shots; measuring it again would cost a member about 20 times its 300 pulses)."""
+        seeds = {"survey.seed": survey_seed, "platform.navigation_noise.seed": navigation_seed}
+        config, given = self.config.with_overrides(seeds), self.given.with_overrides(seeds)
+        return dataclasses.replace(self, config=config, given=given, trajectory=checked_trajectory(config, self.scene),
+                                   physics=dataclasses.replace(self.physics, seed=config.survey.seed))
+
     @property
     def level(self) -> FidelityLevel:
         return self.plan.level
