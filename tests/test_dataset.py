@@ -73,6 +73,17 @@ def test_scene_draw_depends_on_seed_and_index_alone():
     assert all(a.drawn != b.drawn for a, b in zip(five.scenes, other.scenes))
 
 
+def test_dataset_scenes_draw_their_own_navigation_noise():
+    """Root cause: the dataset set survey.seed and seabed.seed but not platform.navigation_noise.seed, so every scene
+    drawn from a base with navigation noise repeated the base's one navigation error draw. Scene i's navigation
+    seed is the third word of its SeedSequence(seed).spawn(n)[i], halved."""
+    nine = parse_dataset(small_spec(9))
+    children = np.random.SeedSequence(11).spawn(9)
+    seeds = [s.config.platform.navigation_noise.seed for s in nine.scenes]
+    assert seeds == [int(child.generate_state(3, np.uint64)[2]) // 2 for child in children]
+    assert len(set(seeds)) == 9
+
+
 def test_drawn_values_stay_in_their_ranges_and_objects_in_the_area():
     dataset = parse_dataset(small_spec(40))
     altitudes = [s.drawn["platform.altitude_m"] for s in dataset.scenes]

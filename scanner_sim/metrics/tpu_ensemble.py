@@ -24,7 +24,7 @@ from scanner_sim.survey.setup import PassOptions, PassSetup
 
 def ensemble_seeds(seed: int, count: int) -> list[tuple[int, int]]:
     """(survey seed, navigation noise seed) of each of ``count`` members derived from ``seed`` (module doc)."""
-    return [scene_seeds(seed, i)[1:] for i in range(count)]
+    return [scene_seeds(seed, i)[1:3] for i in range(count)]
 
 
 def ensemble_calibration(config: SceneConfig, options: PassOptions, count: int) -> dict:

@@ -45,11 +45,12 @@ class DrawnScene:
     config: SceneConfig
 
 
-def scene_seeds(seed: int, index: int) -> tuple[np.random.SeedSequence, int, int]:
-    """Scene ``index``'s seed sequence and its survey and seabed seeds (each in 0 .. 2**63 - 1)."""
+def scene_seeds(seed: int, index: int) -> tuple[np.random.SeedSequence, int, int, int]:
+    """Scene ``index``'s seed sequence and its survey, seabed and navigation-noise seeds (each in 0 .. 2**63 - 1: the
+    sequence's first three 64-bit words halved; the first two do not depend on how many words are drawn)."""
     sequence = np.random.SeedSequence(seed, spawn_key=(index,))
-    survey_seed, seabed_seed = (int(word >> np.uint64(1)) for word in sequence.generate_state(2, np.uint64))
-    return sequence, survey_seed, seabed_seed
+    survey_seed, seabed_seed, navigation_seed = (int(w >> np.uint64(1)) for w in sequence.generate_state(3, np.uint64))
+    return sequence, survey_seed, seabed_seed, navigation_seed
 
 
 def split_of(seed: int, index: int, fractions: dict[str, float]) -> str:
@@ -93,11 +94,12 @@ def _with(config: SceneConfig, overrides: dict, spec: DatasetSpec, name: str, te
 def draw_scene(spec: DatasetSpec, base: SceneConfig, index: int) -> DrawnScene:
     """Draw scene ``index`` of ``spec`` over ``base`` and validate it whole (a drawn value a scene does not allow
     raises the one-line ConfigError, naming the scene)."""
-    sequence, survey_seed, seabed_seed = scene_seeds(spec.seed, index)
+    sequence, survey_seed, seabed_seed, navigation_seed = scene_seeds(spec.seed, index)
     rng = np.random.default_rng(sequence)
     name = scene_folder(index, spec.scenes)
     drawn: dict[str, Any] = {key: distribution.draw(rng) for key, distribution in spec.draw.items()}
-    overrides = {**spec.set, **drawn, "survey.seed": survey_seed, "survey.max_pulses": spec.max_pulses, **OUTPUT_KEYS}
+    overrides = {**spec.set, **drawn, "survey.seed": survey_seed, "platform.navigation_noise.seed": navigation_seed,
+                 "survey.max_pulses": spec.max_pulses, **OUTPUT_KEYS}
     config = _with(base, overrides, spec, name)
     if config.seabed is None:
         seabed_seed = None

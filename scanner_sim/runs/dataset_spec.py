@@ -30,7 +30,7 @@ __all__ = ["OWN_KEYS", "PLACED_TYPES", "DatasetSpec", "Distribution", "ObjectTem
 FORMAT_VERSION = 1
 #: Scene keys the dataset sets itself (the seeds from the scene's index, the pulses from ``max_pulses``, the
 #: objects from ``objects``, the files it reads): a spec may neither set nor draw them.
-OWN_KEYS = ("survey.seed", "seabed.seed", "survey.max_pulses", "objects", "output")
+OWN_KEYS = ("survey.seed", "seabed.seed", "platform.navigation_noise.seed", "survey.max_pulses", "objects", "output")
 #: Object types the dataset can place, and the key it writes the place into.
 PLACED_TYPES = {"cable": "points_m", "cylinder_mine": "position_m", "cone_mine": "position_m",
                 "moored_mine": "position_m"}
