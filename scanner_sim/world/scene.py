@@ -18,7 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from muls.errors import ParameterError
-from muls.runtime import kernel
 from scanner_sim.config import (
     CableObject,
     ConeMineObject,
@@ -33,6 +32,7 @@ from scanner_sim.config import (
 from scanner_sim.config.crs import to_crs
 from scanner_sim.config.raster_seabed import RasterSeabedConfig
 from scanner_sim.io.ply import ply_element_counts
+from scanner_sim.world.facets import face_geometry
 from scanner_sim.world.materials import LABELS
 from scanner_sim.world.mesh_seabed import seabed_of_meshes
 from scanner_sim.world.raster import load_raster_seabed, plan_bounds
@@ -98,7 +98,7 @@ class Scene:
         # Local origin: the bounding box centre rounded to whole metres (a readable number).
         self.local_origin = np.round(0.5 * (lo + hi)) if local_origin is None else np.asarray(local_origin, float)
         local = self.vertices - self.local_origin
-        normal, area2 = _face_geometry(local, faces)
+        normal, area2 = face_geometry(local, faces)
         scale = np.array([_mesh_scale(v) for v in verts])
         keep = area2 > DEGENERATE_AREA * scale[part] ** 2  # degenerate triangles go: Embree and normals need area
         self.faces, part, self.face_normal = faces[keep], part[keep], normal[keep]
@@ -170,32 +170,9 @@ def _mesh_scale(v: np.ndarray) -> float:
     return max(1e-12, float(np.ptp(v, axis=0).max()) if len(v) else 1.0)
 
 
-@kernel(nogil=True)
-def _face_geometry(vertices, faces):
-    """Unit normal (n, 3) (right-hand winding; nan for a degenerate face) and twice the area (n,) of each face
-    (n, 3) of ``vertices`` (m, 3) float64, in one pass: the same arithmetic as numpy's cross and norm."""
-    n = faces.shape[0]
-    normal = np.empty((n, 3))
-    area2 = np.empty(n)
-    for i in range(n):
-        a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
-        e1x, e1y, e1z = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
-        e2x, e2y, e2z = vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1], vertices[c, 2] - vertices[a, 2]
-        nx = e1y * e2z - e1z * e2y
-        ny = e1z * e2x - e1x * e2z
-        nz = e1x * e2y - e1y * e2x
-        length = math.sqrt(nx * nx + ny * ny + nz * nz)
-        area2[i] = length
-        if length > 0.0:
-            normal[i, 0], normal[i, 1], normal[i, 2] = nx / length, ny / length, nz / length
-        else:
-            normal[i, 0], normal[i, 1], normal[i, 2] = np.nan, np.nan, np.nan
-    return normal, area2
-
-
 def _nondegenerate(v: np.ndarray, f: np.ndarray) -> np.ndarray:
     """(m,) bool: the faces f (m, 3) of vertices v (n, 3) that are not degenerate."""
-    return _face_geometry(np.ascontiguousarray(v, np.float64), np.ascontiguousarray(f, np.int64))[1] > (
+    return face_geometry(np.ascontiguousarray(v, np.float64), np.ascontiguousarray(f, np.int64))[1] > (
         DEGENERATE_AREA * _mesh_scale(v) ** 2)
 
 
