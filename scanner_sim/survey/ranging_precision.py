@@ -2,8 +2,8 @@
 
 At set-up the pass ranges flat Lambertian panels at normal incidence (:meth:`muls.waveform.PulseBatch.flat_target`,
 the beam filling them) through its own physics (the same instrument, gate, water, echo spread, record mode and
-processing as its pulses): :data:`SHOTS` shots at each of the ranges its survey gives (quantiles of its sampled
-echo delays, :func:`scanner_sim.survey.gate.echo_span`) and each of :data:`REFLECTANCES`, so that the echoes span
+processing as its pulses): :data:`SHOTS` shots at each of the ranges its survey gives (:data:`PANELS` spread over
+its sampled echo delays, :func:`scanner_sim.survey.gate.echo_span`) and each of :data:`REFLECTANCES`, so that the echoes span
 the signal-to-noise ratios and the clipping the pass meets. Each return the panel's echo explains is binned by the
 channel the instrument chose, whether that channel clipped, whether it was the pulse's first return or a later one (a
 later return inside one broad, multiply scattered echo lies far behind), the nearest panel range (the echo spread's
@@ -25,11 +25,13 @@ from muls.waveform import PulseBatch
 
 #: Panel reflectances ranged at each range: dark mud to a white panel, two decades of signal.
 REFLECTANCES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
-#: Quantiles of the pass's echo ranges at which the panels stand: its nearest and farthest sampled echoes and
-#: three between. The ends are the extremes, not the 2 and 98 % quantiles: the nearest echoes are where the bias can
-#: change fastest (an echo at a gate's opening has part of its rise shut out and peaks late), and a point beyond the
-#: end panels takes their figures unchanged.
-RANGE_QUANTILES = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: Panels, evenly spaced from the pass's nearest sampled echo to its farthest. Evenly, not at quantiles of the
+#: sampled beams: in turbid water the far echoes are mostly lost, so the points crowd where few beams end (the tops
+#: of objects standing off the seabed), and the bias is interpolated between panels, which needs them close wherever
+#: it bends. To the extremes, not the 2 and 98 % quantiles: the nearest echoes are where it can change fastest (an
+#: echo at a gate's opening has part of its rise shut out and peaks late), and a point beyond the end panels takes
+#: their figures unchanged.
+PANELS = 9
 #: Shots per (range, reflectance).
 SHOTS = 256
 #: Bins of log10(SNR) per decade, from SNR 1 to 10^6.
@@ -113,10 +115,10 @@ def nearest_index(values, x) -> np.ndarray:
 
 
 def panel_ranges_m(delays_s: np.ndarray, speed_m_s: float) -> tuple[float, ...]:
-    """The ranges [m] the panels stand at: :data:`RANGE_QUANTILES` of the one-way ranges of echo delays
-    ``delays_s`` (k,) [s] at light speed ``speed_m_s`` [m/s], each once, ascending."""
-    return tuple(float(r) for r in np.unique(np.round(np.quantile(0.5 * speed_m_s * np.asarray(delays_s),
-                                                                  RANGE_QUANTILES), 3)))
+    """The ranges [m] the panels stand at: :data:`PANELS` evenly spaced from the nearest to the farthest one-way range
+    of echo delays ``delays_s`` (k,) [s] at light speed ``speed_m_s`` [m/s], each once, ascending."""
+    ranges = 0.5 * speed_m_s * np.asarray(delays_s)
+    return tuple(float(r) for r in np.unique(np.round(np.linspace(ranges.min(), ranges.max(), PANELS), 3)))
 
 
 def measure_ranging_precision(physics, instrument, ranges_m: tuple[float, ...]) -> RangingPrecision:
