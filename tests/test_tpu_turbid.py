@@ -13,7 +13,7 @@ from scanner_sim.studies import features
 from scanner_sim.studies.coverage_study import combination_config
 from scanner_sim.survey.gate import echo_span
 from scanner_sim.survey.pipeline import simulate_pass
-from scanner_sim.survey.ranging_precision import REFLECTANCES
+from scanner_sim.survey.ranging_precision import REFLECTANCES, tabulate
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.survey.uncertainty import folded_normal_quantile
 
@@ -64,6 +64,22 @@ def test_ranging_table_covers_echoes_between_its_panels_and_at_the_gate_opening(
     assert first.sum() > 1000  # the far panels in turbid water are often lost below the threshold
     share = float(np.mean(np.abs(error) <= tvu))
     assert 0.92 <= share <= 0.98, share
+
+
+def test_ranging_table_is_looked_up_by_measured_range_between_panels():
+    """Panels 5 and 7 m away ranged 0.1 and 0.5 m long are measured at 5.1 and 7.5 m. A point measured at 6.3 m lies
+    halfway between those, so it takes their mean bias, 0.3 m (by hand); one measured at 5.1 m is the near panel's
+    (0.1 m, where the nearest panel by true range, 5 m, happened to agree), and one measured at 7.2 m, nearer 7 m
+    than anything but short of the far panel's 7.5 m, 0.1 + 0.4 * 2.1 / 2.4 = 0.45 m. Before, a point took the panel
+    nearest its measured range as if that were the panel's true range: 0.5 m at 6.3 m, a panel it does not belong
+    to."""
+    errors = np.r_[np.full(20, 0.1), np.full(20, 0.5)] + np.tile([-0.01, 0.01], 20)
+    table = tabulate(errors, np.ones(40, np.int64), np.full(40, 50.0), np.zeros(40, bool), np.zeros(40, bool),
+                     np.repeat([0, 1], 20), 3, (5.0, 7.0))
+    bias, std = table.of(np.ones(3, np.int64), np.full(3, 50.0), np.zeros(3, bool), np.zeros(3, bool),
+                         np.array([6.3, 5.1, 7.2]))
+    np.testing.assert_allclose(bias, [0.3, 0.1, 0.1 + 0.4 * 2.1 / 2.4])
+    np.testing.assert_allclose(std, 0.01)
 
 
 @pytest.mark.slow
