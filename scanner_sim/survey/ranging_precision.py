@@ -2,8 +2,8 @@
 
 At set-up the pass ranges flat Lambertian panels at normal incidence (:meth:`muls.waveform.PulseBatch.flat_target`,
 the beam filling them) through its own physics (the same instrument, gate, water, echo spread, record mode and
-processing as its pulses): :data:`SHOTS` shots at each of the ranges its survey gives (quantiles of its sampled
-echo delays, :func:`scanner_sim.survey.gate.echo_span`) and each of :data:`REFLECTANCES`, so that the echoes span
+processing as its pulses): :data:`SHOTS` shots at each of the ranges its survey gives (:data:`PANELS` spread over
+its sampled echo delays, :func:`scanner_sim.survey.gate.echo_span`) and each of :data:`REFLECTANCES`, so that the echoes span
 the signal-to-noise ratios and the clipping the pass meets. Each return the panel's echo explains is binned by the
 channel the instrument chose, whether that channel clipped, whether it was the pulse's first return or a later one (a
 later return inside one broad, multiply scattered echo lies far behind), the nearest panel range (the echo spread's
@@ -11,7 +11,8 @@ late shift grows with range) and its SNR. A bin holds the mean of its range erro
 systematic part: the echo spread's late shift, a weak echo's early lean) and their standard deviation about that
 mean (its random part). A bin with fewer than :data:`MIN_SHOTS` returns takes the nearest bin in SNR of its row that
 has them, a row without any the nearest panel range's row, and a state (clipped, later) without any on a channel
-the figures of that state pooled over channels and ranges, else of every return.
+the figures of that state pooled over channels and ranges, else of every return. A point looks the table up by
+its measured range (:meth:`RangingPrecision.of`: between the two panels whose measured ranges bracket it).
 """
 
 from __future__ import annotations
@@ -24,8 +25,13 @@ from muls.waveform import PulseBatch
 
 #: Panel reflectances ranged at each range: dark mud to a white panel, two decades of signal.
 REFLECTANCES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
-#: Quantiles of the pass's echo ranges at which the panels stand.
-RANGE_QUANTILES = (0.02, 0.25, 0.5, 0.75, 0.98)
+#: Panels, evenly spaced from the pass's nearest sampled echo to its farthest. Evenly, not at quantiles of the
+#: sampled beams: in turbid water the far echoes are mostly lost, so the points crowd where few beams end (the tops
+#: of objects standing off the seabed), and the bias is interpolated between panels, which needs them close wherever
+#: it bends. To the extremes, not the 2 and 98 % quantiles: the nearest echoes are where it can change fastest (an
+#: echo at a gate's opening has part of its rise shut out and peaks late), and a point beyond the end panels takes
+#: their figures unchanged.
+PANELS = 9
 #: Shots per (range, reflectance).
 SHOTS = 256
 #: Bins of log10(SNR) per decade, from SNR 1 to 10^6.
@@ -51,12 +57,29 @@ class RangingPrecision:
 
     def of(self, channel, snr, saturated, later, range_m) -> tuple[np.ndarray, np.ndarray]:
         """(bias, standard deviation) [m], each (n,), of the range of returns on ``channel`` (n,) 1-based at ``snr``
-        (n,), clipped ``saturated`` (n,) bool, ``later`` (n,) bool not their pulse's first return, at ``range_m``
-        (n,) [m]; the nearest panel range, and SNR outside the table the end bins."""
-        cell = (np.clip(np.asarray(channel, np.int64), 0, self.bias_m.shape[0] - 1),
-                np.asarray(saturated, np.int64), np.asarray(later, np.int64),
-                nearest_index(self.ranges_m, range_m), snr_bin(self.snr_edges, snr))
-        return self.bias_m[cell], self.std_m[cell]
+        (n,), clipped ``saturated`` (n,) bool, ``later`` (n,) bool not their pulse's first return, *measured* at
+        ``range_m`` (n,) [m]; SNR outside the table takes the end bins.
+
+        A point knows its measured range, not its true one, and the two differ by the very bias looked up (tens of
+        centimetres in turbid water, as much as the panels' spacing). So the panels are placed by their measured
+        range, panel i's true range plus its bias in the point's cell, and the figures are interpolated linearly
+        between the two panels whose measured ranges bracket the point's (the end panels' beyond them): near the
+        gate's opening, where part of an echo's rise is shut out, the bias grows by a few centimetres over a
+        decimetre of range, more than a nearest panel's step allows."""
+        cell = (np.clip(np.asarray(channel, np.int64), 0, self.bias_m.shape[0] - 1)[:, None],
+                np.asarray(saturated, np.int64)[:, None], np.asarray(later, np.int64)[:, None],
+                np.arange(len(self.ranges_m))[None, :], snr_bin(self.snr_edges, snr)[:, None])
+        bias, std = self.bias_m[cell], self.std_m[cell]  # (n, panels)
+        measured = np.asarray(self.ranges_m, float)[None, :] + bias  # ascending: a farther panel's echo comes later
+        rho = np.asarray(range_m, float)
+        if measured.shape[1] == 1:
+            return bias[:, 0], std[:, 0]
+        rows = np.arange(rho.size)
+        lo = np.clip((measured <= rho[:, None]).sum(axis=1) - 1, 0, measured.shape[1] - 2)
+        gap = measured[rows, lo + 1] - measured[rows, lo]
+        w = np.clip((rho - measured[rows, lo]) / np.where(gap > 0, gap, np.inf), 0.0, 1.0)
+        return ((1 - w) * bias[rows, lo] + w * bias[rows, lo + 1],
+                (1 - w) * std[rows, lo] + w * std[rows, lo + 1])
 
     def as_dict(self) -> dict:
         """The table as JSON-ready lists (the summary's ``uncertainty.ranging``): per channel, state and panel range,
@@ -92,10 +115,10 @@ def nearest_index(values, x) -> np.ndarray:
 
 
 def panel_ranges_m(delays_s: np.ndarray, speed_m_s: float) -> tuple[float, ...]:
-    """The ranges [m] the panels stand at: :data:`RANGE_QUANTILES` of the one-way ranges of echo delays
-    ``delays_s`` (k,) [s] at light speed ``speed_m_s`` [m/s], each once, ascending."""
-    return tuple(float(r) for r in np.unique(np.round(np.quantile(0.5 * speed_m_s * np.asarray(delays_s),
-                                                                  RANGE_QUANTILES), 3)))
+    """The ranges [m] the panels stand at: :data:`PANELS` evenly spaced from the nearest to the farthest one-way range
+    of echo delays ``delays_s`` (k,) [s] at light speed ``speed_m_s`` [m/s], each once, ascending."""
+    ranges = 0.5 * speed_m_s * np.asarray(delays_s)
+    return tuple(float(r) for r in np.unique(np.round(np.linspace(ranges.min(), ranges.max(), PANELS), 3)))
 
 
 def measure_ranging_precision(physics, instrument, ranges_m: tuple[float, ...]) -> RangingPrecision:
