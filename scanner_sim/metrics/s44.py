@@ -156,7 +156,7 @@ class OrderTally:
         cell = np.asarray(cell)
         inside = cell >= 0
         meets = soundings_meeting(depth_m, vertical_error_m, horizontal_error_m, tvu_m, thu_m)
-        n = self.soundings.size
-        self.soundings += np.bincount(cell[inside], minlength=n)
+        # np.add.at where the soundings are: a bincount over every cell would cost the whole grid per chunk
+        np.add.at(self.soundings, cell[inside], 1)
         for k in range(len(ORDERS)):
-            self.meeting[k] += np.bincount(cell[inside & meets[k]], minlength=n)
+            np.add.at(self.meeting[k], cell[inside & meets[k]], 1)
