@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -283,6 +284,9 @@ class PassSetup:
     water_name: str
     given: SceneConfig
     tpu: TpuModel
+    #: [s] spent measuring the TPU's ranging table at set-up: on a fresh machine this is where the physics kernels
+    #: compile first, so a pass reports it in ``compile_s`` rather than ``setup_s``.
+    ranging_s: float = 0.0
 
     @classmethod
     def build(cls, config: SceneConfig, options: PassOptions = PassOptions(), scene: Scene | None = None,
@@ -307,8 +311,10 @@ class PassSetup:
         model = OpticalModel.build(config.instrument.to_instrument(water), water, plan.level.multiple_scattering)
         stages = _stages(config, target, model, plan.level)
         span = echo_span(target, trajectory, scanner, water.speed_m_s, first_slot, end_slot)
+        started = time.perf_counter()
+        tpu = tpu_model(config, stages[0], stages[4], span)
         return cls(config, plan, target, trajectory, scanner, *stages, first_slot, end_slot,
-                   config.water.preset or water.name, given, tpu_model(config, stages[0], stages[4], span))
+                   config.water.preset or water.name, given, tpu, time.perf_counter() - started)
 
     def at_level(self, level: FidelityLevel) -> PassSetup:
         """This pass at fidelity ``level``: its plan, sub-ray pattern and stages chosen again (the built scene,
