@@ -324,7 +324,7 @@ def test_a_window_beyond_the_triangle_budget_is_refused_before_its_pixels_are_re
     monkeypatch.setattr(rasterio.io.DatasetReader, "read",
                         lambda self, *a, **k: reads.append(k) or original(self, *a, **k))
     with pytest.raises(ConfigError, match=r"^seabed\.resolution_m = 0\.25: refines the raster's 1051 x 1021 window to "
-                       r"34,272,000 triangles, more than the 2,000,000 allowed"):
+                       r"34,272,000 triangles, more than the 32,000,000 allowed"):
         build_scene(cfg)
     assert reads == []
 

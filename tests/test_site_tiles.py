@@ -160,7 +160,7 @@ def test_a_chunks_coverage_tally_takes_memory_for_its_pulses_not_for_the_whole_g
 def test_bench_site_reports_the_figures_its_targets_are_judged_on(monkeypatch):
     """``scanner-sim bench-site --json``'s keys, on a small stand-in (in this process, a minute of survey): the
     site's triangles, set-up, peak memory and pulses/s, the small scene's pulses/s, the memory by minutes of survey,
-    and the rule by which pulses were left out."""
+    and the rule by which pulses were left out; over the procedural seabeds and over generated rasters."""
     from scanner_sim.perf import sitebench
 
     monkeypatch.setattr(sitebench, "_in_fresh_process", lambda fn, *args: fn(*args))
@@ -173,3 +173,6 @@ def test_bench_site_reports_the_figures_its_targets_are_judged_on(monkeypatch):
     assert {"setup_s", "peak_rss_mb", "pulses_per_s"} <= result["site"].keys() and result["site"]["pulses"] > 30000
     assert result["small"]["pulses_per_s"] > 0 and list(result["rss_mb_by_minutes"]) == ["1"]
     assert result["rss_mb_by_minutes"]["1"] > 50 and "every other pulse" in result["subsampling"]
+    raster = sitebench.bench_site("fast", minutes=1, seabed="raster")  # a GeoTIFF of 81 x 41 pixels, 1 m, at 0.25 m
+    assert raster["seabed"] == "raster" and raster["site"]["triangles"] == 2 * 320 * 160
+    assert raster["site"]["pulses"] > 30000 and raster["small"]["pulses_per_s"] > 0

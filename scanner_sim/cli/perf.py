@@ -104,6 +104,9 @@ def _add_bench_site(sub):
                        "a small scene's: set-up, peak memory, pulses/s, memory after 10 and 60 minutes of survey")
     p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), default="balanced", help="fidelity level of both passes")
     p.add_argument("--minutes", type=positive_int(), default=60, help="minutes of survey of the site's pass")
+    p.add_argument("--seabed", choices=["procedural", "raster"], default="procedural",
+                   help="both scenes' seabed: the procedural one, or a generated GeoTIFF (EPSG:32631, 1 m pixels) "
+                        "refined to 0.25 m")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_site)
 
@@ -111,7 +114,7 @@ def _add_bench_site(sub):
 def _cmd_bench_site(args) -> int:
     from scanner_sim.perf.sitebench import bench_site
 
-    result = bench_site(args.fidelity, args.minutes)
+    result = bench_site(args.fidelity, args.minutes, args.seabed)
     if args.json:
         print(json.dumps(result))
         return 0

@@ -18,12 +18,13 @@ SUPER_CELL_M = 1.0
 
 def seabed_grid(scene, caster, z_top_m: float | None = None):
     """The :class:`scanner_sim.rays.seabed_kernels.SeabedGrid` of ``scene``'s seabed in ``caster``'s local frame, or None
-    where the scene has no height field or its seabed faces are not the height field's own, in its order.
+    where the scene has no height field, its height field has gaps (``valid``: so a window of a site with gaps has
+    none, as the whole scene has none), or its seabed faces are not the height field's own, in its order.
     ``z_top_m``: the highest local float32 z of the whole scene when ``scene`` is a window of it (default: the
     caster's own)."""
     hf = scene.heightfield
     seabeds = [o for o in scene.objects if o.kind == "seabed"]
-    if hf is None or len(seabeds) != 1:
+    if hf is None or hf.valid is not None or len(seabeds) != 1:  # a seabed with gaps (or a window of one): none
         return None
     sb = seabeds[0]
     ny, nx = hf.shape

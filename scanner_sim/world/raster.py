@@ -28,13 +28,13 @@ import numpy as np
 
 from scanner_sim.config import ConfigError, reflectance_of
 from scanner_sim.config.crs import horizontal_crs as horizontal_of
+from scanner_sim.config.geometry import MAX_SEABED_TRIANGLES
 from scanner_sim.config.raster_seabed import check_grid, open_raster
-from scanner_sim.world.site import TILED_ABOVE_TRIANGLES
 from scanner_sim.world.terrain import HeightField, RasterGrid, fractal_relief
 
-#: Triangles a raster seabed's refined window may hold: a raster seabed is meshed whole (its tiling along the lines
-#: is not built yet), so it stays within the size below which a procedural seabed is meshed whole too.
-RASTER_MAX_TRIANGLES = TILED_ABOVE_TRIANGLES
+#: Triangles a raster seabed's refined window may hold: the procedural seabed's limit (a raster seabed above
+#: :data:`scanner_sim.world.site.TILED_ABOVE_TRIANGLES` is tiled as a procedural one is).
+RASTER_MAX_TRIANGLES = MAX_SEABED_TRIANGLES
 
 
 @dataclass(frozen=True)

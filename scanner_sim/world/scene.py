@@ -306,10 +306,10 @@ def panel_mesh(center_m, size_m, normal, up):
 # ------------------------------------------------------------------------------------------------------
 
 def build_scene(config, tile_m: float | None = None) -> Scene:
-    """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds); a procedural
-    seabed of more than :data:`~scanner_sim.world.site.TILED_ABOVE_TRIANGLES` triangles gives a :class:`SiteScene`
-    instead, in tiles of about :data:`scanner_sim.world.site.TILE_M`, or of ``tile_m`` [m] when given (any procedural
-    seabed then)."""
+    """Build the :class:`Scene` of a :class:`scanner_sim.config.SceneConfig` (deterministic from its seeds); a seabed
+    (procedural or a raster's) of more than :data:`~scanner_sim.world.site.TILED_ABOVE_TRIANGLES` triangles gives a
+    :class:`SiteScene` instead, in tiles of about :data:`scanner_sim.world.site.TILE_M`, or of ``tile_m`` [m] when
+    given (any such seabed then)."""
     if tile_m is not None and not tile_m > 0:
         raise ParameterError(f"tile_m = {tile_m!r}: must be a tile's side in metres, > 0 (or None: tiled by size)")
     if not isinstance(config, SceneConfig):
@@ -318,18 +318,17 @@ def build_scene(config, tile_m: float | None = None) -> Scene:
     parts: list[Part] = []
     hf, info, site = None, None, False
     sb = config.seabed
+    cell_reflectance = None
     if isinstance(sb, RasterSeabedConfig):
-        if tile_m is not None:
-            raise ParameterError(f"tile_m = {tile_m!r}: tiles serve procedural seabeds; a raster seabed is read as one "
-                                 "window around the survey lines (seabed.margin_m)")
         raster = load_raster_seabed(sb, plan_bounds(config), config.crs)
-        hf, info = raster.heightfield, raster.info
-        v, f = hf.mesh()
-        cell = raster.cell_reflectance
-        per_face = None if cell is None else np.tile(cell.ravel(), 2)[
-            np.tile(hf.valid.ravel(), 2) if hf.valid is not None else slice(None)]
-        parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True,
-                          face_reflectance=per_face))
+        hf, info, cell_reflectance = raster.heightfield, raster.info, raster.cell_reflectance
+        site = bool(tile_m) or tiled(hf)
+        if not site:
+            v, f = hf.mesh()
+            per_face = None if cell_reflectance is None else np.tile(cell_reflectance.ravel(), 2)[
+                np.tile(hf.valid.ravel(), 2) if hf.valid is not None else slice(None)]
+            parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True,
+                              face_reflectance=per_face))
     elif sb is not None:
         rng = np.random.default_rng(sb.seed)
         hf = generate_heightfield(sb.center_m, sb.size_m, sb.resolution_m, sb.depth_m, sb.relief.rms_m,
@@ -398,15 +397,16 @@ def build_scene(config, tile_m: float | None = None) -> Scene:
         parts.append(Part(obj.name, kind, v, f, label, refl, centreline, one_surface=index in seabed_meshes))
     if site:
         return site_scene(hf, SceneObject(0, "seabed", "seabed", LABELS[sb.label], reflectance_of(sb), 0, 0), parts,
-                          tile_m, crs=to_crs(config.crs))
+                          tile_m, crs=to_crs(config.crs), seabed_info=info, cell_reflectance=cell_reflectance)
     return Scene(parts, hf, crs=to_crs(config.crs), seabed_info=info)
 
 
 def site_scene(heightfield: HeightField, seabed: SceneObject, parts: list[Part], tile_m: float | None = None,
-               crs=None):
+               crs=None, seabed_info: dict | None = None, cell_reflectance: np.ndarray | None = None):
     """The :class:`scanner_sim.world.site.SiteScene` of a seabed (``seabed``: object 0, no faces of its own) and the
     other ``parts``, in the frame the whole :class:`Scene` of them would have (its local origin: the bounding box
-    centre in whole metres; its extent); ``crs`` as :class:`Scene`'s."""
+    centre in whole metres; its extent); ``crs`` and ``seabed_info`` as :class:`Scene`'s; ``cell_reflectance``
+    (ny-1, nx-1): each seabed cell's (a class raster's), or None."""
     x_lo, x_hi, y_lo, y_hi = heightfield.extent_m
     lo = np.array([x_lo, y_lo, heightfield.heights_m.min()])
     hi = np.array([x_hi, y_hi, heightfield.heights_m.max()])
@@ -415,7 +415,7 @@ def site_scene(heightfield: HeightField, seabed: SceneObject, parts: list[Part],
     origin = np.round(0.5 * (lo + hi))
     extent = float(np.abs(np.r_[lo - origin, hi - origin]).max())
     return SiteScene(heightfield, seabed, Scene(parts, None, origin) if parts else None, origin, extent, tile_m,
-                     crs=crs)
+                     crs=crs, seabed_info=seabed_info, cell_reflectance=cell_reflectance)
 
 
 def placed_mesh(obj: MeshObject, index: int, hf: HeightField | None) -> tuple[np.ndarray, np.ndarray]:

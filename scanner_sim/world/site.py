@@ -52,6 +52,7 @@ class WindowScene:
     heightfield: HeightField
     objects: list
     cells: tuple[int, int, int, int]
+    cell_faces: np.ndarray
 
     @property
     def n_faces(self) -> int:
@@ -68,7 +69,14 @@ class SiteScene:
     :class:`~scanner_sim.world.scene.SceneObject` (object 0); ``parts``: a :class:`~scanner_sim.world.scene.Scene` of
     the other parts in the site's frame, or None; ``local_origin`` (3,) [m] and ``local_extent_m``: the whole
     scene's (:func:`scanner_sim.world.scene.site_scene` builds them all); ``tile_m``: about a tile's side [m]
-    (default :data:`TILE_M`); ``crs``: the scene's map CRS or None.
+    (default :data:`TILE_M`); ``crs``: the scene's map CRS or None; ``seabed_info``: what the outputs report about a
+    raster seabed, or None; ``cell_reflectance``: (ny-1, nx-1) reflectance of each cell (a class raster's), or None
+    for the seabed's one material.
+
+    A height field with gaps (``valid``) has faces only in its valid cells, numbered as the whole scene numbers
+    them (:meth:`HeightField.mesh`: the lower triangles of the valid cells in row order, then the upper ones), and
+    the seabed is as many smooth surfaces as the valid cells make edge-connected regions, numbered by their first
+    cell in row order, as :func:`scanner_sim.world.scene.smooth_surfaces` numbers them over the whole mesh.
 
     Like a :class:`~scanner_sim.world.scene.Scene` it has ``heightfield``, ``objects`` (the seabed first, object 0),
     ``local_origin``, ``local_extent_m``, ``n_faces`` (the whole scene's), :meth:`surface_height` and
@@ -78,11 +86,26 @@ class SiteScene:
     """
 
     def __init__(self, heightfield: HeightField, seabed, parts, local_origin: np.ndarray, local_extent_m: float,
-                 tile_m: float | None = None, crs=None):
+                 tile_m: float | None = None, crs=None, seabed_info: dict | None = None,
+                 cell_reflectance: np.ndarray | None = None):
         hf = self.heightfield = heightfield
-        self.crs, self.seabed_info = crs, None  # as a Scene's: the map CRS (or None); a procedural seabed has no info
+        self.crs, self.seabed_info = crs, seabed_info  # as a Scene's: the map CRS (or None), the raster's report
+        self.cell_reflectance = cell_reflectance
         ny, nx = hf.shape
-        self.seabed_faces = 2 * (nx - 1) * (ny - 1)
+        if hf.valid is None:
+            self.seabed_faces, self.seabed_surfaces = 2 * (nx - 1) * (ny - 1), 1
+            self._cell_rank = self._cell_surface = None
+        else:
+            from scipy import ndimage
+
+            rank = np.cumsum(hf.valid.ravel(), dtype=np.int64) - 1
+            #: (ny-1, nx-1) int64: each valid cell's place among the valid cells in row order (the number of its
+            #: lower triangle in the whole scene); -1 or a neighbour's elsewhere (never read there).
+            self._cell_rank = rank.reshape(hf.valid.shape)
+            self.seabed_faces = 2 * int(rank[-1] + 1)
+            regions, self.seabed_surfaces = ndimage.label(hf.valid)  # edge-connected cells: faces sharing an edge
+            #: (ny-1, nx-1) int32: the smooth surface of each valid cell's faces (0 .. seabed_surfaces - 1).
+            self._cell_surface = (regions - 1).astype(np.int32)
         self.local_origin, self.local_extent_m, self.parts = np.asarray(local_origin, float), local_extent_m, parts
         z32 = np.float32(hf.heights_m - self.local_origin[2])
         z_top, z_low = float(z32.max()), float(z32.min())
@@ -108,7 +131,9 @@ class SiteScene:
         self.faces = empty.astype(np.int64) if self.parts is None else self.parts.faces
         self.face_label = np.zeros(0, np.int16) if self.parts is None else self.parts.face_label
         self.face_object = np.zeros(0, np.int32) if self.parts is None else self.parts.face_object + 1
-        self.face_surface = _SiteSurfaces(self.seabed_faces, None if self.parts is None else self.parts.face_surface)
+        seabed_surface = None if hf.valid is None else self._cell_surface[hf.valid]
+        self.face_surface = _SiteSurfaces(self.seabed_faces, seabed_surface, self.seabed_surfaces,
+                                          None if self.parts is None else self.parts.face_surface)
 
     @property
     def n_faces(self) -> int:
@@ -133,36 +158,48 @@ class SiteScene:
         # Node positions as HeightField.mesh computes them over the whole grid (x0 + s j), not from the window's
         # corner, so the window's vertices are the whole scene's to the bit.
         gx, gy = np.meshgrid(hf.x0_m + s * np.arange(j0, j1 + 1), hf.y0_m + s * np.arange(i0, i1 + 1))
-        window_hf = HeightField(float(gx[0, 0]), float(gy[0, 0]), s, heights)
+        valid = None if hf.valid is None else hf.valid[i0:i1, j0:j1]
+        window_hf = HeightField(float(gx[0, 0]), float(gy[0, 0]), s, heights, valid)
         _, seabed_faces = window_hf.mesh()
         seabed_vertices = np.c_[gx.ravel(), gy.ravel(), heights.ravel()]
         n = seabed_faces.shape[0]
         normal, _ = face_geometry(seabed_vertices - self.local_origin, seabed_faces)
+        nx = hf.shape[1]
+        if valid is None:
+            rows, cols = np.divmod(np.arange((i1 - i0) * (j1 - j0)), j1 - j0)
+            cell_faces = (rows + i0) * (nx - 1) + (cols + j0)
+            surface = np.zeros(n, np.int32)
+        else:
+            cell_faces = self._cell_rank[i0:i1, j0:j1][valid]
+            surface = np.tile(self._cell_surface[i0:i1, j0:j1][valid], 2)
+        reflectance = (np.full(n, self.seabed_reflectance) if self.cell_reflectance is None else
+                       np.tile(self.cell_reflectance[i0:i1, j0:j1][valid if valid is not None else slice(None)]
+                               .ravel(), 2))
         seabed = dataclasses.replace(self.objects[0], face_start=0, face_stop=n)
         o = self.parts
         if o is None:
-            return WindowScene(seabed_vertices, seabed_faces, normal, np.full(n, self.seabed_reflectance),
-                               np.full(n, self.seabed_label, np.int16), np.zeros(n, np.int32), np.zeros(n, np.int32),
-                               self.local_origin, self.local_extent_m, window_hf, [seabed], (j0, j1, i0, i1))
+            return WindowScene(seabed_vertices, seabed_faces, normal, reflectance,
+                               np.full(n, self.seabed_label, np.int16), np.zeros(n, np.int32), surface,
+                               self.local_origin, self.local_extent_m, window_hf, [seabed], (j0, j1, i0, i1),
+                               cell_faces)
         others = [dataclasses.replace(x, face_start=x.face_start + n, face_stop=x.face_stop + n)
                   for x in self.objects[1:]]
         return WindowScene(
             np.concatenate([seabed_vertices, o.vertices]), np.concatenate([seabed_faces, o.faces + len(seabed_vertices)]),
-            np.concatenate([normal, o.face_normal]), np.r_[np.full(n, self.seabed_reflectance), o.face_reflectance],
+            np.concatenate([normal, o.face_normal]), np.r_[reflectance, o.face_reflectance],
             np.r_[np.full(n, self.seabed_label, np.int16), o.face_label], np.r_[np.zeros(n, np.int32), o.face_object + 1],
-            np.r_[np.zeros(n, np.int32), o.face_surface + 1], self.local_origin, self.local_extent_m, window_hf,
-            [seabed, *others], (j0, j1, i0, i1))
+            np.r_[surface, o.face_surface + self.seabed_surfaces], self.local_origin, self.local_extent_m, window_hf,
+            [seabed, *others], (j0, j1, i0, i1), cell_faces)
 
     def site_faces(self, window: WindowScene, tri: np.ndarray) -> np.ndarray:
-        """Faces ``tri`` (k,) of ``window`` numbered as in the whole scene (the seabed's cells first, in
+        """Faces ``tri`` (k,) of ``window`` numbered as in the whole scene (the seabed's valid cells first, in
         :meth:`HeightField.mesh` order, then the objects)."""
-        j0, j1, i0, i1 = window.cells
-        nx = self.heightfield.shape[1]
-        cells = (j1 - j0) * (i1 - i0)
+        cells = window.cell_faces.shape[0]
         tri = np.asarray(tri, np.int64)
-        upper, cell = np.divmod(tri, cells)
-        i, j = np.divmod(cell, j1 - j0)
-        seabed = upper * (self.seabed_faces // 2) + (i + i0) * (nx - 1) + (j + j0)
+        if not cells:
+            return tri + self.seabed_faces
+        upper, cell = np.divmod(np.minimum(tri, 2 * cells - 1), cells)
+        seabed = upper * (self.seabed_faces // 2) + window.cell_faces[cell]
         return np.where(tri < 2 * cells, seabed, tri - 2 * cells + self.seabed_faces)
 
 
@@ -173,15 +210,21 @@ def tiled(heightfield: HeightField) -> bool:
 
 
 class _SiteSurfaces:
-    """``face_surface`` of a :class:`SiteScene`, indexed by faces numbered as in the whole scene: the seabed is one
-    surface (0), the objects' surfaces follow (those of ``parts`` (n,) int32, plus one)."""
+    """``face_surface`` of a :class:`SiteScene`, indexed by faces numbered as in the whole scene: the seabed's
+    surfaces first (``seabed`` (n_c,) int32: the surface of each valid cell in row order, or None where the seabed
+    is one surface, 0), the objects' surfaces follow (those of ``parts`` (n,) int32, plus ``seabed_surfaces``)."""
 
-    def __init__(self, seabed_faces: int, parts: np.ndarray | None):
-        self.seabed_faces, self.parts = seabed_faces, parts
+    def __init__(self, seabed_faces: int, seabed: np.ndarray | None, seabed_surfaces: int, parts: np.ndarray | None):
+        self.seabed_faces, self.seabed, self.seabed_surfaces, self.parts = seabed_faces, seabed, seabed_surfaces, parts
 
     def __getitem__(self, tri) -> np.ndarray:
         tri = np.asarray(tri, np.int64)
+        on_seabed = tri < self.seabed_faces
+        if self.seabed is None:
+            seabed = np.zeros(tri.shape, np.int32)
+        else:
+            seabed = self.seabed[np.clip(tri, 0, self.seabed_faces - 1) % (self.seabed_faces // 2)]
         if self.parts is None:
-            return np.zeros(tri.shape, np.int32)
+            return seabed.astype(np.int32)
         rest = np.clip(tri - self.seabed_faces, 0, max(0, len(self.parts) - 1))
-        return np.where(tri < self.seabed_faces, 0, self.parts[rest] + 1).astype(np.int32)
+        return np.where(on_seabed, seabed, self.parts[rest] + self.seabed_surfaces).astype(np.int32)
