@@ -71,9 +71,11 @@ class BinTally:
     """Reaching pulses, valid points and failures by cause over ``n_bins`` bins (streamed, chunk by chunk)."""
 
     def __init__(self, n_bins: int):
-        self.reaching = np.zeros(n_bins, np.int64)
-        self.valid = np.zeros(n_bins, np.int64)
-        self.failed = np.zeros((n_bins, len(FAILURE_CAUSES)), np.int64)
+        # int32 counts (a cell sees at most a few thousand pulses a pass): the pages of these site-sized arrays become
+        # resident as the survey first reaches their cells, so their width is the memory a long pass grows by.
+        self.reaching = np.zeros(n_bins, np.int32)
+        self.valid = np.zeros(n_bins, np.int32)
+        self.failed = np.zeros((n_bins, len(FAILURE_CAUSES)), np.int32)
 
     @property
     def n_bins(self) -> int:

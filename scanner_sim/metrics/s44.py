@@ -147,8 +147,8 @@ class OrderTally:
     """Per cell, soundings and those meeting each order, streamed chunk by chunk over ``n_cells`` cells."""
 
     def __init__(self, n_cells: int):
-        self.soundings = np.zeros(n_cells, np.int64)
-        self.meeting = np.zeros((len(ORDERS), n_cells), np.int64)
+        self.soundings = np.zeros(n_cells, np.int32)  # int32 as coverage's BinTally: memory grows with the area reached
+        self.meeting = np.zeros((len(ORDERS), n_cells), np.int32)
 
     def add(self, cell, depth_m, vertical_error_m, horizontal_error_m, tvu_m=None, thu_m=None) -> None:
         """cell (n,) flat cell index of each sounding (-1: outside every cell); the rest as in
