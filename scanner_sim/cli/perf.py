@@ -104,9 +104,9 @@ def _add_bench_site(sub):
                        "a small scene's: set-up, peak memory, pulses/s, memory after 10 and 60 minutes of survey")
     p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), default="balanced", help="fidelity level of both passes")
     p.add_argument("--minutes", type=positive_int(), default=60, help="minutes of survey of the site's pass")
-    p.add_argument("--seabed", choices=["procedural", "raster"], default="procedural",
-                   help="both scenes' seabed: the procedural one, or a generated GeoTIFF (EPSG:32631, 1 m pixels) "
-                        "refined to 0.25 m")
+    p.add_argument("--seabed", choices=["raster", "procedural"], default="raster",
+                   help="both scenes' seabed: a generated GeoTIFF (EPSG:32631, 1 m pixels) refined to 0.25 m (default), "
+                        "or the procedural one")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_site)
 

@@ -1,8 +1,8 @@
 """``scanner-sim bench-site``: a survey pass over a site-scale seabed (1 km x 200 m at 0.25 m, 6.4 million
 triangles, tiled: :mod:`scanner_sim.world.site`) beside the same survey over a small seabed, in one run.
 
-The seabed is the procedural one (``--seabed procedural``, the default) or a bathymetry raster (``--seabed
-raster``): a GeoTIFF in UTM zone 31N (EPSG:32631) of 1 m pixels, generated into a temporary folder
+The seabed is a bathymetry raster (``--seabed raster``, the default) or the procedural one (``--seabed
+procedural``). The raster is a GeoTIFF in UTM zone 31N (EPSG:32631) of 1 m pixels, generated into a temporary folder
 (:func:`write_site_raster`) and read through the scene's ``seabed.raster`` keys, refined bilinearly to 0.25 m with
 seeded micro-relief, as a real site's would be.
 
@@ -152,9 +152,9 @@ def _pass_figures(size_m, spacing_m: float, fidelity: str, duration_s: float, rs
             "windows_built": getattr(setup.target, "windows_built", 0), "rss_mb_by_minutes": probe.found}
 
 
-def bench_site(fidelity: str = "balanced", minutes: int = SITE_MINUTES, seabed: str = "procedural") -> dict:
+def bench_site(fidelity: str = "balanced", minutes: int = SITE_MINUTES, seabed: str = "raster") -> dict:
     """The site's pass and the small scene's, each in a fresh process (module doc), over generated rasters
-    (``seabed`` 'raster') or procedural seabeds ('procedural', the default): ``{"site": {"triangles", "setup_s", "peak_rss_mb",
+    (``seabed`` 'raster', the default) or procedural seabeds ('procedural'): ``{"site": {"triangles", "setup_s", "peak_rss_mb",
     "pulses_per_s", ...}, "small": {"pulses_per_s", ...}, "rss_mb_by_minutes": {"10", "60"}, ...}`` with the ratios
     the targets are judged on."""
     marks = [m for m in RSS_MINUTES if m <= minutes]
