@@ -67,15 +67,19 @@ class CoverageSettings:
         s44.ComplianceRule(self.order_min_soundings)
 
 
+#: Counts per plan cell (a cell sees at most a few thousand pulses a pass): the coverage and S-44 tallies' dtype.
+COUNT_DTYPE = np.int32
+
+
 class BinTally:
     """Reaching pulses, valid points and failures by cause over ``n_bins`` bins (streamed, chunk by chunk)."""
 
     def __init__(self, n_bins: int):
         # int32 counts (a cell sees at most a few thousand pulses a pass): the pages of these site-sized arrays become
         # resident as the survey first reaches their cells, so their width is the memory a long pass grows by.
-        self.reaching = np.zeros(n_bins, np.int32)
-        self.valid = np.zeros(n_bins, np.int32)
-        self.failed = np.zeros((n_bins, len(FAILURE_CAUSES)), np.int32)
+        self.reaching = np.zeros(n_bins, COUNT_DTYPE)
+        self.valid = np.zeros(n_bins, COUNT_DTYPE)
+        self.failed = np.zeros((n_bins, len(FAILURE_CAUSES)), COUNT_DTYPE)
 
     @property
     def n_bins(self) -> int:
@@ -87,10 +91,12 @@ class BinTally:
         reaching_bin, outcome, valid_bin = np.asarray(reaching_bin), np.asarray(outcome), np.asarray(valid_bin)
         inside = reaching_bin >= 0
         # Added where the chunk's pulses are, not as counts over every bin: a site's grid has millions of cells.
-        np.add.at(self.reaching, reaching_bin[inside], 1)
-        np.add.at(self.valid, valid_bin[valid_bin >= 0], 1)
+        # The count as the tallies' own dtype: np.add.at of a Python int casts on a slow path (35x slower here).
+        one = COUNT_DTYPE(1)
+        np.add.at(self.reaching, reaching_bin[inside], one)
+        np.add.at(self.valid, valid_bin[valid_bin >= 0], one)
         fail = inside & (outcome >= 0)
-        np.add.at(self.failed, (reaching_bin[fail], outcome[fail]), 1)
+        np.add.at(self.failed, (reaching_bin[fail], outcome[fail]), one)
 
     def states(self, min_points: int) -> np.ndarray:
         """(n_bins,) int16: NOT_REACHED, COVERED, or the GAP_CAUSES index of a missed bin."""
