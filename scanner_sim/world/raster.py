@@ -32,10 +32,6 @@ from scanner_sim.config.geometry import MAX_SEABED_TRIANGLES
 from scanner_sim.config.raster_seabed import check_grid, open_raster
 from scanner_sim.world.terrain import HeightField, RasterGrid, fractal_relief
 
-#: Triangles a raster seabed's refined window may hold: the procedural seabed's limit (a raster seabed above
-#: :data:`scanner_sim.world.site.TILED_ABOVE_TRIANGLES` is tiled as a procedural one is).
-RASTER_MAX_TRIANGLES = MAX_SEABED_TRIANGLES
-
 
 @dataclass(frozen=True)
 class RasterSeabed:
@@ -262,9 +258,9 @@ def node_grid(nr: int, nc: int, dx: float, dy: float, resolution_m: float, key: 
     s = cell / max(1, math.ceil(cell / resolution_m - 1e-9))
     nx, ny = int((nc - 1) * dx / s + 1e-9) + 1, int((nr - 1) * dy / s + 1e-9) + 1
     triangles = 2 * (nx - 1) * (ny - 1)
-    if triangles > RASTER_MAX_TRIANGLES:
+    if triangles > MAX_SEABED_TRIANGLES:  # the procedural seabed's limit: a large window is tiled alike
         raise ConfigError(f"{key.rpartition('.')[0]}.resolution_m = {resolution_m!r}: refines the raster's "
-                          f"{nc} x {nr} window to {triangles:,} triangles, more than the {RASTER_MAX_TRIANGLES:,} "
+                          f"{nc} x {nr} window to {triangles:,} triangles, more than the {MAX_SEABED_TRIANGLES:,} "
                           "allowed; use a coarser resolution_m or a smaller margin_m")
     if nx < 2 or ny < 2:
         raise ConfigError(f"{key}: the window read holds a single row or column of pixels; widen margin_m")

@@ -316,28 +316,17 @@ def build_scene(config, tile_m: float | None = None) -> Scene:
         raise TypeError(f"config must be a SceneConfig (scanner_sim.load_scene(name_or_path) gives one), not "
                         f"{type(config).__name__} {config!r:.60}")
     parts: list[Part] = []
-    hf, info, site = None, None, False
+    hf, info = None, None
     sb = config.seabed
     cell_reflectance = None
     if isinstance(sb, RasterSeabedConfig):
         raster = load_raster_seabed(sb, plan_bounds(config), config.crs)
         hf, info, cell_reflectance = raster.heightfield, raster.info, raster.cell_reflectance
-        site = bool(tile_m) or tiled(hf)
-        if not site:
-            v, f = hf.mesh()
-            per_face = None if cell_reflectance is None else np.tile(cell_reflectance.ravel(), 2)[
-                np.tile(hf.valid.ravel(), 2) if hf.valid is not None else slice(None)]
-            parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True,
-                              face_reflectance=per_face))
     elif sb is not None:
         rng = np.random.default_rng(sb.seed)
         hf = generate_heightfield(sb.center_m, sb.size_m, sb.resolution_m, sb.depth_m, sb.relief.rms_m,
                                   sb.relief.wavelength_m, sb.relief.hurst, sb.ripples.amplitude_m,
                                   sb.ripples.wavelength_m, sb.ripples.crest_deg, sb.ripples.sinuosity, rng)
-        site = bool(tile_m) or tiled(hf)
-        if not site:
-            v, f = hf.mesh()
-            parts.append(Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True))
         rk = sb.rocks
         if rk.count:
             rocks = rock_meshes(hf, rk.count, (rk.radius_min_m, rk.radius_max_m), rng)
@@ -345,6 +334,13 @@ def build_scene(config, tile_m: float | None = None) -> Scene:
             offsets = np.cumsum([0] + [len(r[0]) for r in rocks[:-1]])
             f = np.concatenate([r[1] + o for r, o in zip(rocks, offsets)])
             parts.append(Part("rocks", "rocks", v, f, LABELS[rk.label], reflectance_of(rk)))
+    site = hf is not None and (bool(tile_m) or tiled(hf))
+    if hf is not None and not site:  # the seabed's mesh, part 0 (a site meshes it in windows as the pass goes)
+        v, f = hf.mesh()
+        per_face = None if cell_reflectance is None else np.tile(cell_reflectance.ravel(), 2)[
+            np.tile(hf.valid.ravel(), 2) if hf.valid is not None else slice(None)]
+        parts.insert(0, Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True,
+                             face_reflectance=per_face))
 
     seabed_meshes = {i: placed_mesh(obj, i, None) for i, obj in enumerate(config.objects)
                      if isinstance(obj, MeshObject) and obj.label == "seabed" and hf is None}
