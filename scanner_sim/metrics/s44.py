@@ -149,7 +149,6 @@ class OrderTally:
     def __init__(self, n_cells: int):
         self.soundings = np.zeros(n_cells, np.int32)  # int32 as coverage's BinTally: memory grows with the area reached
         self.meeting = np.zeros((len(ORDERS), n_cells), np.int32)
-        self._one = np.int32(1)  # np.add.at of a Python int casts on a slow path
 
     def add(self, cell, depth_m, vertical_error_m, horizontal_error_m, tvu_m=None, thu_m=None) -> None:
         """cell (n,) flat cell index of each sounding (-1: outside every cell); the rest as in
@@ -158,6 +157,7 @@ class OrderTally:
         inside = cell >= 0
         meets = soundings_meeting(depth_m, vertical_error_m, horizontal_error_m, tvu_m, thu_m)
         # np.add.at where the soundings are: a bincount over every cell would cost the whole grid per chunk
-        np.add.at(self.soundings, cell[inside], self._one)
+        one = self.soundings.dtype.type(1)  # the tally's own dtype: np.add.at of a Python int casts on a slow path
+        np.add.at(self.soundings, cell[inside], one)
         for k in range(len(ORDERS)):
-            np.add.at(self.meeting[k], cell[inside & meets[k]], self._one)
+            np.add.at(self.meeting[k], cell[inside & meets[k]], one)
