@@ -107,6 +107,8 @@ def _add_run(sub):
     p.add_argument("--gate-width-ns", type=positive_float(), help="gate width (default: the scene's or the preset's)")
     p.add_argument("--split-lines", action="store_true",
                    help="one point cloud and one trajectory per survey leg (output.split_legs)")
+    p.add_argument("--copc", action="store_true",
+                   help="also write points.copc.laz, a Cloud-Optimised Point Cloud for Potree and QGIS (output.copc)")
     p.add_argument("--rosbag", metavar="DIR", type=output_dir(),
                    help="also write the pass as a ROS 2 bag in folder DIR (output.rosbag.dir; frame and storage: "
                         "--set output.rosbag.frame=ned, output.rosbag.storage=sqlite3)")
@@ -153,6 +155,8 @@ def scene_overrides(args, config) -> dict:
                                                else gated[0].gate_width_s * 1e9)
     if args.split_lines:
         changes["output.split_legs"] = True
+    if args.copc:
+        changes["output.copc"] = True
     if args.rosbag is not None:
         changes["output.rosbag.dir"] = args.rosbag
     return changes

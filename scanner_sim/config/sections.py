@@ -341,6 +341,8 @@ class OutputConfig(StrictModel):
     """Write the points as points.las."""
     laz: bool = False
     """Write the points as points.laz (compressed by lazrs); with las, both files."""
+    copc: bool = False
+    """Also write the points as points.copc.laz, a Cloud-Optimised Point Cloud (COPC 1.0) for Potree, QGIS, PDAL."""
     trajectory_csv: bool = True
     """Write the true and estimated poses at 10 Hz as trajectory.csv."""
     waveform_every_n_pulses: Integer(ge=0) = 0

@@ -136,6 +136,7 @@ class PassPlan:
         output, coverage = config.output, config.has_seabed
         clouds = [s for s, on in ((".las", output.las), (".laz", output.laz)) if on]
         files = [] if output.split_legs else [f"points{s}" for s in clouds]
+        files += ["points.copc.laz"] if output.copc else []
         files += ["dropouts.npz"]
         files += ["coverage_grid.npz"] if coverage else []
         files += ["trajectory.csv"] if output.trajectory_csv and not output.split_legs else []

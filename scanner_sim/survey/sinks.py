@@ -19,6 +19,7 @@ import numpy as np
 
 from muls.ranging import DROPOUT_CAUSES
 from scanner_sim import io
+from scanner_sim.io.copc import CopcWriter
 from scanner_sim.io.rosbag import RosbagWriter
 from scanner_sim.metrics.coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
 from scanner_sim.render.coverage_map import plot_coverage_map
@@ -90,6 +91,16 @@ class LasSink(io.LasWriter):
         self.write(chunk.points)
 
 
+class CopcSink(CopcWriter):
+    """points.copc.laz: the pass's points spilled chunk by chunk, organised into a COPC octree at the end."""
+
+    def __init__(self, path: Path, local_origin: np.ndarray, metadata: dict | None = None, crs_wkt: str | None = None):
+        super().__init__(path, offset_m=local_origin, metadata=metadata, crs_wkt=crs_wkt)
+
+    def add(self, chunk) -> None:
+        self.write(chunk.points)
+
+
 class LegLasSink:
     """One LAS/LAZ file per survey leg (``leg007_points.laz``...), like a HELIOS++ leg, each opened when its
     leg's first point arrives and carrying the leg as its file source id."""
@@ -126,13 +137,15 @@ class LegLasSink:
 
 def point_cloud_sinks(output, out: Path, local_origin: np.ndarray, metadata: dict, crs=None) -> list:
     """The point-cloud writers a scene's ``output`` section asks for: points.las and/or points.laz, or one file per
-    leg of each, every one carrying ``metadata`` and placing points off ``local_origin`` (3,) [m], in the map
-    coordinates of ``crs`` (a :class:`pyproj.CRS`, its WKT in the LAS CRS record) or, with None, the local frame."""
+    leg of each, and points.copc.laz (always the whole pass), every one carrying ``metadata`` and placing points off
+    ``local_origin`` (3,) [m], in the map coordinates of ``crs`` (a :class:`pyproj.CRS`, its WKT in the LAS CRS
+    record) or, with None, the local frame."""
     suffixes = [s for s, on in ((".las", output.las), (".laz", output.laz)) if on]
     wkt = None if crs is None else crs.to_wkt("WKT1_GDAL")  # LAS 1.4 R15: OGC WKT 1 (01-009)
+    copc = [CopcSink(out / "points.copc.laz", local_origin, metadata, crs_wkt=wkt)] if output.copc else []
     if output.split_legs:
-        return [LegLasSink(out, s, local_origin, metadata, wkt) for s in suffixes]
-    return [LasSink(out / f"points{s}", local_origin, metadata, crs_wkt=wkt) for s in suffixes]
+        return [LegLasSink(out, s, local_origin, metadata, wkt) for s in suffixes] + copc
+    return [LasSink(out / f"points{s}", local_origin, metadata, crs_wkt=wkt) for s in suffixes] + copc
 
 
 #: Rate of the bag's odometry and transforms [Hz] (the trajectory table's).
