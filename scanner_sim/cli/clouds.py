@@ -13,22 +13,29 @@ from muls.command import (
 from scanner_sim.cli.registry import subcommand
 
 # -- view ---------------------------------------------------------------------------------------------------
-#: ``--color`` name (also the point cloud's colouring, ``color_by``) -> the PointRecords field it shows.
-_VIEW_FIELDS = {"class": "classification", "intensity": "intensity", "channel": "channel",
-                "range_error": "range_error_m", "snr": "snr"}
+#: ``--color`` name (also the point cloud's colouring, ``color_by``) -> the PointRecords field it shows ("depth": -z).
+_VIEW_FIELDS = {"class": "classification", "depth": "xyz", "intensity": "intensity", "channel": "channel",
+                "range_error": "range_error_m", "tvu": "tvu_m", "snr": "snr"}
 
 
 @subcommand("view")
 def _add_view(sub):
-    p = sub.add_parser("view", help="look at a points.las over its scene.ply: a window, or a PNG without a display")
-    p.add_argument("las", metavar="POINTS.las", type=nonempty(), help="a LAS file, e.g. out/cable_survey/points.las")
-    p.add_argument("--color", default="class", choices=list(_VIEW_FIELDS), help="point colouring (default: class)")
+    p = sub.add_parser("view", help="look at a pass's points over its scene.ply: an HTML page to turn in a browser "
+                       "(--html), a window, or a PNG without a display")
+    p.add_argument("path", metavar="RUN_DIR", type=nonempty(),
+                   help="a run folder of scanner-sim run (its points.las...) or a LAS file, e.g. out/cable_survey")
+    p.add_argument("--html", metavar="OUT.html", nargs="?", const=True, type=output_file(),
+                   help="write one self-contained HTML page (WebGL, no network needed; default RUN_DIR/view.html)")
+    p.add_argument("--color", choices=list(_VIEW_FIELDS),
+                   help="point colouring (default: depth in the HTML page over a seabed, else class)")
     p.add_argument("--screenshot", metavar="PNG", type=output_file(),
                    help="render off-screen to this PNG instead of opening a window "
                    "(without a display the default is POINTS.<color>.png beside the LAS)")
     p.add_argument("--no-mesh", action="store_true", help="do not draw the scene.ply beside the LAS (or one directory up)")
-    p.add_argument("--point-size", type=positive_float(), default=3.0, help="pixels")
-    p.add_argument("--max-points", type=positive_int(), default=2_000_000, help="thin larger clouds by a fixed stride")
+    p.add_argument("--point-size", type=positive_float(), default=3.0, help="pixels (default 3; 2 in the HTML page)")
+    p.add_argument("--max-points", type=positive_int(),
+                   help="show at most this many points, one in every ceil(n / max) in file order (default 2,000,000; "
+                        "500,000 in the HTML page)")
     p.add_argument("--window-size", type=positive_int(), nargs=2, default=[1600, 1000], metavar=("WIDTH", "HEIGHT"),
                    help="pixels")
     p.add_argument("--open3d", action="store_true",
@@ -45,10 +52,17 @@ def _cmd_view(args) -> int:
     from scanner_sim.io import read_las, read_scene_ply
     from scanner_sim.render import point_cloud, point_colours
 
+    path = Path(args.path)
+    if not path.exists():
+        raise ValueError(f"RUN_DIR = {str(path)!r}: no such folder or file; expected a run folder or a LAS file")
+    if args.html is not None:
+        return _write_html(args, path)
     point_cloud.check_window_size("--window-size", args.window_size)
-    las = Path(args.las)
-    if not las.is_file():
-        raise ValueError(f"POINTS.las = {str(las)!r}: no such file; expected a LAS file such as points.las")
+    if path.is_dir():
+        from scanner_sim.render.web_view import PassFiles
+
+        path = PassFiles.of(path).clouds[0]
+    las = path
     try:
         points = read_las(las)
     except (laspy.LaspyException, EOFError, OSError, ValueError) as exc:
@@ -59,25 +73,43 @@ def _cmd_view(args) -> int:
     if not args.no_mesh and ply is not None:
         scene = read_scene_ply(ply)
         mesh = {"truth_vertices": scene["vertices"], "truth_faces": scene["faces"]}
-    values = getattr(points, _VIEW_FIELDS[args.color])
-    colouring = ({"classification": values} if args.color == "class" else
-                 {"color_by": args.color, "scalars": values})
-    options = dict(title=f"{las}: {len(values):,} points coloured by {args.color}", point_size=args.point_size,
-                   max_points=args.max_points, window_size=tuple(args.window_size), **colouring, **mesh)
+    color = args.color or "class"
+    values = -points.xyz[:, 2] if color == "depth" else getattr(points, _VIEW_FIELDS[color])
+    colouring = ({"classification": values} if color == "class" else
+                 {"color_by": color, "scalars": values})
+    options = dict(title=f"{las}: {len(values):,} points coloured by {color}", point_size=args.point_size,
+                   max_points=args.max_points or 2_000_000, window_size=tuple(args.window_size), **colouring, **mesh)
     png = args.screenshot
     if args.open3d:
         if not os.environ.get("DISPLAY"):
             raise ValueError("--open3d: opens a window, and there is no display (DISPLAY is unset); "
                              "use --screenshot PNG instead")
-        point_cloud.show_open3d(points.xyz, point_colours.point_rgb(values, args.color), title=str(las),
+        point_cloud.show_open3d(points.xyz, point_colours.point_rgb(values, color), title=str(las),
                                 **{k: v for k, v in mesh.items()})
         return 0
     if png is None and os.environ.get("DISPLAY"):
         point_cloud.show_point_cloud(points.xyz, **options)
         return 0
-    png = Path(png) if png is not None else las.with_suffix(f".{args.color}.png")
+    png = Path(png) if png is not None else las.with_suffix(f".{color}.png")
     point_cloud.render_point_cloud(png, points.xyz, **options)
     print(png)
+    return 0
+
+
+def _write_html(args, path) -> int:
+    """``view --html``: the pass's page, by default view.html in the run folder (beside a LAS file given)."""
+    from pathlib import Path
+
+    from scanner_sim.render import web_view
+
+    files = web_view.PassFiles.of(path)
+    if args.no_mesh:
+        files = web_view.PassFiles(files.clouds, None, files.trajectory, files.dropouts, files.summary)
+    out = Path(args.html) if args.html is not True else (path if path.is_dir() else path.parent) / "view.html"
+    page = web_view.write_view_html(out, files, max_points=args.max_points or web_view.DEFAULT_MAX_POINTS,
+                                    color=args.color, point_size_px=args.point_size if args.point_size != 3.0 else 2.0)
+    print(f"{out}: {page['shown']:,} of {page['points']:,} points"
+          + (f" (one in every {page['stride']})" if page["stride"] > 1 else "") + f", {page['bytes'] / 1e6:.1f} MB")
     return 0
 
 

@@ -61,7 +61,9 @@ _CYCLE = [(31, 119, 180), (44, 160, 44), (148, 103, 189), (23, 190, 207), (188, 
 
 #: ``color_by`` value -> (matplotlib colour map, scalar bar title, symmetric limits?).
 SCALAR_COLOUR_MAPS: dict[str, tuple[str, str, bool]] = {
+    "depth": ("viridis_r", "depth [m] (-z)", False),
     "intensity": ("viridis", "intensity", False),
+    "tvu": ("plasma", "TVU 95 % [m]", False),
     "range_error": ("coolwarm", "range error [m]", True),
     "snr": ("magma", "SNR", False),
     "amplitude": ("viridis", "amplitude [LSB]", False),
