@@ -54,7 +54,7 @@ def _cmd_view(args) -> int:
 
     path = Path(args.path)
     if not path.exists():
-        raise ValueError(f"RUN_DIR = {str(path)!r}: no such folder or file; expected a run folder or a LAS file")
+        raise ValueError(f"RUN_DIR = {str(path)!r}: no such file or folder; expected a run folder or a LAS file")
     if args.html is not None:
         return _write_html(args, path)
     point_cloud.check_window_size("--window-size", args.window_size)

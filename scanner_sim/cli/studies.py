@@ -169,6 +169,9 @@ def _add_coverage(sub):
     p.add_argument("--seed", type=seed(), help="seed of every pass (default: the scene's survey.seed)")
     p.add_argument("--max-pulses", type=positive_int(), help="stop each pass after this many pulses")
     p.add_argument("--no-render", action="store_true", help="tables and coverage.json only: no pictures, no report")
+    p.add_argument("--view-pass", metavar="NAME", type=nonempty(),
+                   help="the pass whose interactive 3-D view report.html embeds, by its folder name, e.g. "
+                        "clean_ocean_alt5_mul2023 (default: the first)")
     p.add_argument("--quiet", action="store_true", help="no progress; print only the path of coverage.json")
     p.add_argument("--json", action="store_true", help="print coverage.json's content (records with their S-44 "
                    "orders, s44_orders) instead of the table and the path")
@@ -192,7 +195,7 @@ def _cmd_coverage(args) -> int:
     settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m, args.order_min_soundings)
     out = Path(args.out or Path(config.output_dir) / "coverage")
     with hold_output(out):  # taken before the passes are built, so a second writer is refused at once
-        study = run_study(config, plan, out, settings=settings, fidelity=args.fidelity, seed=args.seed,
+        study = run_study(config, plan, out, view_pass=args.view_pass, settings=settings, fidelity=args.fidelity, seed=args.seed,
                           max_pulses=args.max_pulses, render=not args.no_render, progress=not (args.quiet or args.json),
                           workers=_workers(args), scheduler=args.scheduler, redo=args.redo,
                           cubes=CubePlan(tuple(args.cubes_m), args.cube_count, args.cube_seed) if args.cubes_m else None)

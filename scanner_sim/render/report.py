@@ -270,6 +270,31 @@ def tradeoff_section(study: dict, out: Path) -> str:
             f"<figure>{_image(chart, 'speed against accuracy')}<figcaption>speed against accuracy</figcaption></figure>")
 
 
+#: Points the report's interactive view shows at most (one in every k in file order above it): about 9 MB of page.
+REPORT_VIEW_MAX_POINTS = 200_000
+
+
+def view_section(study: dict, out: Path) -> str:
+    """The interactive 3-D view of the study's chosen pass (``view_pass``, default the first), the page of
+    ``scanner-sim view --html`` inside an iframe's ``srcdoc``, so the report stays one file; nothing when the
+    pass wrote no point cloud."""
+    from scanner_sim.render import web_view
+
+    name = study.get("view_pass") or (study["records"][0]["dir"] if study["records"] else None)
+    if name is None:
+        return ""
+    try:
+        files = web_view.PassFiles.of(out / name)
+    except ValueError:
+        return ""
+    page = web_view.page_html(web_view.page_data(files, max_points=REPORT_VIEW_MAX_POINTS))
+    return (f"<h2>Interactive view: {html.escape(name)}</h2><p>The pass's points in 3-D: drag to turn, wheel to "
+            "zoom, switch the colouring in the panel (other passes: <code>scanner-sim view "
+            f"{html.escape(name)} --html</code> in this folder, or <code>--view-pass</code>).</p>"
+            f'<iframe title="3-D view of {html.escape(name)}" srcdoc="{html.escape(page, quote=True)}" '
+            'style="width: 100%; height: 680px; border: 1px solid #ccc"></iframe>')
+
+
 def report_html(study: dict, out_dir: str | Path) -> str:
     """report.html: the tables, the coverage-against-altitude chart, and per combination its coverage map and
     rendered point cloud, every picture embedded. Pictures are read from ``out_dir`` as run_study writes them."""
@@ -294,6 +319,7 @@ def report_html(study: dict, out_dir: str | Path) -> str:
     if not (out / TRADEOFF_DIR / "tradeoff.png").exists():
         parts.append(f"<p>Speed against accuracy of the scene's fidelity levels: run <code>scanner-sim tradeoff "
                      f"{html.escape(str(study['scene']))}</code> and build the report again to see it here.</p>")
+    parts.append(view_section(study, out))
     parts.append("<h2>Maps and point clouds</h2>")
     for r in study["records"]:
         parts.append(f"<h3>{html.escape(r['dir'])}</h3>")

@@ -140,8 +140,18 @@ def _field(name: str, values: np.ndarray) -> dict:
     else:
         lo, hi = (float(x) for x in np.percentile(good, [1, 99]))
         hi = hi if hi > lo else lo + 1.0
-    return {"label": label, "values": _b64(v, "f4"), "lut": _lut(cmap), "lo": lo, "hi": hi,
-            "limits": "±99th percentile of |value|" if symmetric else "1st to 99th percentile"}
+    field = {"label": label, "values": _b64(v, "f4"), "lut": _lut(cmap), "lo": lo, "hi": hi,
+             "limits": "±99th percentile of |value|" if symmetric else "1st to 99th percentile"}
+    if name == "depth":  # contour lines show the relief's shape where the colour alone shows only a slope
+        field["contour_m"] = contour_interval(hi - lo)
+    return field
+
+
+def contour_interval(span_m: float, lines: int = 20) -> float:
+    """A round interval [m] (1, 2, 2.5 or 5 times a power of ten) giving about ``lines`` contours over ``span_m``."""
+    raw = max(span_m, 1e-3) / lines
+    power = 10.0 ** math.floor(math.log10(raw))
+    return next(k * power for k in (1.0, 2.0, 2.5, 5.0, 10.0) if k * power >= raw)
 
 
 def _footprints(dropouts, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -246,7 +256,8 @@ def page_html(data: dict) -> str:
                                                             for k in (1, 2, 5, 10, 20))}</select></label>
 <div class="toggles"><label><input type="checkbox" id="show-mesh" checked> scene mesh</label>
 <label><input type="checkbox" id="show-trajectory" checked> trajectory</label>
-<label><input type="checkbox" id="show-dropouts" checked> dropouts</label></div>
+<label><input type="checkbox" id="show-dropouts" checked> dropouts</label>
+<label><input type="checkbox" id="show-contours" checked> depth contours</label></div>
 <div id="legend"></div>
 <div id="dropout-legend">{dropout_legend}</div>
 <p class="help">Drag to turn, right-drag to pan, wheel to zoom. Colouring <span id="shown-colour"></span>,

@@ -115,7 +115,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
               settings: CoverageSettings = CoverageSettings(), fidelity: str | None = None, seed: int | None = None,
               max_pulses: int | None = None, render: bool = True, progress: bool = True, client=None,
               workers: int | None = None, scheduler: str | None = None, redo: bool = False,
-              cubes: CubePlan | None = None) -> dict:
+              cubes: CubePlan | None = None, view_pass: str | None = None) -> dict:
     """Run every combination of ``plan`` and write the study's files into ``out_dir``.
 
     Per combination, a sub-directory with the pass's outputs (points.las, summary.json, coverage_map.png,
@@ -153,6 +153,9 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
                                 max_pulses=max_pulses, progress=False,
                                 render=render, render_size=STUDY_RENDER_SIZE, write_scene=False, coverage=settings))
             for water, altitude, instrument in combos]
+    names = [job.name for job in jobs]
+    if view_pass is not None and view_pass not in names:
+        raise ValueError(f"view_pass = {view_pass!r}: not a pass of this study; one of {', '.join(names)}")
     with hold_output(out):  # one writer at a time (io/run_dir.py)
         out.mkdir(parents=True, exist_ok=True)
         started = time.perf_counter()
@@ -182,6 +185,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
             "cubes": placed,
             "s44_source": s44.SOURCE,
             "wall_s": round(time.perf_counter() - started, 1),
+            "view_pass": view_pass or names[0],
             "records": records,
         }
         io.write_summary_json(out / "coverage.json", study)

@@ -1,6 +1,6 @@
 // The point-cloud viewer of `scanner-sim view RUN_DIR --html` (scanner_sim/render/web_view.py writes its data).
 // Reads the JSON in <script id="muls-data">, draws it with three.js (the global THREE of three-orbit.min.js), and
-// takes its state from the URL fragment too: #color=depth&zscale=5&mesh=0&trajectory=0&dropouts=0.
+// takes its state from the URL fragment too: #color=depth&zscale=5&mesh=0&trajectory=0&dropouts=0&contours=0.
 (function () {
   "use strict";
   const data = JSON.parse(document.getElementById("muls-data").textContent);
@@ -82,7 +82,7 @@
   const camera = new THREE.PerspectiveCamera(35, 1, radius / 1000, radius * 100);
   camera.up.set(0, 0, 1);
   const look = new THREE.Vector3(-0.55, -1.0, 0.85).normalize();
-  camera.position.copy(look.multiplyScalar(radius / Math.sin((35 / 2) * Math.PI / 180) * 1.05));
+  camera.position.copy(look.multiplyScalar(radius / Math.sin((35 / 2) * Math.PI / 180) * 0.85));
   const controls = new THREE.OrbitControls(camera, canvas);
   controls.target.set(0, 0, 0);
   controls.update();
@@ -124,11 +124,15 @@
     } else {
       const lut = field.lutBytes;
       const lo = field.lo, span = field.hi - field.lo || 1;
+      const step = field.contour_m && toggles.contours.checked ? field.contour_m : 0;
       for (let i = 0; i < count; i++) {
         const x = v[i];
         if (Number.isNaN(x)) { colours.set([255, 0, 255], 3 * i); continue; }
         const k = Math.round(255 * Math.min(Math.max((x - lo) / span, 0), 1));
-        colours[3 * i] = lut[3 * k]; colours[3 * i + 1] = lut[3 * k + 1]; colours[3 * i + 2] = lut[3 * k + 2];
+        // a contour line: the points within a tenth of an interval above each multiple of it, darkened
+        const shade = step && (((x / step) % 1) + 1) % 1 < 0.1 ? 0.45 : 1;
+        colours[3 * i] = shade * lut[3 * k]; colours[3 * i + 1] = shade * lut[3 * k + 1];
+        colours[3 * i + 2] = shade * lut[3 * k + 2];
       }
       const bar = document.createElement("canvas");
       bar.width = 256; bar.height = 14; bar.className = "bar";
@@ -145,7 +149,8 @@
         ticks.append(s);
       }
       const title = document.createElement("div");
-      title.textContent = field.label + (field.limits ? ` (${field.limits})` : "");
+      title.textContent = field.label + (field.limits ? ` (${field.limits})` : "")
+        + (step ? `, contours every ${Number(step.toPrecision(3))} m` : "");
       legend.append(title, bar, ticks);
     }
     cloud.attributes.color.needsUpdate = true;
@@ -160,9 +165,9 @@
   }
   const zscale = document.getElementById("zscale");
   const toggles = {};
-  for (const name of ["mesh", "trajectory", "dropouts"]) {
+  for (const name of ["mesh", "trajectory", "dropouts", "contours"]) {
     toggles[name] = document.getElementById(`show-${name}`);
-    if (!layers[name]) toggles[name].parentElement.style.display = "none";
+    if (name !== "contours" && !layers[name]) toggles[name].parentElement.style.display = "none";
   }
   function fragment() {
     return Object.fromEntries(new URLSearchParams(location.hash.replace(/^#/, "")));
@@ -171,14 +176,14 @@
     const state = fragment();
     const name = state.color in fields ? state.color : data.default_color;
     select.value = name;
-    colourBy(name);
-    const k = Number(state.zscale);
-    zscale.value = String(Number.isFinite(k) && k > 0 ? k : 1);
-    world.scale.set(1, 1, Number(zscale.value));
     for (const [layer, box] of Object.entries(toggles)) {
       box.checked = state[layer] !== "0";
       if (layers[layer]) layers[layer].visible = box.checked;
     }
+    colourBy(name);
+    const k = Number(state.zscale);
+    zscale.value = String(Number.isFinite(k) && k > 0 ? k : 1);
+    world.scale.set(1, 1, Number(zscale.value));
     document.getElementById("shown-colour").textContent = name;
     render();
   }
@@ -193,7 +198,8 @@
   for (const box of Object.values(toggles)) box.addEventListener("change", store);
   window.addEventListener("hashchange", apply);
 
-  document.getElementById("count").textContent = String(count);
+  document.getElementById("count").textContent = count.toLocaleString("en");
+  document.body.dataset.count = String(count);
   resize();
   apply();
   document.body.dataset.ready = "1";
