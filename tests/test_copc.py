@@ -44,7 +44,8 @@ def test_run_copc_holds_the_las_points_extra_bytes_and_crs(copc_pass):
     for name in extra:
         assert copc.point_format.dimension_by_name(name).dtype == las.point_format.dimension_by_name(name).dtype
     dims = STANDARD + tuple(extra)
-    assert np.array_equal(_rows(copc, dims), _rows(las.points, dims), equal_nan=True)
+    got, want = _rows(copc, dims), _rows(las.points, dims)
+    assert got.dtype == want.dtype and got.tobytes() == want.tobytes()  # bit for bit, NaN included
     assert np.isfinite(np.asarray(copc["tvu_m"])).all()  # the uncertainty travelled, not NaN placeholders
     with laspy.open(copc_pass / "points.copc.laz") as f:  # the CRS travels as an extended record
         wkt = [v.string for v in f.header.evlrs if isinstance(v, laspy.vlrs.known.WktCoordinateSystemVlr)]
@@ -53,24 +54,32 @@ def test_run_copc_holds_the_las_points_extra_bytes_and_crs(copc_pass):
 
 def test_bounds_query_returns_exactly_the_las_points_inside(copc_pass, tmp_path):
     """An octree several levels deep (leaves of at most 300 points): each query box returns the LAS points inside it,
-    no more, no fewer, and reads fewer nodes than the whole tree."""
+    no more, no fewer, and reads fewer nodes than the whole tree. Inside means at the file's resolution: laspy
+    compares the stored millimetre counts, so the boxes' edges are put on that grid."""
     records = io.read_las(copc_pass / "points.las")
     las = laspy.read(copc_pass / "points.las")
     path = tmp_path / "deep.copc.laz"
     write_copc(path, records, offset_m=las.header.offsets, max_node_points=300)
     rng = np.random.default_rng(3)
     lo, hi = las.xyz.min(axis=0), las.xyz.max(axis=0)
+    offset, scale = las.header.offsets, las.header.scales
+    counts = np.column_stack([las.X, las.Y, las.Z])
     with CopcReader.open(path) as reader:
         every = load_octree_for_query(reader.source, reader.copc_info, reader.root_page, query_bounds=None)
         assert max(node.key.level for node in every) >= 2
         for _ in range(5):
-            a, b = np.sort(rng.uniform(lo, hi, (2, 3)), axis=0)
-            b[2] = hi[2] + 1.0  # plan boxes, as a GIS asks
+            centre, half = las.xyz[rng.integers(len(las.xyz))], rng.uniform(0.3, 3.0, 3)
+            a, b = centre - half, centre + half
+            if rng.random() < 0.5:  # a plan box, as a GIS asks
+                a[2], b[2] = lo[2] - 1.0, hi[2] + 1.0
+            # box edges on the file's millimetre grid: laspy compares the stored integer counts
+            a, b = (np.round((e - offset) / scale) * scale + offset for e in (a, b))
             got = reader.query(Bounds(mins=a, maxs=b))
-            inside = np.all((las.xyz >= a) & (las.xyz <= b), axis=1)
+            lo_counts, hi_counts = (np.round((e - offset) / scale) for e in (a, b))
+            inside = np.all((counts >= lo_counts) & (counts <= hi_counts), axis=1)
             assert 0 < len(got) == inside.sum()
             dims = ("X", "Y", "Z", "gps_time", "thu_m", "tvu_m")
-            assert np.array_equal(_rows(got, dims), _rows(las.points[inside], dims))
+            assert _rows(got, dims).tobytes() == _rows(las.points[inside], dims).tobytes()
             nodes = load_octree_for_query(reader.source, reader.copc_info, reader.root_page,
                                           query_bounds=Bounds(mins=a, maxs=b).ensure_3d(reader.header.mins,
                                                                                         reader.header.maxs))
