@@ -171,7 +171,7 @@ def _add_coverage(sub):
     p.add_argument("--no-render", action="store_true", help="tables and coverage.json only: no pictures, no report")
     p.add_argument("--view-pass", metavar="NAME", type=nonempty(),
                    help="the pass whose interactive 3-D view report.html embeds, by its folder name, e.g. "
-                        "clean_ocean_alt5_mul2023 (default: the first)")
+                        "clean_ocean-mul2023-6m (default: the first)")
     p.add_argument("--quiet", action="store_true", help="no progress; print only the path of coverage.json")
     p.add_argument("--json", action="store_true", help="print coverage.json's content (records with their S-44 "
                    "orders, s44_orders) instead of the table and the path")
