@@ -142,3 +142,10 @@ def test_records_round_trip_through_read_las(copc_pass):
     for name in ("xyz", "gps_time_s", "classification", "thu_m", "tvu_m", "range_error_m"):
         assert np.array_equal(getattr(a, name)[order_a], getattr(b, name)[order_b], equal_nan=True), name
     assert isinstance(b, PointRecords)
+
+
+def test_a_pass_without_points_writes_an_empty_copc(tmp_path):
+    path = tmp_path / "empty.copc.laz"
+    write_copc(path, PointRecords.empty())
+    with CopcReader.open(path) as reader:
+        assert reader.header.point_count == 0 and len(reader.query()) == 0

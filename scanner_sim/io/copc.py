@@ -59,15 +59,24 @@ def octree_levels(xyz: np.ndarray, max_node_points: int = MAX_NODE_POINTS):
         keys[left, 0], keys[left, 1:] = depth, node
         if depth == MAX_DEPTH:
             break
-        _, node_of, node_size = np.unique(node, axis=0, return_inverse=True, return_counts=True)
+        _, node_of, node_size = np.unique(_cell_keys(node, depth), return_inverse=True, return_counts=True)
         leaf = node_size[node_of.ravel()] <= max_node_points
-        _, first = np.unique(fine, axis=0, return_index=True)  # first point of each occupied cell
+        # the first point of each occupied cell (np.unique's index is the first occurrence)
+        _, first = np.unique(_cell_keys(fine, depth + GRID_CELLS.bit_length() - 1), return_index=True)
         stays = leaf.copy()
         stays[first] = True
         left = left[~stays]
         if left.size == 0:
             break
     return centre, halfsize, keys
+
+
+def _cell_keys(cells: np.ndarray, bits: int) -> np.ndarray:
+    """One sortable key per row of ``cells`` (n, 3) int64, each coordinate below 2**bits: an int64 while three
+    coordinates fit its 63 bits (a 1-D sort, several times faster than ``np.unique(axis=0)``), else the rows."""
+    if 3 * bits <= 63:
+        return (cells[:, 0] << (2 * bits)) | (cells[:, 1] << bits) | cells[:, 2]
+    return np.ascontiguousarray(cells).view([("x", np.int64), ("y", np.int64), ("z", np.int64)]).ravel()
 
 
 class CopcWriter(LasWriter):
@@ -172,7 +181,7 @@ class CopcWriter(LasWriter):
             info.spacing = 2.0 * halfsize / GRID_CELLS
             order = np.lexsort((keys[:, 3], keys[:, 2], keys[:, 1], keys[:, 0]))
             sorted_keys = keys[order]
-            starts = np.flatnonzero(np.r_[True, np.any(sorted_keys[1:] != sorted_keys[:-1], axis=1)])
+            starts = np.flatnonzero(np.r_[len(order) > 0, np.any(sorted_keys[1:] != sorted_keys[:-1], axis=1)])
             for start, stop in zip(starts, np.r_[starts[1:], len(order)]):
                 rows = np.sort(order[start:stop])  # pass order inside a node
                 writer.AddNode(copclib.VoxelKey(*(int(k) for k in sorted_keys[start])),
