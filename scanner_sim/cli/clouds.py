@@ -26,6 +26,9 @@ def _add_view(sub):
                    help="a run folder of scanner-sim run (its points.las...) or a LAS file, e.g. out/cable_survey")
     p.add_argument("--html", metavar="OUT.html", nargs="?", const=True, type=output_file(),
                    help="write one self-contained HTML page (WebGL, no network needed; default RUN_DIR/view.html)")
+    p.add_argument("--serve", action="store_true",
+                   help="serve a local interactive viewer at http://127.0.0.1:PORT until Ctrl-C (viser, the serve extra)")
+    p.add_argument("--port", type=positive_int(), default=8080, help="--serve's port (default 8080)")
     p.add_argument("--color", choices=list(_VIEW_FIELDS),
                    help="point colouring (default: depth in the HTML page over a seabed, else class)")
     p.add_argument("--screenshot", metavar="PNG", type=output_file(),
@@ -55,8 +58,19 @@ def _cmd_view(args) -> int:
     path = Path(args.path)
     if not path.exists():
         raise ValueError(f"RUN_DIR = {str(path)!r}: no such file or folder; expected a run folder or a LAS file")
+    if args.html is not None and args.serve:
+        raise ValueError("--html and --serve: give one (a page to keep, or a local viewer)")
     if args.html is not None:
         return _write_html(args, path)
+    if args.serve:
+        from scanner_sim.render import serve_view, web_view
+
+        files = web_view.PassFiles.of(path)
+        if args.no_mesh:
+            files = web_view.PassFiles(files.clouds, None, files.trajectory, files.dropouts, files.summary)
+        serve_view.serve(files, port=args.port, max_points=args.max_points or serve_view.DEFAULT_MAX_POINTS,
+                         color=args.color, announce=lambda line: print(line, flush=True))
+        return 0
     point_cloud.check_window_size("--window-size", args.window_size)
     if path.is_dir():
         from scanner_sim.render.web_view import PassFiles
