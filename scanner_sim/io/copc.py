@@ -183,7 +183,7 @@ class CopcWriter(LasWriter):
             sorted_keys = keys[order]
             starts = np.flatnonzero(np.r_[len(order) > 0, np.any(sorted_keys[1:] != sorted_keys[:-1], axis=1)])
             for start, stop in zip(starts, np.r_[starts[1:], len(order)]):
-                rows = np.sort(order[start:stop])  # pass order inside a node
+                rows = order[start:stop]  # lexsort is stable: pass order inside a node
                 writer.AddNode(copclib.VoxelKey(*(int(k) for k in sorted_keys[start])),
                                copclib.VectorChar(np.ascontiguousarray(records[rows]).view(np.int8)))
         finally:
