@@ -49,7 +49,8 @@ BACKGROUND_KINDS = ("seabed", "rocks")
 @dataclass(frozen=True)
 class CoverageSettings:
     """cell_m: plan cell and cable stretch [m]; min_points: N; tolerance_m: largest |range error| [m];
-    order_min_soundings: soundings a cell needs to comply with an S-44 order (:mod:`scanner_sim.metrics.s44`)."""
+    order_min_soundings: soundings a cell of an S-44 order that must detect features needs to comply with it, on
+    that order's own grid (:func:`scanner_sim.metrics.s44.order_scales`)."""
 
     cell_m: float = 0.25
     min_points: int = 1
@@ -228,7 +229,10 @@ class CoverageAccumulator:
         self.cables = [(obj, CableBins(obj.centreline, settings.cell_m)) for obj in scene.objects
                        if obj.centreline is not None]
         self.cable_tallies = [BinTally(bins.n_bins) for _, bins in self.cables]
-        self.orders = s44.OrderTally(self.grid.size)
+        #: Each S-44 order's grid and rule, and its tally on that grid (over the same origin as the plan cells).
+        self.order_scales = s44.order_scales(settings.order_min_soundings)
+        self.orders = s44.OrderTally([PlanGrid.over((x0, x1), (y0, y1), scale.cell_m) for scale in self.order_scales],
+                                     self.order_scales)
         self.planned = planned
         self.slot_span = [None, None]  # first and last pulse slot seen
 
@@ -239,7 +243,7 @@ class CoverageAccumulator:
         pulse_cell = self.grid.index(footprint.xyz)
         self.cells.add(pulse_cell, outcome, pulse_cell[np.searchsorted(slots, points.pulse_index[valid])])
         self.objects.add(footprint.object_id, outcome, obj)
-        self._add_soundings(slots, footprint, points, pulse_cell)
+        self._add_soundings(slots, footprint, points)
         if slots.size:
             lo, hi = self.slot_span
             self.slot_span = [int(slots[0]) if lo is None else min(lo, int(slots[0])), max(hi or 0, int(slots[-1]))]
@@ -252,19 +256,36 @@ class CoverageAccumulator:
             valid_bin[mine] = bins.index(xyz[mine])
             tally.add(reaching, outcome, valid_bin)
 
-    def _add_soundings(self, slots, footprint: Footprint, points, pulse_cell) -> None:
-        """Every point is a sounding of its pulse's cell; its true errors are its offset from where its pulse's
-        nominal beam axis meets the truth (navigation, ranging and footprint errors together)."""
+    def _add_soundings(self, slots, footprint: Footprint, points) -> None:
+        """Every point is a sounding where its pulse's nominal beam axis meets the truth (in each order's cell
+        there); its true errors are its offset from that point (navigation, ranging and footprint errors together)."""
         pulse = np.searchsorted(slots, points.pulse_index)
         truth = footprint.xyz[pulse]
-        self.orders.add(np.where(np.isfinite(truth[:, 2]), pulse_cell[pulse], -1), -truth[:, 2],
+        self.orders.add(truth[:, :2], -truth[:, 2],
                         points.xyz[:, 2] - truth[:, 2], np.hypot(*(points.xyz[:, :2] - truth[:, :2]).T),
                         getattr(points, "tvu_m", None), getattr(points, "thu_m", None))
 
     def order_compliance(self) -> np.ndarray:
-        """(len(s44.ORDERS), cells) bool: the cells complying with each S-44 order."""
-        rule = s44.ComplianceRule(self.settings.order_min_soundings)
-        return rule.complies(self.orders.soundings, self.orders.meeting)
+        """(len(s44.ORDERS), cells) bool: the reached plan cells lying in a complying cell of each S-44 order's own
+        grid (or of a stricter order's: the limits nest)."""
+        reached = self.cell_states().ravel() != NOT_REACHED
+        return self.orders.on_grid(self.grid) & reached
+
+    def order_reading(self) -> dict:
+        """Per S-44 order, how it is judged and what complies (JSON-ready): its ``cell_m``, ``min_soundings``,
+        ``confidence``, ``cell_basis`` and ``rules`` (:func:`s44.order_scales`), its ``compliant_area_m2`` and
+        ``compliant_fraction`` of the surveyed area (``area``: ``planned_swath`` or ``reached``)."""
+        area_name, area = self._surveyed_area()
+        figures = s44.order_figures(self.order_compliance(), area, self.settings.cell_m ** 2, self.order_scales)
+        return {scale.order.name: {**scale.as_json(), **figures[scale.order.name], "area": area_name}
+                for scale in self.order_scales}
+
+    def _surveyed_area(self) -> tuple[str, np.ndarray]:
+        """What the orders' shares are of: the planned swath's cells where the plan has one, else the reached."""
+        planned = self.planned_cells()
+        if planned is not None and planned.any():
+            return "planned_swath", planned
+        return "reached", self.cell_states().ravel() != NOT_REACHED
 
     def strictest_orders(self) -> np.ndarray:
         """(ny, nx) int16: the strictest S-44 order each cell complies with (index into s44.ORDERS), or s44.NO_ORDER."""
@@ -325,10 +346,11 @@ class CoverageAccumulator:
             swath = {"area_m2": float(n * cell_area), "reached_fraction": float((reached & planned).sum() / n),
                      "covered_fraction": float((covered & planned).sum() / n),
                      "never_reached_fraction": float((planned & ~reached).sum() / n)}
-        area = planned if swath is not None else reached
+        reading = self.order_reading()
         return {"planned_swath": swath, "order_min_soundings": self.settings.order_min_soundings,
                 "orders_area": "planned_swath" if swath is not None else "reached",
-                "orders": s44.order_figures(self.order_compliance(), area, cell_area)}
+                "orders": {name: {key: value for key, value in r.items() if key not in ("area", "confidence", "cell_basis")}
+                           for name, r in reading.items()}}
 
     def _cable_figures(self, cable, bins: CableBins, tally: BinTally) -> dict:
         state = tally.states(self.settings.min_points)
