@@ -27,7 +27,8 @@ from muls.errors import ParameterError
 
 #: Share of a cell's soundings that must meet an order (S-44's uncertainties are at 95 % confidence).
 CONFIDENCE = 0.95  # assumption: 95 % of a cell's soundings (docs/assumptions.md)
-#: Soundings a cell needs by default (S-44 Ed. 6.0.0 Annex D, Sample Density: ">= five samples per node").
+#: Soundings a cell of an order that must detect features needs by default, on that order's own grid (S-44 Ed.
+#: 6.0.0 Annex D, Sample Density: ">= five samples per node", on the grid that depicts the features).
 DEFAULT_MIN_SOUNDINGS = 5  # assumption: S-44 Annex D's example (docs/assumptions.md)
 #: Valid soundings on a feature for it to count as detected: the same five samples, over the feature taken as one
 #: grid node (Annex D asks a grid cell no larger than the feature it must depict).
@@ -163,6 +164,7 @@ def order_scales(min_soundings: int = DEFAULT_MIN_SOUNDINGS) -> tuple[OrderScale
     its fixed THU, the scale to which it positions a sounding, with no density rule (one sounding suffices)."""
     out = []
     for order in ORDERS:
+        # assumption: the feature's cell, else the fixed THU's (docs/assumptions.md, docs/coverage.md)
         if order.feature_m is not None:
             out.append(OrderScale(order, order.feature_m, ComplianceRule(min_soundings),
                                   f"the {order.feature_m:g} m cube the order must detect (Table 1)"))

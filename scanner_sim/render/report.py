@@ -214,11 +214,18 @@ def _sections(study: dict):
 
 def _s44_text(study: dict) -> str:
     s = study["study"]
-    return (f"A cell complies with an order when it holds at least {s.get('order_min_soundings', 5)} soundings and "
-            "at least 95 % of them lie within the order's TVU = sqrt(a² + (b·d)²) at their depth d and its THU of "
-            "their true position, and their predicted 95 % uncertainties (TVU, THU) are within the same limits. "
-            "Compliant % is of the planned swath (the track flown, widened by altitude · tan(half the scan sector)) "
-            "where the plan has one, else of the reached area. Source: " + study.get("s44_source", "") + ".")
+    return ("Each order is judged on square cells of its own size: the cube it must detect where S-44's Table 1 gives "
+            "one (Exclusive 0.5 m, Special 1 m, 1a 2 m), each cell needing at least "
+            f"{s.get('order_min_soundings', 5)} soundings (Annex D's sample density); Orders 1b and 2, which ask no "
+            "feature detection, on cells of their fixed THU (5 m, 20 m) with no count rule. A cell complies when at "
+            "least 95 % of its soundings lie within the order's TVU = sqrt(a² + (b·d)²) at their depth d and its THU "
+            "of their true position, and their predicted 95 % uncertainties (TVU, THU) are within the same limits. "
+            "Compliant % is the share of the planned swath (the track flown, widened by altitude · tan(half the scan "
+            "sector)) where the plan has one, else of the reached area, lying in reached cells that comply. Not "
+            "checked: Exclusive's 200 % coverage (one pass covers a cell once) and the feature search of Exclusive, "
+            "Special and 1a (measured apart by scanner-sim features); so Exclusive's figure is its uncertainty and "
+            "density on 0.5 m cells, not a claim that the survey meets Exclusive Order. Source: "
+            + study.get("s44_source", "") + ".")
 
 
 def coverage_markdown(study: dict) -> str:

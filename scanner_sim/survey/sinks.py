@@ -422,6 +422,5 @@ def render_order_map(path: Path, coverage: CoverageAccumulator, facts: PassFacts
     planned = coverage.planned_cells()
     plot_order_map(path, coverage.strictest_orders(), coverage.cell_states(),
                    None if planned is None else planned.reshape(coverage.grid.shape), coverage.grid.extent_m,
-                   ORDER_NAMES, figures, title=f"{facts.label}\nIHO S-44 orders (Ed. 6.0.0), each on cells of its own "
-                   f"size; 95 % of a cell's soundings within the order's TVU and THU, and at least "
-                   f"{figures['order_min_soundings']} soundings a cell for the orders that must detect features")
+                   ORDER_NAMES, figures, title=f"{facts.label}\nIHO S-44 orders (Ed. 6.0.0), each judged on cells of "
+                   "its own size (legend): 95 % of a cell's soundings within the order's TVU and THU")
