@@ -47,10 +47,14 @@ def _add_validate(sub):
 
 def _cmd_validate(args) -> int:
     from scanner_sim.config import load_scene
+    from scanner_sim.config.raster_seabed import RasterSeabedConfig
+    from scanner_sim.world.raster import check_raster_frame, plan_bounds
 
     cfg = load_scene(args.scene)
     cfg.water_model()
     inst = cfg.instrument_model()
+    if isinstance(cfg.seabed, RasterSeabedConfig):  # the same check, the same line, as `run`'s
+        check_raster_frame(cfg.seabed, plan_bounds(cfg), cfg.crs)
     extra = ""
     if args.build:
         from scanner_sim.survey.setup import checked_trajectory
