@@ -85,19 +85,61 @@ def object_table(study: dict) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
-def multichannel_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
-    """mul2023 against single_channel at each water and altitude, when the study has both."""
+MULTICHANNEL_TITLE = "Multi-channel against single channel"
+
+
+def _multichannel_pairs(study: dict) -> list[tuple[dict, dict]]:
+    """(mul2023, single_channel) records at each water and altitude where the study has both."""
     by_key = {(r["water"], r["altitude_m"], r["instrument"]): r for r in study["records"]}
-    pairs = [(w, a) for (w, a, i) in by_key if i == "mul2023" and (w, a, "single_channel") in by_key]
+    return [(r, by_key[(w, a, "single_channel")]) for (w, a, i), r in by_key.items()
+            if i == "mul2023" and (w, a, "single_channel") in by_key]
+
+
+def _masked_share(record: dict) -> float | None:
+    """The share of the reached area whose gap is ``masked_by_backscatter``."""
+    reached = record["reached_area_m2"]
+    return record["gaps_m2"]["masked_by_backscatter"] / reached if reached else None
+
+
+def multichannel_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
+    """mul2023 against single_channel at each water and altitude, when the study has both: covered shares, their
+    difference in percentage points, the difference in valid points, and the share masked by backscatter."""
+    pairs = _multichannel_pairs(study)
     if not pairs:
         return None
-    header = ["water", "altitude [m]", "mul2023 covered [%]", "single_channel covered [%]", "difference [points]"]
+    header = ["water", "altitude [m]", "mul2023 covered [%]", "single_channel covered [%]",
+              "covered, mul2023 − single_channel [percentage points]", "valid points, mul2023 − single_channel",
+              "masked by backscatter, mul2023 / single_channel [% of reached]"]
     rows = []
-    for w, a in pairs:
-        m, s = by_key[(w, a, "mul2023")], by_key[(w, a, "single_channel")]
-        rows.append([w, _altitude(a), _percent(m["covered_fraction"]),
-                     _percent(s["covered_fraction"]), f"{m['valid_points_in_reach'] - s['valid_points_in_reach']:+,}"])
+    for m, s in pairs:
+        difference = (None if m["covered_fraction"] is None or s["covered_fraction"] is None
+                      else 100 * (m["covered_fraction"] - s["covered_fraction"]))
+        rows.append([m["water"], _altitude(m["altitude_m"]), _percent(m["covered_fraction"]),
+                     _percent(s["covered_fraction"]), "–" if difference is None else f"{difference:+.1f}",
+                     f"{m['valid_points_in_reach'] - s['valid_points_in_reach']:+,}",
+                     f"{_percent(_masked_share(m))} / {_percent(_masked_share(s))}"])
     return header, rows
+
+
+def multichannel_notes(study: dict) -> list[str]:
+    """One sentence per water and altitude where mul2023 covers less than single_channel: the shares masked by
+    backscatter and single_channel's own largest loss, and why the two instruments differ there."""
+    notes = []
+    for m, s in _multichannel_pairs(study):
+        if m["covered_fraction"] is None or s["covered_fraction"] is None or \
+                m["covered_fraction"] >= s["covered_fraction"]:
+            continue
+        cause, area = max(s["gaps_m2"].items(), key=lambda kv: kv[1])
+        own = (f"; single_channel loses {_percent(area / s['reached_area_m2'])} % to {cause.replace('_', ' ')}"
+               if area > 0 else "")
+        notes.append(f"{m['water']} at {_altitude(m['altitude_m'])} m: mul2023 covers {_percent(m['covered_fraction'])} "
+                     f"% against single_channel's {_percent(s['covered_fraction'])} % because the water column's "
+                     f"backscatter masks the echo on {_percent(_masked_share(m))} % of mul2023's reached area against "
+                     f"{_percent(_masked_share(s))} % of single_channel's{own}. mul2023 runs the pond's gains (2000 and "
+                     "20,000), so the turbid column's own light clips its channels, or rises as high as the echo, over "
+                     "the echo; single_channel's gain is set to keep the column unclipped, so it sees those echoes, "
+                     "and loses only those too weak to clear its noise.")
+    return notes
 
 
 def orders_table(study: dict) -> tuple[list[str], list[list[str]]]:
@@ -196,7 +238,7 @@ def _sections(study: dict):
     sections = [("Coverage", main_table(study))]
     multi = multichannel_table(study)
     if multi:
-        sections.append(("Multi-channel against single channel", multi))
+        sections.append((MULTICHANNEL_TITLE, multi))
     objects = object_table(study)
     if objects[1]:
         sections.append(("Objects and cables", objects))
@@ -233,6 +275,8 @@ def coverage_markdown(study: dict) -> str:
     parts = [f"# Coverage study: {study['scene']}\n", _definitions(study) + "\n"]
     for title, (header, rows) in _sections(study):
         parts.append(f"## {title}\n\n" + markdown_table(header, rows))
+        if title == MULTICHANNEL_TITLE:
+            parts += [f"- {n}" for n in multichannel_notes(study)] + [""]
     if study.get("s44_orders"):
         parts.append(_s44_text(study) + "\n")
     notes = near_zero_notes(study)
@@ -293,6 +337,8 @@ def report_html(study: dict, out_dir: str | Path) -> str:
         parts.append(f"<h2>{html.escape(heading)}</h2>" + html_table(header, rows))
         if heading.startswith("S-44 compliance"):
             parts.append(f"<p>{html.escape(_s44_text(study))}</p>")
+        if heading == MULTICHANNEL_TITLE and multichannel_notes(study):
+            parts.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in multichannel_notes(study)) + "</ul>")
     notes = near_zero_notes(study)
     if notes:
         parts.append("<h2>Why some combinations map (next to) nothing</h2><ul>"
