@@ -67,3 +67,17 @@ def test_multichannel_table_gives_percentage_points_beside_percentages_and_says_
     assert "single_channel loses 27.5 % to below threshold" in note
     study["records"][0]["covered_fraction"] = 0.8  # mul2023 ahead: nothing to explain
     assert multichannel_notes(study) == []
+
+
+def test_progress_total_is_the_pulses_real_site_fires():
+    """real_site's progress bar ran past its total (393,750 pulses fired under a total of 391k). Root cause: the
+    total was the slots times sector / 360 deg (a quarter for 90 deg), while a slot on the sector's edge fires or
+    not by rounding: 126 of every 500 slots fire, not 125. Now the total counts the firing slots by the same test
+    pulse_slots uses."""
+    from scanner_sim.config import load_scene
+    from scanner_sim.survey.setup import PassOptions, PassSetup
+
+    setup = PassSetup.build(load_scene("real_site"), PassOptions(progress=False))
+    fired = sum(slots.size for slots in setup.slot_chunks())
+    assert fired == 393_750
+    assert setup.expected_pulses() == fired

@@ -358,7 +358,9 @@ class PassSetup:
         return self.config.survey.chunk_pulses
 
     def expected_pulses(self) -> int:
-        n = int((self.end_slot - self.first_slot) * self.scanner.active_fraction)
+        """The pulses the pass fires: its slots that fire (exactly, as :meth:`slot_chunks` yields them), at most
+        ``max_pulses``; the progress bar's total."""
+        n = self.scanner.fired_count(self.first_slot, self.end_slot)
         return min(n, self.max_pulses) if self.max_pulses else n
 
     def slot_chunks(self):
