@@ -81,3 +81,32 @@ def test_progress_total_is_the_pulses_real_site_fires():
     fired = sum(slots.size for slots in setup.slot_chunks())
     assert fired == 393_750
     assert setup.expected_pulses() == fired
+
+
+def test_console_names_the_rasters_nodata_behind_the_no_hit_dropouts(tmp_path, capsys):
+    """real_site's console read "dropouts: no_hit 46,559" with no word that these beams were aimed at the
+    raster's nodata, where there is no seabed to meet. Root cause: nothing compared a no_hit beam with where the
+    seabed has data. Hand case: a flat seabed 12 m deep whose western half is nodata (-9999), flown across the
+    boundary at 4 m in clean water: every beam over the data meets it, so every no_hit is aimed at the nodata."""
+    import json
+
+    import numpy as np
+
+    values = np.full((40, 60), -12.0)
+    values[:, :30] = -9999.0
+    write_raster(tmp_path / "site.tif", values, nodata=-9999.0)
+    data = {"format_version": 1, "name": "half_nodata", "crs": "EPSG:32631", "water": "clean_ocean",
+            "seabed": {"raster": "site.tif"},
+            "platform": {"mode": "waypoints", "altitude_m": 4.0,
+                         "waypoints_m": [[X0 + 24, Y0 + 20], [X0 + 36, Y0 + 20]]},
+            "survey": {"max_pulses": 6000}}
+    path = tmp_path / "site.yaml"
+    path.write_text(yaml.safe_dump(data))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--no-render"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    no_hit = summary["dropouts"]["no_hit"]
+    assert no_hit > 500
+    assert summary["no_hit_over_no_seabed"] == no_hit
+    console = capsys.readouterr().out
+    assert f"no_hit {no_hit:,} ({no_hit:,} of them aimed where the raster has nodata (-9999)" in console

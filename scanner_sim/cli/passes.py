@@ -68,6 +68,18 @@ def _cmd_validate(args) -> int:
     return 0
 
 
+def _no_seabed_note(summary: dict) -> str:
+    """How many ``no_hit`` dropouts were aimed where the seabed has no data, naming a raster's nodata value."""
+    n = summary.get("no_hit_over_no_seabed")
+    if not n:
+        return ""
+    seabed = summary.get("seabed")
+    if seabed is None:
+        return f" ({n:,} of them aimed beyond the seabed's edge)"
+    nodata = "" if seabed.get("nodata") is None else f" ({seabed['nodata']:g})"
+    return f" ({n:,} of them aimed where the raster has nodata{nodata} or beyond its edge: no seabed to meet)"
+
+
 # -- schema -------------------------------------------------------------------------------------------------
 @subcommand("schema")
 def _add_schema(sub):
@@ -212,6 +224,7 @@ def _cmd_run(args) -> int:
               "pulses_per_s leaves it out)", file=sys.stderr, flush=True)
     if not args.quiet:
         dropped = ", ".join(f"{k} {v:,}" for k, v in summary["dropouts"].items() if v) or "none"
+        dropped += _no_seabed_note(summary)
         print(f"{summary['pulses']:,} pulses -> {summary['points']:,} points in {summary['wall_s']:.1f} s "
               f"({summary['pulses_per_s']:,.0f} pulses/s); dropouts: {dropped}")
         error = summary["range_error_m"]

@@ -237,7 +237,7 @@ def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOption
     if setup.plan.measures_coverage:
         planned = planned_swath(setup.config, setup.trajectory, setup.scanner.pulse_rate_hz)
         coverage = sinks.CoverageSink(setup.scene, options.coverage, planned)
-    stats = sinks.PassStats(len(setup.model.instrument.channels))
+    stats = sinks.PassStats(len(setup.model.instrument.channels), setup.scene.heightfield)
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
     started = time.perf_counter()
     for chunk in chunks:
