@@ -110,3 +110,18 @@ def test_console_names_the_rasters_nodata_behind_the_no_hit_dropouts(tmp_path, c
     assert summary["no_hit_over_no_seabed"] == no_hit
     console = capsys.readouterr().out
     assert f"no_hit {no_hit:,} ({no_hit:,} of them aimed where the raster has nodata (-9999)" in console
+
+
+def test_summary_calibration_says_one_short_pass_is_one_draw_of_the_navigation_drift():
+    """The summary gave horizontal_within_thu 0.79 with no word that one short pass is one draw of the navigation's
+    drift (cable_survey's noise is correlated over 20 s; its oscillating scanner fires every slot, so 3,000 pulses
+    at 5 kHz fly 0.6 s). Root cause: the calibration block carried the shares alone."""
+    import scanner_sim
+    from scanner_sim.config import load_scene
+
+    config = load_scene("cable_survey")
+    summary = scanner_sim.simulate_pass(config, scanner_sim.PassOptions(max_pulses=3000, progress=False)).summary
+    note = summary["uncertainty"]["calibration"]["note"]
+    tau = config.platform.navigation_noise.correlation_time_s
+    assert "one pass of 0.6 s" in note and f"correlated over {tau:g} s" in note and "about one draw" in note
+    assert "--seeds N" in note
