@@ -37,6 +37,9 @@ GAP_CAUSES = FAILURE_CAUSES + ("other_surface",)
 OTHER_SURFACE = len(FAILURE_CAUSES)
 #: Why an object the valid points reach is not detected: fewer than s44.FEATURE_MIN_SOUNDINGS of them.
 FEW_SOUNDINGS = "few_soundings"
+#: Why an object no pulse reached is not detected: beams continued past another object's surface pass through its
+#: box (SHADOWED: that object hides it), or none does (NOT_REACHED_OBJECT: the scan does not aim there).
+SHADOWED, NOT_REACHED_OBJECT = "shadowed", "not_reached"
 #: Bin states besides a gap cause index.
 NOT_REACHED = -2
 COVERED = -1
@@ -175,23 +178,25 @@ class CableBins:
 @dataclass(frozen=True)
 class Footprint:
     """Where each pulse's nominal beam axis first meets the truth meshes: ``xyz`` (n, 3) world [m] (NaN
-    without a hit), ``object_id`` (n,) int (-1 without a hit)."""
+    without a hit), ``object_id`` (n,) int (-1 without a hit); ``direction`` (n, 3) unit, the axis's direction, or
+    None (then no object is judged shadowed)."""
 
     xyz: np.ndarray
     object_id: np.ndarray
+    direction: np.ndarray | None = None
 
 
-def nominal_footprint(hits) -> Footprint:
+def nominal_footprint(hits, direction: np.ndarray | None = None) -> Footprint:
     """Where each beam axis first meets the truth meshes, from the beam cast itself: sub-ray 0 of every beam
     pattern is the axis (:func:`scanner_sim.rays.beams.beam_pattern`), so its hit, if any, is the axis hit;
-    ``hits``: the chunk's :class:`scanner_sim.rays.cast.Hits`."""
+    ``hits``: the chunk's :class:`scanner_sim.rays.cast.Hits`; ``direction`` (n, 3): the axes' directions."""
     axis = hits.subray_index == 0
     pulse = hits.pulse_index[axis]
     xyz = np.full((hits.n_pulses, 3), np.nan)
     xyz[pulse] = hits.point[axis]
     object_id = np.full(hits.n_pulses, -1, np.int64)
     object_id[pulse] = hits.object_id[axis]
-    return Footprint(xyz, object_id)
+    return Footprint(xyz, object_id, direction)
 
 
 def pulse_outcomes(slots: np.ndarray, points, dropouts, tolerance_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -231,6 +236,11 @@ class CoverageAccumulator:
         self.cable_tallies = [BinTally(bins.n_bins) for _, bins in self.cables]
         #: Each S-44 order's grid and rule, and its tally on that grid (over the same origin as the plan cells).
         self.order_scales = s44.order_scales(settings.order_min_soundings)
+        self._targets = np.array([o.object_id for o in scene.objects
+                                  if o.kind not in BACKGROUND_KINDS and o.centreline is None], np.int64)
+        self._target_boxes = np.array([_box(scene, scene.objects[i]) for i in self._targets]).reshape(-1, 2, 3)
+        #: Per object, beams whose axis, continued past another object's surface, passes through its box.
+        self.shadowing = np.zeros(len(scene.objects), COUNT_DTYPE)
         self.orders = s44.OrderTally([PlanGrid.over((x0, x1), (y0, y1), scale.cell_m) for scale in self.order_scales],
                                      self.order_scales)
         self.planned = planned
@@ -243,6 +253,7 @@ class CoverageAccumulator:
         pulse_cell = self.grid.index(footprint.xyz)
         self.cells.add(pulse_cell, outcome, pulse_cell[np.searchsorted(slots, points.pulse_index[valid])])
         self.objects.add(footprint.object_id, outcome, obj)
+        self._add_shadowing(footprint)
         self._add_soundings(slots, footprint, points)
         if slots.size:
             lo, hi = self.slot_span
@@ -255,6 +266,26 @@ class CoverageAccumulator:
             valid_bin = np.full(obj.size, -1, np.int64)
             valid_bin[mine] = bins.index(xyz[mine])
             tally.add(reaching, outcome, valid_bin)
+
+    def _add_shadowing(self, footprint: Footprint) -> None:
+        """Count, per target object, the beams whose axis met another object (not the seabed) first and, continued
+        past it, passes through the target's box: the beams that object hides it from."""
+        if footprint.direction is None or not self._targets.size:
+            return
+        kinds = np.array([o.kind for o in self.scene.objects])
+        hit = footprint.object_id
+        blocked = (hit >= 0) & (kinds[np.maximum(hit, 0)] != "seabed")
+        if not blocked.any():
+            return
+        start, direction, by = footprint.xyz[blocked], footprint.direction[blocked], hit[blocked]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inverse = 1.0 / direction  # (m, 3): inf along an axis the beam does not move on
+            t0 = (self._target_boxes[None, :, 0, :] - start[:, None, :]) * inverse[:, None, :]
+            t1 = (self._target_boxes[None, :, 1, :] - start[:, None, :]) * inverse[:, None, :]
+            enter = np.nanmax(np.minimum(t0, t1), axis=2)
+            leave = np.nanmin(np.maximum(t0, t1), axis=2)
+        through = (leave >= np.maximum(enter, 0.0)) & (self._targets[None, :] != by[:, None])
+        np.add.at(self.shadowing, self._targets[np.nonzero(through)[1]], COUNT_DTYPE(1))
 
     def _add_soundings(self, slots, footprint: Footprint, points) -> None:
         """Every point is a sounding where its pulse's nominal beam axis meets the truth (in each order's cell
@@ -375,15 +406,28 @@ class CoverageAccumulator:
                 continue
             i = obj.object_id
             detected = bool(self.objects.valid[i] >= s44.FEATURE_MIN_SOUNDINGS)
+            if state[i] >= 0:
+                cause = GAP_CAUSES[state[i]]
+            elif state[i] == NOT_REACHED:
+                cause = SHADOWED if self.shadowing[i] > 0 else NOT_REACHED_OBJECT
+            else:
+                cause = None if detected else FEW_SOUNDINGS
             out.append({
                 "name": obj.name,
                 "kind": obj.kind,
                 "reaching_pulses": int(self.objects.reaching[i]),
+                "shadowing_pulses": int(self.shadowing[i]),
                 "valid_points": int(self.objects.valid[i]),
                 "detected": detected,
-                "gap_cause": GAP_CAUSES[state[i]] if state[i] >= 0 else (None if detected else FEW_SOUNDINGS),
+                "gap_cause": cause,
             })
         return out
+
+
+def _box(scene, obj) -> np.ndarray:
+    """(2, 3) lower and upper corners [m] of an object's axis-aligned box, from its faces' vertices."""
+    vertices = scene.vertices[np.unique(scene.faces[obj.face_start:obj.face_stop])]
+    return np.array([vertices.min(axis=0), vertices.max(axis=0)])
 
 
 def _by_cause(codes: np.ndarray, weight) -> dict:

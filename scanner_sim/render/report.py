@@ -186,15 +186,22 @@ def tpu_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
 
 
 def feature_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
-    """Per combination, the share of the placed cubes of each size detected, when the study placed cubes."""
+    """Per combination, the cubes of each size detected of those the scan reached, those no pulse reached or another
+    object hid counted apart, when the study placed cubes."""
     sizes = list(dict.fromkeys(size for r in study["records"] for size in r.get("features", {})))
     if not sizes:
         return None
-    header = ["water", "instrument", "altitude [m]"] + [f"{size} m cubes detected" for size in sizes]
+    header = ["water", "instrument", "altitude [m]"] + [f"{size} m cubes detected of those reached" for size in sizes]
     rows = [[r["water"], r["instrument"], _altitude(r["altitude_m"])]
-            + [f"{c['detected']}/{c['placed']}" if (c := r["features"].get(size)) else "–" for size in sizes]
+            + [_detected(c) if (c := r["features"].get(size)) else "–" for size in sizes]
             for r in study["records"]]
     return header, rows
+
+
+def _detected(cubes: dict) -> str:
+    """"detected/reached", with the cubes no pulse reached or another object hid counted apart."""
+    apart = [f"{cubes[k]} {k.replace('_', ' ')}" for k in ("not_reached", "shadowed") if cubes.get(k)]
+    return f"{cubes['detected']}/{cubes.get('reached', cubes['placed'])}" + (f" ({', '.join(apart)})" if apart else "")
 
 
 def near_zero_notes(study: dict) -> list[str]:

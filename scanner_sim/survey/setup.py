@@ -385,7 +385,7 @@ class PassSetup:
         beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(poses)
         hits = self.rays(beam_o, beam_d, shaft, rx_o, rx_d)
         return CastChunk(slots, hits, self.handoff(hits, slots), self.lines_of_sight(slots, poses, hits, (beam_o, beam_d)),
-                         nominal_footprint(hits) if self.plan.measures_coverage else None)
+                         nominal_footprint(hits, beam_d) if self.plan.measures_coverage else None)
 
     def finish_chunk(self, cast: CastChunk, record_mode: str | None = None, every_channel: bool = False,
                      whole_records: bool = False) -> Chunk:
