@@ -31,6 +31,9 @@ CUBE_GAP_M = 0.25  # assumption: cubes apart (docs/assumptions.md)
 REACH_BEAMS = 50_000
 #: Plan cell of that map [m]: half the smallest feature S-44 names (Exclusive's 0.5 m cube).
 REACH_CELL_M = 0.25
+#: Share of the sampled beams through a cube's box that must not enter another placed cube first: a cube stands
+#: mostly in view, not in another's shadow.
+IN_VIEW = 0.5  # assumption: half its beams in view (docs/assumptions.md)
 
 
 def detection_rule(settings: CoverageSettings) -> dict:
@@ -80,7 +83,7 @@ def cube_positions(config: SceneConfig, sizes_m, count: int, seed: int, max_puls
     area = swath.polygon(start, stop).intersection(shapely.box(x0, y0, x1, y1))
     rng = np.random.default_rng(seed)
     placed: list[dict] = []
-    beams_through: list[np.ndarray] = []  # per placed cube, the sampled beams through its box
+    boxes: list[CubeBeams] = []  # per placed cube, the sampled beams through its box
     for size in reversed(sizes):  # the largest first, while there is room
         radius = size / math.sqrt(2.0)
         inner = area.buffer(-radius)
@@ -96,14 +99,15 @@ def cube_positions(config: SceneConfig, sizes_m, count: int, seed: int, max_puls
                         math.hypot(x - p["x_m"], y - p["y_m"]) <= radius + p["size_m"] / math.sqrt(2.0) + CUBE_GAP_M
                         for p in placed):
                     continue
-                through = reach.beams_through(x, y, radius, size)
-                if not any((through & other).any() for other in beams_through):  # neither hides the other
+                candidate = reach.beams_through(x, y, radius, size)
+                if candidate.stays_in_view(boxes):  # neither it nor an earlier cube mostly in the other's shadow
                     break
             else:
                 raise ParameterError(f"{count_key} = {count}: {count} cubes of each size do not fit apart inside the swath "
                                      f"flown where the scan reaches the seabed ({area.area:.1f} m² planned); give fewer "
                                      "or a longer pass")
-            beams_through.append(through)
+            candidate.hide(boxes)
+            boxes.append(candidate)
             placed.append({"name": cube_name(size, k), "size_m": size, "x_m": float(x), "y_m": float(y),
                            "heading_deg": float(rng.uniform(0.0, 90.0))})
     return placed
@@ -167,10 +171,10 @@ class SeabedReach:
         flat = int(self.grid.index(np.array([[x, y]]))[0])
         return flat >= 0 and bool(cells.ravel()[flat])
 
-    def beams_through(self, x: float, y: float, radius_m: float, size_m: float) -> np.ndarray:
-        """(beams,) bool: the sampled beams whose segment up to their first hit passes through the box of a cube of
-        ``size_m`` [m] standing at (x, y) (its plan circle of ``radius_m``, from the seabed's lowest point under it to
-        its highest plus the size)."""
+    def beams_through(self, x: float, y: float, radius_m: float, size_m: float) -> CubeBeams:
+        """The sampled beams whose segment up to their first hit passes through the box of a cube of ``size_m`` [m]
+        standing at (x, y) (its plan circle of ``radius_m``, from the seabed's lowest point under it to its highest
+        plus the size), and how far along each they enter it."""
         ring = np.array([[x, y], [x - radius_m, y], [x + radius_m, y], [x, y - radius_m], [x, y + radius_m]])
         z = self.heightfield.height(ring[:, 0], ring[:, 1])
         lo = np.array([x - radius_m, y - radius_m, z.min()])
@@ -180,7 +184,45 @@ class SeabedReach:
             t0, t1 = (lo - self.origin) * inverse, (hi - self.origin) * inverse
             enter = np.nanmax(np.minimum(t0, t1), axis=1)
             leave = np.nanmin(np.maximum(t0, t1), axis=1)
-        return (leave >= np.maximum(enter, 0.0)) & (enter <= self.length)
+        through = (leave >= np.maximum(enter, 0.0)) & (enter <= self.length)
+        return CubeBeams(np.nonzero(through)[0], enter[through])
+
+
+class CubeBeams:
+    """The sampled beams through one cube's box: their indices (k,) and where along each it is entered [m] (k,),
+    and how many of them an other cube, entered first, hides."""
+
+    def __init__(self, beams: np.ndarray, enter_m: np.ndarray):
+        self.beams, self.enter_m, self.hidden = beams, enter_m, np.zeros(beams.size, bool)
+
+    def _shared(self, other: CubeBeams) -> tuple[np.ndarray, np.ndarray]:
+        """Positions in self and in other of the beams through both boxes."""
+        _, mine, theirs = np.intersect1d(self.beams, other.beams, assume_unique=True, return_indices=True)
+        return mine, theirs
+
+    def _in_view(self, hidden: np.ndarray) -> bool:
+        return self.beams.size > 0 and np.count_nonzero(~hidden) >= IN_VIEW * self.beams.size
+
+    def stays_in_view(self, placed: list[CubeBeams]) -> bool:
+        """Whether this cube, added to ``placed``, keeps itself and each of them in view: at least :data:`IN_VIEW` of
+        each one's beams not entering another cube first."""
+        hidden = np.zeros(self.beams.size, bool)
+        for other in placed:
+            mine, theirs = self._shared(other)
+            hidden[mine[other.enter_m[theirs] < self.enter_m[mine]]] = True
+            hides = other.hidden.copy()
+            hides[theirs[self.enter_m[mine] < other.enter_m[theirs]]] = True
+            if not other._in_view(hides):
+                return False
+        return self._in_view(hidden)
+
+    def hide(self, placed: list[CubeBeams]) -> None:
+        """Mark, in this cube and in ``placed``, the beams that enter another of them first."""
+        for other in placed:
+            mine, theirs = self._shared(other)
+            first = other.enter_m[theirs] < self.enter_m[mine]
+            self.hidden[mine[first]] = True
+            other.hidden[theirs[~first]] = True
 
 
 def detection_table(objects: list[dict], placed: list[dict]) -> dict:
