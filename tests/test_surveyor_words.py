@@ -125,3 +125,21 @@ def test_summary_calibration_says_one_short_pass_is_one_draw_of_the_navigation_d
     tau = config.platform.navigation_noise.correlation_time_s
     assert "one pass of 0.6 s" in note and f"correlated over {tau:g} s" in note and "about one draw" in note
     assert "--seeds N" in note
+
+
+def test_the_reports_s44_words_say_what_each_orders_figure_does_not_check():
+    """The coverage report showed Exclusive at 98.8 % without saying that its 200 % coverage and its feature search
+    are not checked. Root cause: the report's S-44 text described the compliance rule alone."""
+    from scanner_sim.render.report import _s44_text, compliance_table
+
+    study = {"study": {"order_min_soundings": 5}, "s44_source": "IHO S-44",
+             "s44_orders": {"exclusive": {}, "2": {}},
+             "records": [{"water": "w", "instrument": "i", "altitude_m": 4.0, "planned_swath": None,
+                          "range_error_m": {"median": None},
+                          "orders": {"exclusive": {"cell_m": 0.5, "compliant_fraction": 0.988},
+                                     "2": {"cell_m": 20.0, "compliant_fraction": 1.0}}}]}
+    text = _s44_text(study)
+    assert "Not checked: Exclusive's 200 % coverage" in text and "feature search" in text
+    assert "Orders 1b and 2, which ask no feature detection" in text
+    header, _ = compliance_table(study)
+    assert "exclusive [%] (0.5 m cells)" in header and "2 [%] (20 m cells)" in header

@@ -155,7 +155,9 @@ def compliance_table(study: dict) -> tuple[list[str], list[list[str]]]:
     """Per combination: the share of the surveyed area complying with each S-44 order, the share of the planned
     swath the scan reached, and the range error's signed bias beside its absolute size."""
     names = list(study.get("s44_orders", {}))
-    header = (["water", "instrument", "altitude [m]", "swath reached [%]"] + [f"{n} [%]" for n in names]
+    cells = {n: o.get("cell_m") for r in study["records"] for n, o in r.get("orders", {}).items()}
+    header = (["water", "instrument", "altitude [m]", "swath reached [%]"]
+              + [f"{n} [%]" if cells.get(n) is None else f"{n} [%] ({cells[n]:g} m cells)" for n in names]
               + ["range error: median absolute / median signed [cm]", "points short [%]"])
     rows = []
     for r in study["records"]:
