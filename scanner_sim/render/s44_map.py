@@ -7,8 +7,9 @@ import numpy as np
 
 from scanner_sim.render.plan_map import COVERAGE_COLOURS, finish_plan_map
 
-#: Colour per order, strictest first (dark to light green), then "complies with none" and "not reached".
-ORDER_COLOURS = ("#00441b", "#238b45", "#74c476", "#bae4b3", "#edf8e9")
+#: Colour per order, strictest first (dark green to yellow-green: the loosest stays apart from the grey of "not
+#: reached"), then "complies with none".
+ORDER_COLOURS = ("#00441b", "#238b45", "#66bd63", "#a6d96a", "#e6f598")
 NONE_COLOUR = "#fdae6b"
 
 
