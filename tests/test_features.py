@@ -34,8 +34,9 @@ def test_features_json_has_cubes_per_size_and_the_rule(turbid):
     result, out = turbid
     assert list(result["cubes"]) == ["0.5", "1", "2"]
     for c in result["cubes"].values():
-        assert c["placed"] == COUNT and 0 <= c["detected"] <= COUNT
-        assert c["fraction"] == pytest.approx(c["detected"] / c["placed"])
+        assert c["placed"] == COUNT and 0 <= c["detected"] <= c["reached"] <= COUNT
+        assert c["reached"] == COUNT - c["not_reached"] - c["shadowed"]
+        assert c["fraction"] == pytest.approx(c["detected"] / c["reached"])
         # the rule, counted again from the soundings of each cube
         assert c["detected"] == sum(n >= s44.FEATURE_MIN_SOUNDINGS for n in c["valid_soundings"])
     assert result["rule"]["min_valid_soundings"] == s44.FEATURE_MIN_SOUNDINGS and "S-44" in result["rule"]["source"]

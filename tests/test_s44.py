@@ -69,13 +69,17 @@ def test_strictest_order_per_cell():
 
 
 def test_order_compliance_from_a_hand_counted_pass():
-    """Cell (1, 1) gets 5 soundings 0.1 m deep of the truth (Exclusive at 10 m allows sqrt(0.15²+0.075²) =
-    0.168 m); cell (3, 1) 5 soundings 0.2 m off (Special's 0.26 m, not Exclusive); cell (5, 1) 4 good ones."""
+    """Each order judged on its own grid over the 2 m x 1 m seabed at 10 m depth: Exclusive on 0.5 m cells,
+    Special on 1 m, 1a on 2 m (each needing 5 soundings), 1b on 5 m and Order 2 on 20 m (no count rule).
+    Plan cell (0, 0) of 0.25 m gets 5 soundings 0.1 m deep of the truth (Exclusive at 10 m allows
+    sqrt(0.15² + 0.075²) = 0.168 m); (2, 0) 5 soundings 0.2 m off (Special's 0.26 m, not Exclusive); (5, 1) 4
+    exact ones, too few for its Exclusive and Special cells; (7, 3) one 0.8 m off (past 1a's and 1b's 0.517 m,
+    within Order 2's 1.026 m), which puts 1a's and 1b's single cell at 14 of 15 soundings, under 95 %."""
     scene = _flat_scene()
     acc = CoverageAccumulator(scene, CoverageSettings(cell_m=CELL))
     aims, errors = [], []
-    for ix, dz, n in ((1, 0.1, 5), (3, 0.2, 5), (5, 0.0, 4)):
-        aims += [_centre(ix, 1)] * n
+    for ix, iy, dz, n in ((0, 0, 0.1, 5), (2, 0, 0.2, 5), (5, 1, 0.0, 4), (7, 3, 0.8, 1)):
+        aims += [_centre(ix, iy)] * n
         errors += [dz] * n
     aims = np.array(aims)
     slots = np.arange(len(aims))
@@ -84,11 +88,14 @@ def test_order_compliance_from_a_hand_counted_pass():
     acc.add(slots, Footprint(aims, np.zeros(len(aims), np.int64)), points, _dropouts(np.zeros(0, int), []))
     f = acc.figures()
     assert f["orders_area"] == "reached" and f["planned_swath"] is None
-    reached = 3 * CELL**2
-    assert f["orders"]["exclusive"]["compliant_area_m2"] == pytest.approx(CELL**2)
-    assert f["orders"]["special"]["compliant_fraction"] == pytest.approx(2 * CELL**2 / reached)
+    assert {n: o["cell_m"] for n, o in f["orders"].items()} == {"exclusive": 0.5, "special": 1.0, "1a": 2.0,
+                                                              "1b": 5.0, "2": 20.0}
+    compliant_cells = {name: round(o["compliant_area_m2"] / CELL**2) for name, o in f["orders"].items()}
+    assert compliant_cells == {"exclusive": 1, "special": 2, "1a": 2, "1b": 2, "2": 4}
+    assert f["orders"]["2"]["compliant_fraction"] == pytest.approx(1.0)
     strictest = s44.strictest_order(acc.order_compliance()).reshape(acc.grid.shape)
-    assert (strictest[1, 1], strictest[1, 3], strictest[1, 5]) == (0, 1, s44.NO_ORDER)
+    assert (strictest[0, 0], strictest[0, 2], strictest[1, 5], strictest[3, 7]) == (0, 1, 4, 4)
+    assert (strictest == s44.NO_ORDER).sum() == acc.grid.size - 4  # the cells no pulse reached
 
 
 def test_summary_gives_signed_bias_beside_absolute_error():
@@ -156,7 +163,8 @@ def test_coverage_json_prints_orders_per_record_and_the_table_used(tmp_path, cap
     study = json.loads(capsys.readouterr().out)
     (record,) = study["records"]
     assert set(record["orders"]) == {"exclusive", "special", "1a", "1b", "2"}
-    assert all(set(v) == {"compliant_fraction", "compliant_area_m2"} for v in record["orders"].values())
+    assert all(set(v) == {"compliant_fraction", "compliant_area_m2", "cell_m", "min_soundings", "rules"}
+               for v in record["orders"].values())
     assert study["s44_orders"]["special"] == {"tvu_a_m": 0.25, "tvu_b": 0.0075, "thu_m": 2.0, "thu_depth_fraction": 0.0,
                                               "feature_m": 1.0, "coverage_percent": 100.0}
 
@@ -168,22 +176,28 @@ def test_a_chunks_order_tally_takes_memory_for_its_soundings_not_for_the_whole_g
     scene's to about 0.6. Now the counts are added where the soundings are; the same counts as bincount's."""
     import tracemalloc
 
-    from scanner_sim.metrics.s44 import ORDERS, OrderTally
+    from scanner_sim.metrics.coverage import PlanGrid
+    from scanner_sim.metrics.s44 import ORDERS, OrderTally, order_scales
 
     rng = np.random.default_rng(3)
     n = 3000
-    cell = rng.integers(-1, 10_000_000, n)
     depth, dz, dh = rng.uniform(2, 30, n), rng.normal(0, 0.2, n), np.abs(rng.normal(0, 1.0, n))
-    big = OrderTally(10_000_000)
+    scales = order_scales()
+    side = 1500.0  # m: 9 million cells of Exclusive's 0.5 m
+    big = OrderTally([PlanGrid.over((0, side), (0, side), s.cell_m) for s in scales], scales)
+    xy = rng.uniform(-10, side + 10, (n, 2))
     tracemalloc.start()
-    big.add(cell, depth, dz, dh)
+    big.add(xy, depth, dz, dh)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    assert peak < 2_000_000  # bytes: the chunk's soundings, not 6 x 80 MB of bins
-    small = OrderTally(50)
-    c = cell % 51 - 1
-    small.add(c, depth, dz, dh)
-    small.add(c, depth, dz, dh)
-    np.testing.assert_array_equal(small.soundings, 2 * np.bincount(c[c >= 0], minlength=50))
-    assert small.meeting.shape == (len(ORDERS), 50)
-    assert (small.meeting <= small.soundings).all() and (np.diff(small.meeting, axis=0) >= 0).all()
+    assert peak < 2_000_000  # bytes: the chunk's soundings, not 10 x 36 MB of bins
+    grids = [PlanGrid.over((0, 10), (0, 10), s.cell_m) for s in scales]
+    small = OrderTally(grids, scales)
+    xy = rng.uniform(-1, 11, (n, 2))
+    small.add(xy, depth, dz, dh)
+    small.add(xy, depth, dz, dh)
+    for k, grid in enumerate(grids):
+        cell = grid.index(xy)
+        np.testing.assert_array_equal(small.soundings[k], 2 * np.bincount(cell[cell >= 0], minlength=grid.size))
+        assert (small.meeting[k] <= small.soundings[k]).all()
+    assert len(small.meeting) == len(ORDERS)

@@ -47,10 +47,14 @@ def _add_validate(sub):
 
 def _cmd_validate(args) -> int:
     from scanner_sim.config import load_scene
+    from scanner_sim.config.raster_seabed import RasterSeabedConfig
+    from scanner_sim.world.raster import check_raster_frame, plan_bounds
 
     cfg = load_scene(args.scene)
     cfg.water_model()
     inst = cfg.instrument_model()
+    if isinstance(cfg.seabed, RasterSeabedConfig):  # the same check, the same line, as `run`'s
+        check_raster_frame(cfg.seabed, plan_bounds(cfg), cfg.crs)
     extra = ""
     if args.build:
         from scanner_sim.survey.setup import checked_trajectory
@@ -62,6 +66,18 @@ def _cmd_validate(args) -> int:
     print(f"OK {cfg.name}: water {cfg.water.preset or 'custom'}, instrument {inst.name}, "
           f"{len(cfg.objects)} objects, platform {cfg.platform.mode}, scanner {cfg.scanner.mode}{extra}")
     return 0
+
+
+def _no_seabed_note(summary: dict) -> str:
+    """How many ``no_hit`` dropouts were aimed where the seabed has no data, naming a raster's nodata value."""
+    n = summary.get("no_hit_over_no_seabed")
+    if not n:
+        return ""
+    seabed = summary.get("seabed")
+    if seabed is None:
+        return f" ({n:,} of them aimed beyond the seabed's edge)"
+    nodata = "" if seabed.get("nodata") is None else f" ({seabed['nodata']:g})"
+    return f" ({n:,} of them aimed where the raster has nodata{nodata} or beyond its edge: no seabed to meet)"
 
 
 # -- schema -------------------------------------------------------------------------------------------------
@@ -212,6 +228,7 @@ def _cmd_run(args) -> int:
               "pulses_per_s leaves it out)", file=sys.stderr, flush=True)
     if not args.quiet:
         dropped = ", ".join(f"{k} {v:,}" for k, v in summary["dropouts"].items() if v) or "none"
+        dropped += _no_seabed_note(summary)
         print(f"{summary['pulses']:,} pulses -> {summary['points']:,} points in {summary['wall_s']:.1f} s "
               f"({summary['pulses_per_s']:,.0f} pulses/s); dropouts: {dropped}")
         error = summary["range_error_m"]

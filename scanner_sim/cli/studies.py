@@ -159,7 +159,8 @@ def _add_coverage(sub):
                    help="largest |range error| of a valid point [m] (default: %(default)s, IHO S-44 Exclusive Order)")
     p.add_argument("--order-min-soundings", type=positive_int("order_min_soundings"),
                    default=CoverageSettings.order_min_soundings,
-                   help="soundings a cell needs to comply with an S-44 order (default: %(default)s, S-44 Annex D)")
+                   help="soundings a cell of an S-44 order that must detect features (Exclusive, Special, 1a) needs, "
+                        "on that order's own grid (default: %(default)s, S-44 Annex D)")
     p.add_argument("--cubes-m", nargs="+", type=positive_float("cubes_m"), metavar="M",
                    help="place cubes of these edge sizes [m] across the swath and report the share detected per size")
     p.add_argument("--cube-count", type=positive_int("cube_count"), default=8, help="cubes of each size (default: 8)")

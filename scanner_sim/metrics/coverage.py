@@ -37,6 +37,9 @@ GAP_CAUSES = FAILURE_CAUSES + ("other_surface",)
 OTHER_SURFACE = len(FAILURE_CAUSES)
 #: Why an object the valid points reach is not detected: fewer than s44.FEATURE_MIN_SOUNDINGS of them.
 FEW_SOUNDINGS = "few_soundings"
+#: Why an object no pulse reached is not detected: beams continued past another object's surface pass through its
+#: box (SHADOWED: that object hides it), or none does (NOT_REACHED_OBJECT: the scan does not aim there).
+SHADOWED, NOT_REACHED_OBJECT = "shadowed", "not_reached"
 #: Bin states besides a gap cause index.
 NOT_REACHED = -2
 COVERED = -1
@@ -49,7 +52,8 @@ BACKGROUND_KINDS = ("seabed", "rocks")
 @dataclass(frozen=True)
 class CoverageSettings:
     """cell_m: plan cell and cable stretch [m]; min_points: N; tolerance_m: largest |range error| [m];
-    order_min_soundings: soundings a cell needs to comply with an S-44 order (:mod:`scanner_sim.metrics.s44`)."""
+    order_min_soundings: soundings a cell of an S-44 order that must detect features needs to comply with it, on
+    that order's own grid (:func:`scanner_sim.metrics.s44.order_scales`)."""
 
     cell_m: float = 0.25
     min_points: int = 1
@@ -174,23 +178,25 @@ class CableBins:
 @dataclass(frozen=True)
 class Footprint:
     """Where each pulse's nominal beam axis first meets the truth meshes: ``xyz`` (n, 3) world [m] (NaN
-    without a hit), ``object_id`` (n,) int (-1 without a hit)."""
+    without a hit), ``object_id`` (n,) int (-1 without a hit); ``direction`` (n, 3) unit, the axis's direction, or
+    None (then no object is judged shadowed)."""
 
     xyz: np.ndarray
     object_id: np.ndarray
+    direction: np.ndarray | None = None
 
 
-def nominal_footprint(hits) -> Footprint:
+def nominal_footprint(hits, direction: np.ndarray | None = None) -> Footprint:
     """Where each beam axis first meets the truth meshes, from the beam cast itself: sub-ray 0 of every beam
     pattern is the axis (:func:`scanner_sim.rays.beams.beam_pattern`), so its hit, if any, is the axis hit;
-    ``hits``: the chunk's :class:`scanner_sim.rays.cast.Hits`."""
+    ``hits``: the chunk's :class:`scanner_sim.rays.cast.Hits`; ``direction`` (n, 3): the axes' directions."""
     axis = hits.subray_index == 0
     pulse = hits.pulse_index[axis]
     xyz = np.full((hits.n_pulses, 3), np.nan)
     xyz[pulse] = hits.point[axis]
     object_id = np.full(hits.n_pulses, -1, np.int64)
     object_id[pulse] = hits.object_id[axis]
-    return Footprint(xyz, object_id)
+    return Footprint(xyz, object_id, direction)
 
 
 def pulse_outcomes(slots: np.ndarray, points, dropouts, tolerance_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -228,7 +234,15 @@ class CoverageAccumulator:
         self.cables = [(obj, CableBins(obj.centreline, settings.cell_m)) for obj in scene.objects
                        if obj.centreline is not None]
         self.cable_tallies = [BinTally(bins.n_bins) for _, bins in self.cables]
-        self.orders = s44.OrderTally(self.grid.size)
+        #: Each S-44 order's grid and rule, and its tally on that grid (over the same origin as the plan cells).
+        self.order_scales = s44.order_scales(settings.order_min_soundings)
+        self._targets = np.array([o.object_id for o in scene.objects
+                                  if o.kind not in BACKGROUND_KINDS and o.centreline is None], np.int64)
+        self._target_boxes = np.array([_box(scene, scene.objects[i]) for i in self._targets]).reshape(-1, 2, 3)
+        #: Per object, beams whose axis, continued past another object's surface, passes through its box.
+        self.shadowing = np.zeros(len(scene.objects), COUNT_DTYPE)
+        self.orders = s44.OrderTally([PlanGrid.over((x0, x1), (y0, y1), scale.cell_m) for scale in self.order_scales],
+                                     self.order_scales)
         self.planned = planned
         self.slot_span = [None, None]  # first and last pulse slot seen
 
@@ -239,7 +253,8 @@ class CoverageAccumulator:
         pulse_cell = self.grid.index(footprint.xyz)
         self.cells.add(pulse_cell, outcome, pulse_cell[np.searchsorted(slots, points.pulse_index[valid])])
         self.objects.add(footprint.object_id, outcome, obj)
-        self._add_soundings(slots, footprint, points, pulse_cell)
+        self._add_shadowing(footprint)
+        self._add_soundings(slots, footprint, points)
         if slots.size:
             lo, hi = self.slot_span
             self.slot_span = [int(slots[0]) if lo is None else min(lo, int(slots[0])), max(hi or 0, int(slots[-1]))]
@@ -252,19 +267,56 @@ class CoverageAccumulator:
             valid_bin[mine] = bins.index(xyz[mine])
             tally.add(reaching, outcome, valid_bin)
 
-    def _add_soundings(self, slots, footprint: Footprint, points, pulse_cell) -> None:
-        """Every point is a sounding of its pulse's cell; its true errors are its offset from where its pulse's
-        nominal beam axis meets the truth (navigation, ranging and footprint errors together)."""
+    def _add_shadowing(self, footprint: Footprint) -> None:
+        """Count, per target object, the beams whose axis met another object (not the seabed) first and, continued
+        past it, passes through the target's box: the beams that object hides it from."""
+        if footprint.direction is None or not self._targets.size:
+            return
+        kinds = np.array([o.kind for o in self.scene.objects])
+        hit = footprint.object_id
+        blocked = (hit >= 0) & (kinds[np.maximum(hit, 0)] != "seabed")
+        if not blocked.any():
+            return
+        start, direction, by = footprint.xyz[blocked], footprint.direction[blocked], hit[blocked]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inverse = 1.0 / direction  # (m, 3): inf along an axis the beam does not move on
+            t0 = (self._target_boxes[None, :, 0, :] - start[:, None, :]) * inverse[:, None, :]
+            t1 = (self._target_boxes[None, :, 1, :] - start[:, None, :]) * inverse[:, None, :]
+            enter = np.nanmax(np.minimum(t0, t1), axis=2)
+            leave = np.nanmin(np.maximum(t0, t1), axis=2)
+        through = (leave >= np.maximum(enter, 0.0)) & (self._targets[None, :] != by[:, None])
+        np.add.at(self.shadowing, self._targets[np.nonzero(through)[1]], COUNT_DTYPE(1))
+
+    def _add_soundings(self, slots, footprint: Footprint, points) -> None:
+        """Every point is a sounding where its pulse's nominal beam axis meets the truth (in each order's cell
+        there); its true errors are its offset from that point (navigation, ranging and footprint errors together)."""
         pulse = np.searchsorted(slots, points.pulse_index)
         truth = footprint.xyz[pulse]
-        self.orders.add(np.where(np.isfinite(truth[:, 2]), pulse_cell[pulse], -1), -truth[:, 2],
+        self.orders.add(truth[:, :2], -truth[:, 2],
                         points.xyz[:, 2] - truth[:, 2], np.hypot(*(points.xyz[:, :2] - truth[:, :2]).T),
                         getattr(points, "tvu_m", None), getattr(points, "thu_m", None))
 
     def order_compliance(self) -> np.ndarray:
-        """(len(s44.ORDERS), cells) bool: the cells complying with each S-44 order."""
-        rule = s44.ComplianceRule(self.settings.order_min_soundings)
-        return rule.complies(self.orders.soundings, self.orders.meeting)
+        """(len(s44.ORDERS), cells) bool: the reached plan cells lying in a complying cell of each S-44 order's own
+        grid (or of a stricter order's: the limits nest)."""
+        reached = self.cell_states().ravel() != NOT_REACHED
+        return self.orders.on_grid(self.grid) & reached
+
+    def order_reading(self) -> dict:
+        """Per S-44 order, how it is judged and what complies (JSON-ready): its ``cell_m``, ``min_soundings``,
+        ``confidence``, ``cell_basis`` and ``rules`` (:func:`s44.order_scales`), its ``compliant_area_m2`` and
+        ``compliant_fraction`` of the surveyed area (``area``: ``planned_swath`` or ``reached``)."""
+        area_name, area = self._surveyed_area()
+        figures = s44.order_figures(self.order_compliance(), area, self.settings.cell_m ** 2, self.order_scales)
+        return {scale.order.name: {**scale.as_json(), **figures[scale.order.name], "area": area_name}
+                for scale in self.order_scales}
+
+    def _surveyed_area(self) -> tuple[str, np.ndarray]:
+        """What the orders' shares are of: the planned swath's cells where the plan has one, else the reached."""
+        planned = self.planned_cells()
+        if planned is not None and planned.any():
+            return "planned_swath", planned
+        return "reached", self.cell_states().ravel() != NOT_REACHED
 
     def strictest_orders(self) -> np.ndarray:
         """(ny, nx) int16: the strictest S-44 order each cell complies with (index into s44.ORDERS), or s44.NO_ORDER."""
@@ -325,10 +377,11 @@ class CoverageAccumulator:
             swath = {"area_m2": float(n * cell_area), "reached_fraction": float((reached & planned).sum() / n),
                      "covered_fraction": float((covered & planned).sum() / n),
                      "never_reached_fraction": float((planned & ~reached).sum() / n)}
-        area = planned if swath is not None else reached
+        reading = self.order_reading()
         return {"planned_swath": swath, "order_min_soundings": self.settings.order_min_soundings,
                 "orders_area": "planned_swath" if swath is not None else "reached",
-                "orders": s44.order_figures(self.order_compliance(), area, cell_area)}
+                "orders": {name: {key: value for key, value in r.items() if key not in ("area", "confidence", "cell_basis")}
+                           for name, r in reading.items()}}
 
     def _cable_figures(self, cable, bins: CableBins, tally: BinTally) -> dict:
         state = tally.states(self.settings.min_points)
@@ -353,15 +406,28 @@ class CoverageAccumulator:
                 continue
             i = obj.object_id
             detected = bool(self.objects.valid[i] >= s44.FEATURE_MIN_SOUNDINGS)
+            if state[i] >= 0:
+                cause = GAP_CAUSES[state[i]]
+            elif state[i] == NOT_REACHED:
+                cause = SHADOWED if self.shadowing[i] > 0 else NOT_REACHED_OBJECT
+            else:
+                cause = None if detected else FEW_SOUNDINGS
             out.append({
                 "name": obj.name,
                 "kind": obj.kind,
                 "reaching_pulses": int(self.objects.reaching[i]),
+                "shadowing_pulses": int(self.shadowing[i]),
                 "valid_points": int(self.objects.valid[i]),
                 "detected": detected,
-                "gap_cause": GAP_CAUSES[state[i]] if state[i] >= 0 else (None if detected else FEW_SOUNDINGS),
+                "gap_cause": cause,
             })
         return out
+
+
+def _box(scene, obj) -> np.ndarray:
+    """(2, 3) lower and upper corners [m] of an object's axis-aligned box, from its faces' vertices."""
+    vertices = scene.vertices[np.unique(scene.faces[obj.face_start:obj.face_stop])]
+    return np.array([vertices.min(axis=0), vertices.max(axis=0)])
 
 
 def _by_cause(codes: np.ndarray, weight) -> dict:

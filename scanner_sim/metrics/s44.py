@@ -1,4 +1,5 @@
-"""IHO S-44 survey orders: the Edition 6.0.0 (2020) table as data, and which orders a cell's soundings meet.
+"""IHO S-44 survey orders: the Edition 6.0.0 (2020) table as data, and where a pass's soundings meet each order,
+each order judged on a grid of its own scale.
 
 Source of every number in :data:`ORDERS`: IHO S-44 Edition 6.0.0 (2020), *Standards for Hydrographic Surveys*,
 Table 1 "Minimum Bathymetry Standards for Safety of Navigation Hydrographic Surveys" (THU, TVU a and b, feature
@@ -8,9 +9,12 @@ Annex D ("Sample Density"): at least five samples per grid node. docs/coverage.m
 
 A sounding *meets* an order when its true vertical error is within the order's TVU at its depth and its true
 horizontal error within the THU at its depth, and, when the pass predicts them, its own 95 % uncertainties
-(``tvu_m``, ``thu_m``) are within those limits too. A cell *complies* with an order when it holds at least
-``min_soundings`` soundings and at least 95 % of them meet it (the standard's 95 % confidence read over the
-cell's soundings).
+(``tvu_m``, ``thu_m``) are within those limits too. Each order is judged on square cells of its own size
+(:func:`order_scales`): the cube it must detect where Table 1 gives one, its fixed THU where it gives none. A
+cell of an order *complies* when at least 95 % of its soundings meet the order (the standard's 95 % confidence
+read over the cell's soundings) and, for an order that must detect features, when it holds at least
+``min_soundings`` of them (Annex D's density example, which it ties to the grid that depicts the features).
+Orders 1b and 2 ask no feature detection, so no density: one sounding is enough for their cell to be judged.
 """
 
 from __future__ import annotations
@@ -23,7 +27,8 @@ from muls.errors import ParameterError
 
 #: Share of a cell's soundings that must meet an order (S-44's uncertainties are at 95 % confidence).
 CONFIDENCE = 0.95  # assumption: 95 % of a cell's soundings (docs/assumptions.md)
-#: Soundings a cell needs by default (S-44 Ed. 6.0.0 Annex D, Sample Density: ">= five samples per node").
+#: Soundings a cell of an order that must detect features needs by default, on that order's own grid (S-44 Ed.
+#: 6.0.0 Annex D, Sample Density: ">= five samples per node", on the grid that depicts the features).
 DEFAULT_MIN_SOUNDINGS = 5  # assumption: S-44 Annex D's example (docs/assumptions.md)
 #: Valid soundings on a feature for it to count as detected: the same five samples, over the feature taken as one
 #: grid node (Annex D asks a grid cell no larger than the feature it must depict).
@@ -130,34 +135,105 @@ def strictest_order(complies: np.ndarray) -> np.ndarray:
     return np.where(c.any(axis=0), first, np.int16(NO_ORDER)).astype(np.int16)
 
 
-def order_figures(complies: np.ndarray, area_mask: np.ndarray, cell_area_m2: float) -> dict:
-    """Per order, the compliant cells within ``area_mask`` (cells,) bool: ``compliant_area_m2`` and
-    ``compliant_fraction`` of the masked area (None when the mask is empty)."""
+@dataclass(frozen=True)
+class OrderScale:
+    """How one order is judged: on square cells of ``cell_m`` [m] under ``rule``; ``cell_basis`` says why that size."""
+
+    order: Order
+    cell_m: float
+    rule: ComplianceRule
+    cell_basis: str
+
+    @property
+    def rules(self) -> tuple[str, ...]:
+        """The checks a cell of this order passes to comply, in words."""
+        out = [f"at least {100 * self.rule.confidence:g} % of the cell's soundings within the order's TVU and THU "
+               "(true errors and predicted 95 % uncertainties)"]
+        if self.rule.min_soundings > 1:
+            out.append(f"at least {self.rule.min_soundings} soundings in the cell (Annex D's sample density)")
+        return tuple(out)
+
+    def as_json(self) -> dict:
+        return {"cell_m": self.cell_m, "min_soundings": self.rule.min_soundings, "confidence": self.rule.confidence,
+                "cell_basis": self.cell_basis, "rules": list(self.rules)}
+
+
+def order_scales(min_soundings: int = DEFAULT_MIN_SOUNDINGS) -> tuple[OrderScale, ...]:
+    """Each order's grid and rule, as in :data:`ORDERS`: the cell is the feature the order must detect (Table 1),
+    each cell needing ``min_soundings`` soundings; an order without feature detection (1b, 2) is judged on cells of
+    its fixed THU, the scale to which it positions a sounding, with no density rule (one sounding suffices)."""
+    out = []
+    for order in ORDERS:
+        # assumption: the feature's cell, else the fixed THU's (docs/assumptions.md, docs/coverage.md)
+        if order.feature_m is not None:
+            out.append(OrderScale(order, order.feature_m, ComplianceRule(min_soundings),
+                                  f"the {order.feature_m:g} m cube the order must detect (Table 1)"))
+        else:
+            out.append(OrderScale(order, order.thu_m, ComplianceRule(1),
+                                  f"the order's fixed THU of {order.thu_m:g} m; no feature detection, so no density"))
+    return tuple(out)
+
+
+def order_figures(complies: np.ndarray, area_mask: np.ndarray, cell_area_m2: float,
+                  scales: tuple[OrderScale, ...]) -> dict:
+    """Per order, its scale and the compliant cells within ``area_mask`` (cells,) bool of the plan grid whose cells
+    are ``cell_area_m2``: ``compliant_area_m2`` and ``compliant_fraction`` of the masked area (None when empty)."""
     mask = np.asarray(area_mask, bool)
     total = int(mask.sum())
     out = {}
-    for k, order in enumerate(ORDERS):
+    for k, scale in enumerate(scales):
         n = int((complies[k] & mask).sum())
-        out[order.name] = {"compliant_area_m2": n * cell_area_m2,
-                           "compliant_fraction": n / total if total else None}
+        out[scale.order.name] = {"cell_m": scale.cell_m, "min_soundings": scale.rule.min_soundings,
+                                 "compliant_area_m2": n * cell_area_m2,
+                                 "compliant_fraction": n / total if total else None}
     return out
 
 
 class OrderTally:
-    """Per cell, soundings and those meeting each order, streamed chunk by chunk over ``n_cells`` cells."""
+    """Per order, on that order's own grid, the soundings of each cell and those meeting the order; streamed chunk
+    by chunk. ``grids``: one plan grid per order (``index(xy)``, ``size``, ``shape``, ``origin_m``, ``cell_m``),
+    all with the same origin and axes."""
 
-    def __init__(self, n_cells: int):
-        self.soundings = np.zeros(n_cells, np.int32)  # int32 as coverage's BinTally: memory grows with the area reached
-        self.meeting = np.zeros((len(ORDERS), n_cells), np.int32)
+    def __init__(self, grids, scales: tuple[OrderScale, ...]):
+        self.grids, self.scales = tuple(grids), tuple(scales)
+        # int32 as coverage's BinTally: memory grows with the area reached
+        self.soundings = [np.zeros(g.size, np.int32) for g in self.grids]
+        self.meeting = [np.zeros(g.size, np.int32) for g in self.grids]
 
-    def add(self, cell, depth_m, vertical_error_m, horizontal_error_m, tvu_m=None, thu_m=None) -> None:
-        """cell (n,) flat cell index of each sounding (-1: outside every cell); the rest as in
+    def add(self, xy, depth_m, vertical_error_m, horizontal_error_m, tvu_m=None, thu_m=None) -> None:
+        """xy (n, 2) true plan position of each sounding [m] (NaN: none, counted nowhere); the rest as in
         :func:`soundings_meeting`."""
-        cell = np.asarray(cell)
-        inside = cell >= 0
         meets = soundings_meeting(depth_m, vertical_error_m, horizontal_error_m, tvu_m, thu_m)
-        # np.add.at where the soundings are: a bincount over every cell would cost the whole grid per chunk
-        one = self.soundings.dtype.type(1)  # the tally's own dtype: np.add.at of a Python int casts on a slow path
-        np.add.at(self.soundings, cell[inside], one)
-        for k in range(len(ORDERS)):
+        one = np.int32(1)  # the tally's own dtype: np.add.at of a Python int casts on a slow path
+        for k, grid in enumerate(self.grids):
+            # np.add.at where the soundings are: a bincount over every cell would cost the whole grid per chunk
+            cell = grid.index(xy)
+            inside = cell >= 0
+            np.add.at(self.soundings[k], cell[inside], one)
             np.add.at(self.meeting[k], cell[inside & meets[k]], one)
+
+    def complies(self, k: int) -> np.ndarray:
+        """(grids[k].size,) bool: the cells of order k's own grid that comply with it."""
+        return self.scales[k].rule.complies(self.soundings[k], self.meeting[k])
+
+    def on_grid(self, grid) -> np.ndarray:
+        """(len(ORDERS), grid.size) bool: the cells of a finer plan ``grid`` (same origin and axes) whose centre
+        lies in a complying cell of each order, or of a stricter one: the orders' limits nest, so a cell meeting a
+        stricter order's limits and density meets every looser order's."""
+        ny, nx = grid.shape
+        out = np.zeros((len(self.grids), ny * nx), bool)
+        for k, coarse in enumerate(self.grids):
+            row = _cells_along(grid.origin_m[1], grid.cell_m, ny, coarse.origin_m[1], coarse.cell_m, coarse.shape[0])
+            col = _cells_along(grid.origin_m[0], grid.cell_m, nx, coarse.origin_m[0], coarse.cell_m, coarse.shape[1])
+            flat = row[:, None] * coarse.shape[1] + col[None, :]
+            valid = (row[:, None] >= 0) & (col[None, :] >= 0)
+            out[k] = np.where(valid, self.complies(k)[np.where(valid, flat, 0)], False).ravel()
+        return np.logical_or.accumulate(out, axis=0)
+
+
+def _cells_along(fine_origin: float, fine_cell: float, n_fine: int, origin: float, cell: float, n: int) -> np.ndarray:
+    """(n_fine,) int64: the coarse cell (of n from ``origin``, ``cell`` wide) holding each fine cell's centre, -1
+    outside."""
+    centre = fine_origin + (np.arange(n_fine) + 0.5) * fine_cell
+    i = np.floor((centre - origin) / cell).astype(np.int64)
+    return np.where((i >= 0) & (i < n), i, -1)

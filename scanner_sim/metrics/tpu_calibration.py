@@ -152,3 +152,18 @@ class UncertaintySink:
             "ranging": self.setup.tpu.ranging.as_dict(),
             "navigation": self.setup.tpu.navigation.as_dict(),
         }
+
+
+def single_pass_note(flown_s: float, navigation) -> str:
+    """One line on what one pass's calibration can show, from the time it flew [s] and its navigation noise
+    (:class:`scanner_sim.config.sections.NavigationNoiseConfig`): a drift correlated over tau is about one value
+    over a pass shorter than tau, so such a pass's shares within THU and TVU are one draw of it (docs/uncertainty.md)."""
+    n = navigation
+    if not (n.position_sigma_m or n.depth_sigma_m or n.attitude_sigma_deg or n.heading_sigma_deg):
+        return ("no navigation noise in this pass: its shares within THU and TVU judge the ranging and the footprint "
+                "alone")
+    tau, draws = n.correlation_time_s, flown_s / n.correlation_time_s
+    how_many = "about one draw" if draws < 2 else f"about {draws:.0f} draws"
+    return (f"one pass of {flown_s:.1f} s holds {how_many} of the navigation's drift (correlated over {tau:g} s): its "
+            "shares within THU and TVU are those of its draws, not the TPU's calibration, which `scanner-sim "
+            "uncertainty SCENE --seeds N` checks over N passes")

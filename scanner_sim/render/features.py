@@ -1,5 +1,6 @@
-"""features.png: the feature-detection pass in plan, each cube drawn where it stands, green when detected and red
-when missed, with its size and the valid soundings it got, over the cells the scan covered."""
+"""features.png: the feature-detection pass in plan, each cube drawn where it stands, green when detected, red when
+missed though reached, grey when no pulse reached it and purple when another object hid it, with its size and the
+valid soundings it got, over the cells the scan covered."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ from scanner_sim.render.plan_map import COVERAGE_COLOURS, finish_plan_map
 
 DETECTED_COLOUR = "#1a9850"
 MISSED_COLOUR = "#d73027"
+#: Cubes no pulse reached, apart from the missed ones: beyond the scan's reach, or hidden by another object.
+UNREACHED_COLOURS = {"not_reached": "#bdbdbd", "shadowed": "#6a51a3"}
 
 
 def _square(x: float, y: float, size: float, heading_deg: float) -> np.ndarray:
@@ -20,6 +23,12 @@ def _square(x: float, y: float, size: float, heading_deg: float) -> np.ndarray:
     r = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
     unit = 0.5 * size * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]], float)
     return unit @ r.T + [x, y]
+
+
+def _apart(cubes: dict) -> str:
+    """The cubes of one size no pulse reached or another object hid, e.g. " (1 shadowed)"."""
+    apart = [f"{cubes[k]} {k.replace('_', ' ')}" for k in ("not_reached", "shadowed") if cubes[k]]
+    return f" ({', '.join(apart)})" if apart else ""
 
 
 def plot_feature_detection(path_png, grid_npz: Path, result: dict, *, title: str | None = None) -> None:
@@ -46,7 +55,7 @@ def plot_feature_detection(path_png, grid_npz: Path, result: dict, *, title: str
     soundings = {o["name"]: o for o in result["objects"]}
     for p in result["placements"]:
         o = soundings[p["name"]]
-        colour = DETECTED_COLOUR if o["detected"] else MISSED_COLOUR
+        colour = DETECTED_COLOUR if o["detected"] else UNREACHED_COLOURS.get(o["gap_cause"], MISSED_COLOUR)
         corners = _square(p["x_m"], p["y_m"], p["size_m"], p["heading_deg"])
         ax.fill(corners[:, 0], corners[:, 1], facecolor=colour, edgecolor="black", lw=0.6, alpha=0.85)
         ax.annotate(f"{p['size_m']:g} m: {o['valid_points']}", (p["x_m"], p["y_m"] + 0.5 * p["size_m"]),
@@ -58,11 +67,14 @@ def plot_feature_detection(path_png, grid_npz: Path, result: dict, *, title: str
     rule = result["rule"]
     handles = [Patch(facecolor=DETECTED_COLOUR, edgecolor="black", label=f"detected (>= {rule['min_valid_soundings']} "
                      "valid soundings)"),
-               Patch(facecolor=MISSED_COLOUR, edgecolor="black", label="missed"),
+               Patch(facecolor=MISSED_COLOUR, edgecolor="black", label="missed (reached)"),
+               Patch(facecolor=UNREACHED_COLOURS["not_reached"], edgecolor="black", label="no pulse reached it"),
+               Patch(facecolor=UNREACHED_COLOURS["shadowed"], edgecolor="black", label="hidden by another object"),
                Patch(facecolor="#b8e0dc", edgecolor="grey", label="covered cell"),
                Patch(facecolor="#d9d9d9", edgecolor="grey", label="missed cell"),
                Patch(facecolor=COVERAGE_COLOURS["not_reached"], edgecolor="grey", label="not reached by the scan")]
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, fontsize=8, frameon=False)
-    rows = [f"{size} m: {c['detected']}/{c['placed']}" for size, c in result["cubes"].items()]
-    finish_plan_map(fig, ax, path_png, (title + "\n" if title else "") + "detected per size: " + ", ".join(rows),
+    rows = [f"{size} m: {c['detected']}/{c['reached']}" + _apart(c) for size, c in result["cubes"].items()]
+    finish_plan_map(fig, ax, path_png, (title + "\n" if title else "") + "detected of those reached, per size: "
+                    + ", ".join(rows),
                     x_label="x east [m]; label: cube size: its valid soundings")

@@ -85,19 +85,61 @@ def object_table(study: dict) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
-def multichannel_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
-    """mul2023 against single_channel at each water and altitude, when the study has both."""
+MULTICHANNEL_TITLE = "Multi-channel against single channel"
+
+
+def _multichannel_pairs(study: dict) -> list[tuple[dict, dict]]:
+    """(mul2023, single_channel) records at each water and altitude where the study has both."""
     by_key = {(r["water"], r["altitude_m"], r["instrument"]): r for r in study["records"]}
-    pairs = [(w, a) for (w, a, i) in by_key if i == "mul2023" and (w, a, "single_channel") in by_key]
+    return [(r, by_key[(w, a, "single_channel")]) for (w, a, i), r in by_key.items()
+            if i == "mul2023" and (w, a, "single_channel") in by_key]
+
+
+def _masked_share(record: dict) -> float | None:
+    """The share of the reached area whose gap is ``masked_by_backscatter``."""
+    reached = record["reached_area_m2"]
+    return record["gaps_m2"]["masked_by_backscatter"] / reached if reached else None
+
+
+def multichannel_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
+    """mul2023 against single_channel at each water and altitude, when the study has both: covered shares, their
+    difference in percentage points, the difference in valid points, and the share masked by backscatter."""
+    pairs = _multichannel_pairs(study)
     if not pairs:
         return None
-    header = ["water", "altitude [m]", "mul2023 covered [%]", "single_channel covered [%]", "difference [points]"]
+    header = ["water", "altitude [m]", "mul2023 covered [%]", "single_channel covered [%]",
+              "covered, mul2023 − single_channel [percentage points]", "valid points, mul2023 − single_channel",
+              "masked by backscatter, mul2023 / single_channel [% of reached]"]
     rows = []
-    for w, a in pairs:
-        m, s = by_key[(w, a, "mul2023")], by_key[(w, a, "single_channel")]
-        rows.append([w, _altitude(a), _percent(m["covered_fraction"]),
-                     _percent(s["covered_fraction"]), f"{m['valid_points_in_reach'] - s['valid_points_in_reach']:+,}"])
+    for m, s in pairs:
+        difference = (None if m["covered_fraction"] is None or s["covered_fraction"] is None
+                      else 100 * (m["covered_fraction"] - s["covered_fraction"]))
+        rows.append([m["water"], _altitude(m["altitude_m"]), _percent(m["covered_fraction"]),
+                     _percent(s["covered_fraction"]), "–" if difference is None else f"{difference:+.1f}",
+                     f"{m['valid_points_in_reach'] - s['valid_points_in_reach']:+,}",
+                     f"{_percent(_masked_share(m))} / {_percent(_masked_share(s))}"])
     return header, rows
+
+
+def multichannel_notes(study: dict) -> list[str]:
+    """One sentence per water and altitude where mul2023 covers less than single_channel: the shares masked by
+    backscatter and single_channel's own largest loss, and why the two instruments differ there."""
+    notes = []
+    for m, s in _multichannel_pairs(study):
+        if m["covered_fraction"] is None or s["covered_fraction"] is None or \
+                m["covered_fraction"] >= s["covered_fraction"]:
+            continue
+        cause, area = max(s["gaps_m2"].items(), key=lambda kv: kv[1])
+        own = (f"; single_channel loses {_percent(area / s['reached_area_m2'])} % to {cause.replace('_', ' ')}"
+               if area > 0 else "")
+        notes.append(f"{m['water']} at {_altitude(m['altitude_m'])} m: mul2023 covers {_percent(m['covered_fraction'])} "
+                     f"% against single_channel's {_percent(s['covered_fraction'])} % because the water column's "
+                     f"backscatter masks the echo on {_percent(_masked_share(m))} % of mul2023's reached area against "
+                     f"{_percent(_masked_share(s))} % of single_channel's{own}. mul2023 runs the pond's gains (2000 and "
+                     "20,000), so the turbid column's own light clips its channels, or rises as high as the echo, over "
+                     "the echo; single_channel's gain is set to keep the column unclipped, so it sees those echoes, "
+                     "and loses only those too weak to clear its noise.")
+    return notes
 
 
 def orders_table(study: dict) -> tuple[list[str], list[list[str]]]:
@@ -113,7 +155,9 @@ def compliance_table(study: dict) -> tuple[list[str], list[list[str]]]:
     """Per combination: the share of the surveyed area complying with each S-44 order, the share of the planned
     swath the scan reached, and the range error's signed bias beside its absolute size."""
     names = list(study.get("s44_orders", {}))
-    header = (["water", "instrument", "altitude [m]", "swath reached [%]"] + [f"{n} [%]" for n in names]
+    cells = {n: o.get("cell_m") for r in study["records"] for n, o in r.get("orders", {}).items()}
+    header = (["water", "instrument", "altitude [m]", "swath reached [%]"]
+              + [f"{n} [%]" if cells.get(n) is None else f"{n} [%] ({cells[n]:g} m cells)" for n in names]
               + ["range error: median absolute / median signed [cm]", "points short [%]"])
     rows = []
     for r in study["records"]:
@@ -144,15 +188,22 @@ def tpu_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
 
 
 def feature_table(study: dict) -> tuple[list[str], list[list[str]]] | None:
-    """Per combination, the share of the placed cubes of each size detected, when the study placed cubes."""
+    """Per combination, the cubes of each size detected of those the scan reached, those no pulse reached or another
+    object hid counted apart, when the study placed cubes."""
     sizes = list(dict.fromkeys(size for r in study["records"] for size in r.get("features", {})))
     if not sizes:
         return None
-    header = ["water", "instrument", "altitude [m]"] + [f"{size} m cubes detected" for size in sizes]
+    header = ["water", "instrument", "altitude [m]"] + [f"{size} m cubes detected of those reached" for size in sizes]
     rows = [[r["water"], r["instrument"], _altitude(r["altitude_m"])]
-            + [f"{c['detected']}/{c['placed']}" if (c := r["features"].get(size)) else "–" for size in sizes]
+            + [_detected(c) if (c := r["features"].get(size)) else "–" for size in sizes]
             for r in study["records"]]
     return header, rows
+
+
+def _detected(cubes: dict) -> str:
+    """"detected/reached", with the cubes no pulse reached or another object hid counted apart."""
+    apart = [f"{cubes[k]} {k.replace('_', ' ')}" for k in ("not_reached", "shadowed") if cubes.get(k)]
+    return f"{cubes['detected']}/{cubes.get('reached', cubes['placed'])}" + (f" ({', '.join(apart)})" if apart else "")
 
 
 def near_zero_notes(study: dict) -> list[str]:
@@ -196,7 +247,7 @@ def _sections(study: dict):
     sections = [("Coverage", main_table(study))]
     multi = multichannel_table(study)
     if multi:
-        sections.append(("Multi-channel against single channel", multi))
+        sections.append((MULTICHANNEL_TITLE, multi))
     objects = object_table(study)
     if objects[1]:
         sections.append(("Objects and cables", objects))
@@ -214,11 +265,18 @@ def _sections(study: dict):
 
 def _s44_text(study: dict) -> str:
     s = study["study"]
-    return (f"A cell complies with an order when it holds at least {s.get('order_min_soundings', 5)} soundings and "
-            "at least 95 % of them lie within the order's TVU = sqrt(a² + (b·d)²) at their depth d and its THU of "
-            "their true position, and their predicted 95 % uncertainties (TVU, THU) are within the same limits. "
-            "Compliant % is of the planned swath (the track flown, widened by altitude · tan(half the scan sector)) "
-            "where the plan has one, else of the reached area. Source: " + study.get("s44_source", "") + ".")
+    return ("Each order is judged on square cells of its own size: the cube it must detect where S-44's Table 1 gives "
+            "one (Exclusive 0.5 m, Special 1 m, 1a 2 m), each cell needing at least "
+            f"{s.get('order_min_soundings', 5)} soundings (Annex D's sample density); Orders 1b and 2, which ask no "
+            "feature detection, on cells of their fixed THU (5 m, 20 m) with no count rule. A cell complies when at "
+            "least 95 % of its soundings lie within the order's TVU = sqrt(a² + (b·d)²) at their depth d and its THU "
+            "of their true position, and their predicted 95 % uncertainties (TVU, THU) are within the same limits. "
+            "Compliant % is the share of the planned swath (the track flown, widened by altitude · tan(half the scan "
+            "sector)) where the plan has one, else of the reached area, lying in reached cells that comply. Not "
+            "checked: Exclusive's 200 % coverage (one pass covers a cell once) and the feature search of Exclusive, "
+            "Special and 1a (measured apart by scanner-sim features); so Exclusive's figure is its uncertainty and "
+            "density on 0.5 m cells, not a claim that the survey meets Exclusive Order. Source: "
+            + study.get("s44_source", "") + ".")
 
 
 def coverage_markdown(study: dict) -> str:
@@ -226,6 +284,8 @@ def coverage_markdown(study: dict) -> str:
     parts = [f"# Coverage study: {study['scene']}\n", _definitions(study) + "\n"]
     for title, (header, rows) in _sections(study):
         parts.append(f"## {title}\n\n" + markdown_table(header, rows))
+        if title == MULTICHANNEL_TITLE:
+            parts += [f"- {n}" for n in multichannel_notes(study)] + [""]
     if study.get("s44_orders"):
         parts.append(_s44_text(study) + "\n")
     notes = near_zero_notes(study)
@@ -311,6 +371,8 @@ def report_html(study: dict, out_dir: str | Path) -> str:
         parts.append(f"<h2>{html.escape(heading)}</h2>" + html_table(header, rows))
         if heading.startswith("S-44 compliance"):
             parts.append(f"<p>{html.escape(_s44_text(study))}</p>")
+        if heading == MULTICHANNEL_TITLE and multichannel_notes(study):
+            parts.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in multichannel_notes(study)) + "</ul>")
     notes = near_zero_notes(study)
     if notes:
         parts.append("<h2>Why some combinations map (next to) nothing</h2><ul>"

@@ -7,8 +7,9 @@ import numpy as np
 
 from scanner_sim.render.plan_map import COVERAGE_COLOURS, finish_plan_map
 
-#: Colour per order, strictest first (dark to light green), then "complies with none" and "not reached".
-ORDER_COLOURS = ("#00441b", "#238b45", "#74c476", "#bae4b3", "#edf8e9")
+#: Colour per order, strictest first (dark green to yellow-green: the loosest stays apart from the grey of "not
+#: reached"), then "complies with none".
+ORDER_COLOURS = ("#00441b", "#238b45", "#66bd63", "#a6d96a", "#e6f598")
 NONE_COLOUR = "#fdae6b"
 
 
@@ -16,7 +17,8 @@ def plot_order_map(path_png, order, state, planned, extent_m, order_names, figur
                    title: str | None = None) -> None:
     """Plan map to a PNG. order (ny, nx) int: index into ``order_names`` of the strictest order a cell complies
     with, -1 none; state (ny, nx): coverage states (-2 not reached); planned (ny, nx) bool or None: the planned
-    swath; extent_m (x_min, x_max, y_min, y_max) [m]; figures: the pass's coverage figures (``orders``)."""
+    swath; extent_m (x_min, x_max, y_min, y_max) [m]; figures: the pass's coverage figures (``orders``: per order its
+    ``cell_m``, ``min_soundings`` and ``compliant_fraction``)."""
     from matplotlib.colors import ListedColormap
     from matplotlib.figure import Figure
     from matplotlib.patches import Patch
@@ -35,7 +37,8 @@ def plot_order_map(path_png, order, state, planned, extent_m, order_names, figur
                    colors="black", linewidths=0.8, linestyles="--")
     area = "planned swath" if figures.get("orders_area") == "planned_swath" else "reached area"
     handles = [Patch(facecolor=ORDER_COLOURS[k], edgecolor="grey",
-                     label=f"{name} (complies on {_pct(figures['orders'][name]['compliant_fraction'])} of the {area})")
+                     label=f"{name} ({_cells(figures['orders'][name])}; complies on "
+                           f"{_pct(figures['orders'][name]['compliant_fraction'])} of the {area})")
                for k, name in enumerate(order_names)]
     handles += [Patch(facecolor=NONE_COLOUR, edgecolor="grey", label="reached, complies with no order"),
                 Patch(facecolor=COVERAGE_COLOURS["not_reached"], edgecolor="grey", label="not reached by the scan")]
@@ -44,6 +47,12 @@ def plot_order_map(path_png, order, state, planned, extent_m, order_names, figur
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=8, frameon=False,
               title="strictest S-44 order the cell complies with")
     finish_plan_map(fig, ax, path_png, title)
+
+
+def _cells(order: dict) -> str:
+    """The grid an order was judged on, e.g. "0.5 m cells, >= 5 soundings"."""
+    count = f", ≥ {order['min_soundings']} soundings" if order["min_soundings"] > 1 else ", no count rule"
+    return f"{order['cell_m']:g} m cells{count}"
 
 
 def _pct(fraction) -> str:

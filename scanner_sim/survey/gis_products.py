@@ -59,12 +59,15 @@ def density_band(coverage: CoverageAccumulator) -> RasterBand:
 
 def s44_order_band(coverage: CoverageAccumulator) -> RasterBand:
     """int16 strictest IHO S-44 order each reached cell complies with: k >= 0 is ORDER_NAMES[k] (0 the strictest),
-    NO_ORDER (-1) none; nodata -2 (not reached). The same cells as s44_map.png."""
+    NO_ORDER (-1) none; nodata -2 (not reached). The same cells as s44_map.png; each order was judged on its own
+    grid (tags ``order_cells_m``, ``min_soundings``) and is drawn on the plan cells."""
     orders = np.where(coverage.cell_states() == NOT_REACHED, NOT_REACHED, coverage.strictest_orders()).astype(np.int16)
     codes = {str(NO_ORDER): "none", **{str(k): name for k, name in enumerate(ORDER_NAMES)}}
     return RasterBand(orders, NOT_REACHED, "strictest IHO S-44 order (Ed. 6.0.0)",
                       {"codes": ", ".join(f"{k}={v}" for k, v in codes.items()), "not_reached": str(NOT_REACHED),
-                       "min_soundings": str(coverage.settings.order_min_soundings)})
+                       "order_cells_m": ", ".join(f"{sc.order.name}={sc.cell_m:g}" for sc in coverage.order_scales),
+                       "min_soundings": ", ".join(f"{sc.order.name}={sc.rule.min_soundings}"
+                                                  for sc in coverage.order_scales)})
 
 
 #: The rasters a pass writes from its coverage: file name -> the band. Another grid of the coverage is one more line.

@@ -27,7 +27,7 @@ from scanner_sim.config.crs import crs_label
 from scanner_sim.io.rosbag import ROSBAG_NAME
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.metrics.planned_swath import planned_swath
-from scanner_sim.metrics.tpu_calibration import UncertaintySink
+from scanner_sim.metrics.tpu_calibration import UncertaintySink, single_pass_note
 from scanner_sim.render import point_cloud
 from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.gis_products import write_gis_products
@@ -104,7 +104,7 @@ def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), sce
     dropouts = memory.dropouts()
     summary = sinks.pass_summary(pass_facts(setup, options), stats, stats.points, dropouts.counts_by_cause(), wall_s,
                                  setup_s, compile_s)
-    summary["uncertainty"] = uncertainty.figures()
+    summary["uncertainty"] = uncertainty_figures(setup, uncertainty, stats.pulses)
     if coverage is not None:
         summary["coverage"] = coverage.figures()
     return PassResult(summary, None, memory.points(), dropouts, trajectory_table(setup))
@@ -230,6 +230,15 @@ def _finished(chunk: Future, bar) -> Chunk:
     return done
 
 
+def uncertainty_figures(setup: PassSetup, sink, pulses: int) -> dict:
+    """The summary's ``uncertainty`` (the sink's figures), its calibration with a ``note`` on what one pass of
+    ``pulses`` can show (:func:`~scanner_sim.metrics.tpu_calibration.single_pass_note`)."""
+    figures = sink.figures()
+    flown_s = pulses / (setup.scanner.pulse_rate_hz * setup.scanner.active_fraction)
+    figures["calibration"]["note"] = single_pass_note(flown_s, setup.config.platform.navigation_noise)
+    return figures
+
+
 def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):
     """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally.
     Returns (stats, coverage sink or None, wall seconds)."""
@@ -237,7 +246,7 @@ def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOption
     if setup.plan.measures_coverage:
         planned = planned_swath(setup.config, setup.trajectory, setup.scanner.pulse_rate_hz)
         coverage = sinks.CoverageSink(setup.scene, options.coverage, planned)
-    stats = sinks.PassStats(len(setup.model.instrument.channels))
+    stats = sinks.PassStats(len(setup.model.instrument.channels), setup.scene.heightfield)
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
     started = time.perf_counter()
     for chunk in chunks:
@@ -291,7 +300,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
                                               + ([sample] if render else []), options)
     summary = sinks.pass_summary(facts, stats, stats.points, dropouts.counts_by_cause(), wall_s + earlier_wall_s,
                                  setup_s, compile_s)
-    summary["uncertainty"] = uncertainty.figures()
+    summary["uncertainty"] = uncertainty_figures(setup, uncertainty, stats.pulses)
     if coverage is not None:
         summary["coverage"] = coverage.write(out / "coverage_grid.npz")
     if "scene.ply" in files:

@@ -359,7 +359,9 @@ class PassSetup:
         return self.config.survey.chunk_pulses
 
     def expected_pulses(self) -> int:
-        n = int((self.end_slot - self.first_slot) * self.scanner.active_fraction)
+        """The pulses the pass fires: its slots that fire (exactly, as :meth:`slot_chunks` yields them), at most
+        ``max_pulses``; the progress bar's total."""
+        n = self.scanner.fired_count(self.first_slot, self.end_slot)
         return min(n, self.max_pulses) if self.max_pulses else n
 
     def slot_chunks(self):
@@ -384,7 +386,7 @@ class PassSetup:
         beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(poses)
         hits = self.rays(beam_o, beam_d, shaft, rx_o, rx_d)
         return CastChunk(slots, hits, self.handoff(hits, slots), self.lines_of_sight(slots, poses, hits, (beam_o, beam_d)),
-                         nominal_footprint(hits) if self.plan.measures_coverage else None)
+                         nominal_footprint(hits, beam_d) if self.plan.measures_coverage else None)
 
     def finish_chunk(self, cast: CastChunk, record_mode: str | None = None, every_channel: bool = False,
                      whole_records: bool = False) -> Chunk:

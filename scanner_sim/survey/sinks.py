@@ -12,6 +12,7 @@ of the points for the picture. After the chunks, :func:`pass_summary` assembles 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +28,10 @@ from scanner_sim.render.point_cloud import render_point_cloud
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.provenance import point_cloud_provenance
 from scanner_sim.version import __version__
+
+NO_HIT = DROPOUT_CAUSES.index("no_hit")
+#: Beams followed down to the seabed at a time when counting the ``no_hit`` aimed where it has no data.
+RAY_BLOCK = 512
 
 #: Resolution and extent of the streaming |range error| histogram behind the summary's quantiles [m].
 ERROR_BIN_M = 5e-4
@@ -254,7 +259,17 @@ class PassStats:
     """Pulses, points per channel and streaming histograms of the range error [m]: of |error| (median and 95th
     percentile) and of the signed error (its median, the bias, and the share of points ranged short)."""
 
-    def __init__(self, n_channels: int):
+    def __init__(self, n_channels: int, heightfield=None):
+        """heightfield: the scene's seabed (:class:`scanner_sim.world.terrain.HeightField`), to count the ``no_hit``
+        dropouts aimed where it holds no seabed (a raster's nodata, or beyond its edge); None: not counted."""
+        self.heightfield = heightfield
+        self.seabed_low_m = None if heightfield is None else float(np.min(_valid_heights(heightfield)))
+        self.no_hit_over_no_seabed = 0
+        if heightfield is not None:
+            from scipy import ndimage
+
+            cells = np.ones(np.subtract(heightfield.shape, 1), bool) if heightfield.valid is None else heightfield.valid
+            self._inner_cells = ndimage.binary_erosion(cells, np.ones((3, 3), bool), border_value=0)
         self.pulses = 0
         self.points = 0
         self.channels = np.zeros(n_channels + 1, np.int64)
@@ -273,6 +288,44 @@ class PassStats:
         k = np.clip(np.floor(signed / ERROR_BIN_M).astype(np.int64) + half, 0, self.signed_counts.size - 1)
         np.add.at(self.signed_counts, k, 1)
         self.short += int((signed < 0).sum())
+        if self.heightfield is not None:
+            self.no_hit_over_no_seabed += self._aimed_at_no_seabed(chunk.dropouts)
+
+    def _aimed_at_no_seabed(self, dropouts) -> int:
+        """``no_hit`` dropouts whose beam, followed down in steps of the seabed's node spacing (to its lowest height,
+        at most across its whole plan), first crosses the seabed's level where the seabed has no data (a gap, within
+        a node of one, or beyond the edge): the beams a raster's nodata leaves with nothing to meet."""
+        hf = self.heightfield
+        no_hit = np.asarray(dropouts.cause) == NO_HIT
+        origin, direction = np.asarray(dropouts.origin)[no_hit], np.asarray(dropouts.direction)[no_hit]
+        down = direction[:, 2] < 0
+        origin, direction = origin[down], direction[down]
+        if not origin.shape[0]:
+            return 0
+        x0, x1, y0, y1 = hf.extent_m
+        reach = min(float(np.max((self.seabed_low_m - origin[:, 2]) / direction[:, 2])), math.hypot(x1 - x0, y1 - y0))
+        t = np.arange(0.0, reach + hf.spacing_m, hf.spacing_m)  # (steps,) [m] along each beam
+        count = 0
+        for start in range(0, origin.shape[0], RAY_BLOCK):  # blocks of beams bound the (beams, steps) arrays
+            o, d = origin[start:start + RAY_BLOCK], direction[start:start + RAY_BLOCK]
+            x, y, z = (o[:, None, k] + t[None, :] * d[:, None, k] for k in range(3))
+            inside, height = self._inner_data(x, y)
+            under = z <= height  # the gaps' heights are their nearest data's: a surface without holes
+            first = np.argmax(under, axis=1)
+            count += int(np.count_nonzero(~(under.any(axis=1) & inside[np.arange(first.size), first])))
+        return count
+
+    def _inner_data(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        """bool and float (shape of x): whether (x, y) [m] lies in a seabed cell with data whose 8 neighbours hold
+        data too (the mesh's edge along a gap is ragged within a node of it), and the height [m] of the cell's
+        lower-left node (the node spacing's precision is enough to tell where a beam crosses the seabed's level)."""
+        hf, inner = self.heightfield, self._inner_cells
+        i = np.floor((np.asarray(y) - hf.y0_m) / hf.spacing_m)
+        j = np.floor((np.asarray(x) - hf.x0_m) / hf.spacing_m)
+        ok = (i >= 0) & (i < inner.shape[0]) & (j >= 0) & (j < inner.shape[1])
+        i = np.clip(i, 0, inner.shape[0] - 1).astype(np.int64)
+        j = np.clip(j, 0, inner.shape[1] - 1).astype(np.int64)
+        return ok & inner[i, j], hf.heights_m[i, j]
 
     def error_quantile_m(self, q: float) -> float | None:
         total = self.error_counts.sum()
@@ -353,6 +406,14 @@ class CloudSample:
         return np.concatenate(self._classes) if self._classes else np.zeros(0, np.uint8)
 
 
+def _valid_heights(heightfield) -> np.ndarray:
+    """The heights [m] of the nodes at the corners of the seabed's cells that hold data (all nodes without gaps)."""
+    h = heightfield.heights_m
+    if heightfield.valid is None:
+        return h.ravel()
+    return h[:-1, :-1][heightfield.valid]
+
+
 def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_counts: dict, wall_s: float,
                  setup_s: float, compile_s: float = 0.0) -> dict:
     """The summary of a pass: counts, speed, range error quantiles and the settings that made it. ``wall_s`` [s]
@@ -366,6 +427,7 @@ def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_coun
         "pulses": stats.pulses,
         "points": n_points,
         "dropouts": {cause: int(dropout_counts.get(cause, 0)) for cause in DROPOUT_CAUSES},
+        "no_hit_over_no_seabed": stats.no_hit_over_no_seabed if stats.heightfield is not None else None,
         "channels": {name: int(stats.channels[i + 1]) for i, name in enumerate(facts.channels)},
         "wall_s": round(wall_s, 3),
         "setup_s": round(setup_s, 3),
@@ -435,5 +497,5 @@ def render_order_map(path: Path, coverage: CoverageAccumulator, facts: PassFacts
     planned = coverage.planned_cells()
     plot_order_map(path, coverage.strictest_orders(), coverage.cell_states(),
                    None if planned is None else planned.reshape(coverage.grid.shape), coverage.grid.extent_m,
-                   ORDER_NAMES, figures, title=f"{facts.label}\nIHO S-44 orders (Ed. 6.0.0), "
-                   f"{figures['order_min_soundings']} soundings a cell, 95 % within the order's TVU and THU")
+                   ORDER_NAMES, figures, title=f"{facts.label}\nIHO S-44 orders (Ed. 6.0.0), each judged on cells of "
+                   "its own size (legend): 95 % of a cell's soundings within the order's TVU and THU")

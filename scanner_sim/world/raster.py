@@ -197,8 +197,7 @@ def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raste
             nodata = section.nodata if section.nodata is not None else ds.nodatavals[section.band - 1]
             sign, reason = vertical_sign(ds, section.band, section.vertical)
             transform, crs, source, driver = ds.transform, ds.crs, section.raster, ds.driver
-    centre = transform @ (cols.start + 0.5 * (cols.stop - cols.start), rows.start + 0.5 * (rows.stop - rows.start))
-    check_same_frame(crs, scene_crs, *centre, key, str(source))
+    check_same_frame(crs, scene_crs, *_window_centre(transform, rows, cols), key, str(source))
     valid = np.isfinite(values)
     if nodata is not None:
         valid &= values != nodata
@@ -229,6 +228,26 @@ def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raste
         reflectance = _cell_reflectance(section.classes, hf, crs, key.rpartition(".")[0] + ".classes",
                                         reflectance_of(section))
     return RasterSeabed(hf, reflectance, info)
+
+
+def check_raster_frame(section, bounds, scene_crs, key: str = "seabed.raster") -> None:
+    """:func:`load_raster_seabed`'s check that the raster's CRS is the scene's, from the raster's header alone (no
+    pixel read): the same window, the same point, so the same one-line error."""
+    grid = section.raster
+    if isinstance(grid, RasterGrid):
+        rows, cols = _window(grid.transform, grid.heights.shape[1], grid.heights.shape[0], bounds, section.margin_m,
+                             key)
+        transform, crs, source = grid.transform, grid.crs, grid.source
+    else:
+        with open_raster(section.resolved_raster, key, section.band) as ds:
+            rows, cols = _window(ds.transform, ds.width, ds.height, bounds, section.margin_m, key)
+            transform, crs, source = ds.transform, ds.crs, section.raster
+    check_same_frame(crs, scene_crs, *_window_centre(transform, rows, cols), key, str(source))
+
+
+def _window_centre(transform, rows: slice, cols: slice) -> tuple[float, float]:
+    """Map coordinates [m] of the centre of a raster window."""
+    return transform @ (cols.start + 0.5 * (cols.stop - cols.start), rows.start + 0.5 * (rows.stop - rows.start))
 
 
 def _window(transform, width: int, height: int, bounds, margin_m: float, key: str) -> tuple[slice, slice]:
