@@ -50,6 +50,20 @@ def open_raster(path: Path, key: str, band: int = 1):
     return ds
 
 
+def read_pixels(ds, band: int, key: str, source: str, window=None) -> np.ndarray:
+    """Band ``band`` of the open raster ``ds`` (in ``window``, default all of it); a file GDAL cannot read the
+    pixels of (truncated, damaged, a header claiming more pixels than the file holds) is a :class:`ConfigError`
+    naming ``key``, the file as the scene gives it (``source``) and the driver's reason."""
+    from rasterio.errors import RasterioError
+
+    try:
+        return ds.read(band, window=window)
+    except RasterioError as exc:  # GDAL's reason is the cause; rasterio's own message says only "Read failed"
+        reason = " ".join(str(exc.__cause__ or exc).split())[:160]
+        raise ConfigError(f"{key} = {source!r}: the {ds.driver} driver cannot read its pixels ({reason});"
+                          " the file is truncated or damaged: write it again") from None
+
+
 def _path_or_grid(value: Any) -> Any:
     if isinstance(value, dict) and set(value) == set(RasterGrid.__dataclass_fields__):
         value = RasterGrid(**value)  # a grid dumped by with_overrides, back to itself
