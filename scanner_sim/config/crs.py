@@ -49,16 +49,23 @@ def crs_check(value: Any) -> int | str:
         crs = to_crs(value)
     except (CRSError, ValueError, OverflowError):
         raise invalid(f"{CRS_ALLOWED}; pyproj does not know it", value=value) from None
+    problem = not_metric(crs)
+    if problem.endswith(("(degrees)", "not projected")):
+        raise invalid(f"{problem}; the world frame must be projected, in metres (a UTM zone such as "
+                      "'EPSG:32631'): give waypoints in its eastings and northings", value=value)
+    if problem:
+        raise invalid(f"{problem}; the world frame must be projected, in metres", value=value)
+    return value
+
+
+def not_metric(crs) -> str:
+    """What keeps the CRS ``crs`` (a :class:`pyproj.CRS`) from being a world frame ("'WGS 84' is geographic
+    (degrees)", "'...' is in US survey foot"), or '' for a projected CRS whose horizontal axes are in metres."""
     horizontal = horizontal_crs(crs)
     if not horizontal.is_projected:
-        kind = "geographic (degrees)" if horizontal.is_geographic else "not projected"
-        raise invalid(f"{crs.name!r} is {kind}; the world frame must be projected, in metres (a UTM zone such "
-                      "as 'EPSG:32631'): give waypoints in its eastings and northings", value=value)
+        return f"{crs.name!r} is {'geographic (degrees)' if horizontal.is_geographic else 'not projected'}"
     units = {axis.unit_name for axis in horizontal.axis_info[:2]}
-    if not units <= set(_METRE):
-        raise invalid(f"{crs.name!r} is in {', '.join(sorted(units))}; the world frame must be projected, in "
-                      "metres", value=value)
-    return value
+    return "" if units <= set(_METRE) else f"{crs.name!r} is in {', '.join(sorted(units))}"
 
 
 #: The ``crs`` key's type: an EPSG code or text pyproj reads as a projected CRS in metres.

@@ -30,6 +30,7 @@ from scanner_sim.config import ConfigError, reflectance_of
 from scanner_sim.config.crs import horizontal_crs as horizontal_of
 from scanner_sim.config.geometry import MAX_SEABED_TRIANGLES
 from scanner_sim.config.raster_seabed import check_grid, open_raster, read_pixels
+from scanner_sim.config.sections import MAX_DEPTH_M
 from scanner_sim.world.terrain import HeightField, RasterGrid, fractal_relief
 
 
@@ -217,6 +218,7 @@ def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raste
         raise ConfigError(f"{key.rpartition('.')[0]}.vertical = 'auto': the raster's values are all above 0 "
                           f"({reason}), which puts the seabed above the water surface (z = 0); if they are depths, "
                           "set vertical: depth_down")
+    refuse_voids(values, valid, -1.0 if sign == "depth_down" else 1.0, key, source)
     hf, node_valid = _refine(values, valid, transform, rows, cols, section, key)
     code = horizontal_crs(crs).to_authority()
     info = {"source": str(source), "driver": driver,
@@ -234,6 +236,26 @@ def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raste
         reflectance = _cell_reflectance(section.classes, hf, crs, key.rpartition(".")[0] + ".classes",
                                         reflectance_of(section))
     return RasterSeabed(hf, reflectance, info)
+
+
+#: [m] Higher than any land (Everest is about 8,849 m): a raster value above it is no height but a void.
+MAX_ELEVATION_M = 9_000.0
+
+
+def refuse_voids(z: np.ndarray, valid: np.ndarray, sign: float, key: str, source) -> None:
+    """Refuse a raster whose ``valid`` pixels hold heights ``z`` [m] (up) no seabed has: deeper than any ocean
+    (:data:`~scanner_sim.config.sections.MAX_DEPTH_M`) or higher than any land (:data:`MAX_ELEVATION_M`), void
+    values (-32767, 3.4e38 ...) the file does not tag as nodata. The message gives the value as the file holds it
+    (``sign`` z), which the scene's nodata key then takes."""
+    impossible = valid & ((z < -MAX_DEPTH_M) | (z > MAX_ELEVATION_M))
+    if impossible.any():
+        first = np.flatnonzero(impossible.ravel())[0]
+        z0, value = float(z.ravel()[first]), float(sign * z.ravel()[first])
+        raise ConfigError(f"{key} = {source!r}: {np.count_nonzero(impossible):,} of the {np.count_nonzero(valid):,} "
+                          f"pixels read hold values such as {value:g}, which put the seabed "
+                          f"{'deeper than any ocean' if z0 < 0 else 'higher than any land'} ({MAX_DEPTH_M:,.0f} m deep, "
+                          f"{MAX_ELEVATION_M:,.0f} m high at most): a void value the file does not tag as nodata; set "
+                          f"{key.rpartition('.')[0]}.nodata: {value:g}")
 
 
 def _window(transform, width: int, height: int, bounds, margin_m: float, key: str) -> tuple[slice, slice]:
