@@ -39,7 +39,7 @@ def cli(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
 
 def one_line(run: subprocess.CompletedProcess, command: str) -> str:
     assert run.returncode == 2, run.stderr
-    lines = run.stderr.strip().splitlines()
+    lines = [line for line in run.stderr.strip().splitlines() if not line.startswith("first run:")]
     assert len(lines) == 1 and lines[0].startswith(f"scanner-sim {command}: error: "), lines
     return lines[0]
 
