@@ -96,7 +96,7 @@ def test_dataset_over_a_raster_base_with_mines_places_them_around_the_plan(tmp_p
 
 @pytest.mark.parametrize("case, document, message", [
     ("null_geometry", {"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": None}]},
-     "feature 0 has a null geometry"),
+     "a null geometry (feature 0)"),
     ("top_level_list", [{"type": "Feature", "geometry": {"type": "LineString", "coordinates": [[3, 50], [3.1, 50]]}}],
      "the file holds a JSON list"),
     ("features_not_a_list", {"type": "FeatureCollection", "features": {"a": 1}}, "features are"),

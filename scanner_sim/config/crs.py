@@ -17,10 +17,6 @@ from scanner_sim.config.errors import invalid
 CRS_ALLOWED = ("must be a projected coordinate system in metres: an EPSG code (32631 or 'EPSG:32631'), another "
                "authority code, or its WKT")
 
-#: Axis units pyproj names for metres.
-_METRE = ("metre", "meter")
-
-
 def to_crs(value: int | str | None):
     """The :class:`pyproj.CRS` of a ``crs`` value (an EPSG code int, an authority code or WKT text), or None."""
     if value is None:
@@ -64,8 +60,10 @@ def not_metric(crs) -> str:
     horizontal = horizontal_crs(crs)
     if not horizontal.is_projected:
         return f"{crs.name!r} is {'geographic (degrees)' if horizontal.is_geographic else 'not projected'}"
-    units = {axis.unit_name for axis in horizontal.axis_info[:2]}
-    return "" if units <= set(_METRE) else f"{crs.name!r} is in {', '.join(sorted(units))}"
+    axes = horizontal.axis_info[:2]
+    if all(abs(axis.unit_conversion_factor - 1.0) < 1e-12 for axis in axes):  # metres, however named ('Meter')
+        return ""
+    return f"{crs.name!r} is in {', '.join(sorted({axis.unit_name for axis in axes}))}"
 
 
 #: The ``crs`` key's type: an EPSG code or text pyproj reads as a projected CRS in metres.

@@ -112,12 +112,12 @@ def _geojson_lines(path: Path, project) -> list[list]:
     for k, feature in enumerate(features):
         geometry = feature.get("geometry", feature) if isinstance(feature, dict) else None
         if not isinstance(geometry, dict):
-            raise ValueError(f"feature {k} has {'a null' if geometry is None else 'no'} geometry; a line plan is "
+            raise ValueError(f"{'a null' if geometry is None else 'no'} geometry (feature {k}); a line plan is "
                              f"{GEOJSON_PLAN}")
         kind, coords = geometry.get("type"), geometry.get("coordinates")
         parts = [coords] if kind == "LineString" else coords if kind == "MultiLineString" else None
         if parts is None:
-            raise ValueError(f"feature {k} has a {kind} geometry; a line plan holds LineString or MultiLineString "
+            raise ValueError(f"a {kind} geometry (feature {k}); a line plan holds LineString or MultiLineString "
                              "features")
         if not isinstance(parts, list) or not all(isinstance(part, list) for part in parts):
             raise ValueError(f"feature {k}'s coordinates are {coords!r:.40}; a {kind} has lists of [longitude, "
