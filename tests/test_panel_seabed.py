@@ -88,11 +88,14 @@ def test_far_panel_labelled_seabed_is_ranged_behind_the_near_clipped_echo_in_a_w
 
 
 def test_other_objects_labelled_seabed_are_only_classed_so():
-    """A cable labelled seabed is a class of points, not the seabed: a scene with nothing else has no seabed (it
-    ran before panels and meshes labelled seabed became the seabed, and runs still)."""
+    """A cable labelled seabed, or a wall (a panel standing on edge, with no top surface), is a class of points,
+    not the seabed: a scene with nothing else has no seabed (it ran before panels and meshes labelled seabed
+    became the seabed, and runs still)."""
     data = _labelled_seabed("blind_zone_edge", panels=set())
     data["objects"].append({"type": "cable", "name": "rope", "points_m": [[-1, 0, -2.5], [1, 0, -2.5]],
                             "diameter_m": 0.05, "label": "seabed"})
+    data["objects"].append({"type": "panel", "name": "wall", "center_m": [2, 0, -2], "size_m": [2, 2],
+                            "normal": [-1, 0, 0], "label": "seabed"})
     cfg = parse_scene(data)
     assert not cfg.has_seabed and build_scene(cfg).heightfield is None
     assert "coverage" not in _pass(data, 50).summary

@@ -100,10 +100,12 @@ class SceneConfig(StrictModel):
 
     @property
     def seabed_objects(self) -> tuple[int, ...]:
-        """The indices in ``objects`` of the surfaces that are the seabed: the panels and meshes labelled seabed.
-        Where the scene has no seabed section their top surface gives its height field
-        (:func:`scanner_sim.world.scene.build_scene`); another object labelled seabed is only classed so."""
-        return tuple(i for i, o in enumerate(self.objects) if o.label == "seabed" and o.type in ("panel", "mesh"))
+        """The indices in ``objects`` of the surfaces that are the seabed: the meshes and the panels not standing on
+        edge (a wall has no top surface) labelled seabed. Where the scene has no seabed section their top surface
+        gives its height field (:func:`scanner_sim.world.scene.build_scene`); another object labelled seabed is
+        only classed so."""
+        return tuple(i for i, o in enumerate(self.objects) if o.label == "seabed" and (
+            o.type == "mesh" or o.type == "panel" and o.normal[2] != 0.0))
 
     @property
     def has_seabed(self) -> bool:
