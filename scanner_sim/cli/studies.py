@@ -219,7 +219,7 @@ def _check_cell_memory(args, config) -> None:
     from scanner_sim.survey.budget import COVERAGE_BYTES_PER_CELL
     from scanner_sim.world.raster import seabed_plan_size_m
 
-    size = seabed_plan_size_m(config.seabed)
+    size = seabed_plan_size_m(config)
     if size is None:  # the study refuses the scene itself (or measures a mesh seabed, sized once built)
         return
     cells = math.prod(math.ceil(s / args.cell_m) for s in size)

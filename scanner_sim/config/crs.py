@@ -17,10 +17,6 @@ from scanner_sim.config.errors import invalid
 CRS_ALLOWED = ("must be a projected coordinate system in metres: an EPSG code (32631 or 'EPSG:32631'), another "
                "authority code, or its WKT")
 
-#: Axis units pyproj names for metres.
-_METRE = ("metre", "meter")
-
-
 def to_crs(value: int | str | None):
     """The :class:`pyproj.CRS` of a ``crs`` value (an EPSG code int, an authority code or WKT text), or None."""
     if value is None:
@@ -49,16 +45,25 @@ def crs_check(value: Any) -> int | str:
         crs = to_crs(value)
     except (CRSError, ValueError, OverflowError):
         raise invalid(f"{CRS_ALLOWED}; pyproj does not know it", value=value) from None
+    problem = not_metric(crs)
+    if problem.endswith(("(degrees)", "not projected")):
+        raise invalid(f"{problem}; the world frame must be projected, in metres (a UTM zone such as "
+                      "'EPSG:32631'): give waypoints in its eastings and northings", value=value)
+    if problem:
+        raise invalid(f"{problem}; the world frame must be projected, in metres", value=value)
+    return value
+
+
+def not_metric(crs) -> str:
+    """What keeps the CRS ``crs`` (a :class:`pyproj.CRS`) from being a world frame ("'WGS 84' is geographic
+    (degrees)", "'...' is in US survey foot"), or '' for a projected CRS whose horizontal axes are in metres."""
     horizontal = horizontal_crs(crs)
     if not horizontal.is_projected:
-        kind = "geographic (degrees)" if horizontal.is_geographic else "not projected"
-        raise invalid(f"{crs.name!r} is {kind}; the world frame must be projected, in metres (a UTM zone such "
-                      "as 'EPSG:32631'): give waypoints in its eastings and northings", value=value)
-    units = {axis.unit_name for axis in horizontal.axis_info[:2]}
-    if not units <= set(_METRE):
-        raise invalid(f"{crs.name!r} is in {', '.join(sorted(units))}; the world frame must be projected, in "
-                      "metres", value=value)
-    return value
+        return f"{crs.name!r} is {'geographic (degrees)' if horizontal.is_geographic else 'not projected'}"
+    axes = horizontal.axis_info[:2]
+    if all(abs(axis.unit_conversion_factor - 1.0) < 1e-12 for axis in axes):  # metres, however named ('Meter')
+        return ""
+    return f"{crs.name!r} is in {', '.join(sorted({axis.unit_name for axis in axes}))}"
 
 
 #: The ``crs`` key's type: an EPSG code or text pyproj reads as a projected CRS in metres.

@@ -4,7 +4,8 @@ The loader refuses, with one line naming the file, what a scene never needs and 
 could use to exhaust the machine (``docs/errors.md``): a file larger than :data:`MAX_SCENE_BYTES`, bytes that
 are not UTF-8 text, nesting deeper than :data:`MAX_DEPTH`, aliases that expand to more than
 :data:`MAX_NODES` nodes (the "billion laughs"), recursive aliases, explicit tags (``!!binary``,
-``!!python/object``), keys that are not text, duplicate keys, and a document that is not a mapping.
+``!!python/object``), keys that are not text (but the integer codes of a class raster's ``materials``), duplicate
+keys, and a document that is not a mapping.
 """
 
 import difflib
@@ -40,6 +41,7 @@ class StrictLoader(_BaseLoader):
             stream = stream.read()
         _check_events(stream)
         super().__init__(stream)
+        self.code_keyed: set[int] = set()  # ids of the mapping nodes keyed by integer codes (CODE_KEYED)
 
 
 class _Refused(yaml.YAMLError):
@@ -93,13 +95,20 @@ def _check_events(text: str) -> None:
             raise _refused(event, f"more than {MAX_NODES:,} values once anchors and aliases are expanded")
 
 
+#: Keys whose value is a mapping keyed by integer codes: a class raster's ``materials`` (code -> material).
+CODE_KEYED = frozenset({"materials"})
+
+
 def _construct_mapping(loader, node, deep=False):
     seen = set()
-    for key_node, _ in node.value:
+    for key_node, value_node in node.value:
         if key_node.tag == "tag:yaml.org,2002:merge":  # ``<<: *defaults``, resolved by flatten_mapping
             continue
         key = loader.construct_object(key_node, deep=deep) if isinstance(key_node, yaml.ScalarNode) else None
-        if not isinstance(key, str):
+        if key in CODE_KEYED and isinstance(value_node, yaml.MappingNode):
+            loader.code_keyed.add(id(value_node))
+        code = type(key) is int and id(node) in loader.code_keyed
+        if not isinstance(key, str) and not code:
             shown = repr(key) if isinstance(key_node, yaml.ScalarNode) else f"a {key_node.id}"
             raise _refused(key_node, f"key {shown} is not text; keys are names such as format_version")
         if key in seen:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import copy
 import csv
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -95,17 +96,36 @@ def read_line_plan(plan: Any, base_dir: Path | None, project) -> list[list[float
     return [list(map(float, p)) for line in lines for p in line]
 
 
+#: What a GeoJSON line plan holds, for the messages.
+GEOJSON_PLAN = "a GeoJSON FeatureCollection of LineString or MultiLineString features (or one such Feature or geometry)"
+
+
 def _geojson_lines(path: Path, project) -> list[list]:
     doc = json.loads(path.read_text())
-    features = doc.get("features", [doc]) if doc.get("type") == "FeatureCollection" else [doc]
+    if not isinstance(doc, dict):
+        raise ValueError(f"the file holds a JSON {type(doc).__name__}; a line plan is {GEOJSON_PLAN}")
+    features = doc.get("features") if doc.get("type") == "FeatureCollection" else [doc]
+    if not isinstance(features, list):
+        raise ValueError(f"its FeatureCollection's features are {features!r:.40}, not a list; a line plan is "
+                         f"{GEOJSON_PLAN}")
     lines = []
-    for feature in features:
-        geometry = feature.get("geometry", feature)
+    for k, feature in enumerate(features):
+        geometry = feature.get("geometry", feature) if isinstance(feature, dict) else None
+        if not isinstance(geometry, dict):
+            raise ValueError(f"{'a null' if geometry is None else 'no'} geometry (feature {k}); a line plan is "
+                             f"{GEOJSON_PLAN}")
         kind, coords = geometry.get("type"), geometry.get("coordinates")
         parts = [coords] if kind == "LineString" else coords if kind == "MultiLineString" else None
         if parts is None:
-            raise ValueError(f"a {kind} geometry; a line plan holds LineString or MultiLineString features")
-        lines += [_converted(part, True, project, "coordinates") for part in parts]
+            raise ValueError(f"a {kind} geometry (feature {k}); a line plan holds LineString or MultiLineString "
+                             "features")
+        if not isinstance(parts, list) or not all(isinstance(part, list) for part in parts):
+            raise ValueError(f"feature {k}'s coordinates are {coords!r:.40}; a {kind} has lists of [longitude, "
+                             "latitude]")
+        try:
+            lines += [_converted(part, True, project, "coordinates") for part in parts]
+        except ConfigError as exc:
+            raise ValueError(f"feature {k}'s {exc}") from None
     return lines
 
 
@@ -122,11 +142,24 @@ def _csv_lines(path: Path, project) -> list[list]:
     if geographic and project is None:
         raise ValueError("lon, lat columns need the scene's crs to convert them to")
     lines: dict[str, list] = {}
-    for row in rows:
+    for number, row in enumerate(rows, start=2):  # the header is the file's line 1
         lines.setdefault(row[names["line"]].strip() if "line" in names else "1", []).append(
-            [float(row[a]), float(row[b])])
+            [_csv_number(row, column, number) for column in (a, b)])
     out = list(lines.values())
     return [_converted(line, True, project, "lon, lat") for line in out] if geographic else out
+
+
+def _csv_number(row: dict, column: str, number: int) -> float:
+    """The finite number in ``column`` of a line plan's CSV ``row`` (line ``number`` of the file)."""
+    text = row.get(column)
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not math.isfinite(value):
+        raise ValueError(f"line {number}, column {column!r} = {text!r}: must be a finite number "
+                         f"({'map coordinates, metres' if column.strip().lower() in ('x', 'y') else 'degrees'})")
+    return value
 
 
 def _projector(crs):

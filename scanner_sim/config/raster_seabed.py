@@ -12,6 +12,7 @@ import numpy as np
 from pydantic import BeforeValidator, PlainSerializer, PrivateAttr, ValidationInfo, WithJsonSchema, model_validator
 
 from scanner_sim.config.base import Choice, Integer, NonNegative, Positive, StrictModel
+from scanner_sim.config.crs import not_metric, to_crs
 from scanner_sim.config.errors import ConfigError, invalid
 from scanner_sim.config.geometry import ReliefConfig, surface
 from scanner_sim.config.sections import MAX_SEED
@@ -23,6 +24,15 @@ def check_grid(transform, width: int, height: int, crs) -> str | None:
     if crs is None or not str(crs):
         return ("the raster has no coordinate reference system; give it one (gdal_edit.py -a_srs EPSG:...) so that "
                 "its map coordinates name a place")
+    from pyproj.exceptions import CRSError
+
+    try:
+        problem = not_metric(to_crs(crs.to_wkt() if hasattr(crs, "to_wkt") else crs))
+    except (CRSError, ValueError, TypeError):
+        problem = f"{str(crs)[:60]!r} is not one pyproj reads"
+    if problem:
+        return (f"its CRS {problem}; the world frame is projected, in metres: reproject the raster to such a CRS "
+                "first (gdalwarp -t_srs EPSG:..., the site's UTM zone)")
     if transform.b != 0 or transform.d != 0:
         return (f"the raster's grid is rotated or sheared (transform {tuple(round(t, 6) for t in transform)[:6]}); "
                 "warp it north-up first (gdalwarp)")
@@ -48,6 +58,20 @@ def open_raster(path: Path, key: str, band: int = 1):
         ds.close()
         raise ConfigError(f"{key} = {str(path)!r}: {problem}")
     return ds
+
+
+def read_pixels(ds, band: int, key: str, source: str, window=None) -> np.ndarray:
+    """Band ``band`` of the open raster ``ds`` (in ``window``, default all of it); a file GDAL cannot read the
+    pixels of (truncated, damaged, a header claiming more pixels than the file holds) is a :class:`ConfigError`
+    naming ``key``, the file as the scene gives it (``source``) and the driver's reason."""
+    from rasterio.errors import RasterioError
+
+    try:
+        return ds.read(band, window=window)
+    except RasterioError as exc:  # GDAL's reason is the cause; rasterio's own message says only "Read failed"
+        reason = " ".join(str(exc.__cause__ or exc).split())[:160]
+        raise ConfigError(f"{key} = {source!r}: the {ds.driver} driver cannot read its pixels ({reason});"
+                          " the file is truncated or damaged: write it again") from None
 
 
 def _path_or_grid(value: Any) -> Any:

@@ -85,8 +85,8 @@ class SceneConfig(StrictModel):
             raise invalid("a static platform needs survey.duration_s or survey.max_pulses", key="survey")
         if not self.has_seabed and (self.platform.altitude_m is not None
                                     or any(o.rests_on_seabed for o in self.objects)):
-            raise invalid("missing; altitude_m and objects placed on the bottom need a seabed section (or a mesh "
-                          "object labelled seabed)", key="seabed")
+            raise invalid("missing; altitude_m and objects placed on the bottom need a seabed section (or a panel "
+                          "or mesh labelled seabed)", key="seabed")
         lawnmower = self.platform.lawnmower if self.platform.mode == "lawnmower" else None
         if lawnmower is not None and lawnmower.size_m is None and not isinstance(self.seabed, RasterSeabedConfig):
             raise invalid("missing; only a lawnmower over a raster seabed may leave its area to the raster's valid "
@@ -99,9 +99,18 @@ class SceneConfig(StrictModel):
         return self
 
     @property
+    def seabed_objects(self) -> tuple[int, ...]:
+        """The indices in ``objects`` of the surfaces that are the seabed: the meshes and the panels not standing on
+        edge (a wall has no top surface) labelled seabed. Where the scene has no seabed section their top surface
+        gives its height field (:func:`scanner_sim.world.scene.build_scene`); another object labelled seabed is
+        only classed so."""
+        return tuple(i for i, o in enumerate(self.objects) if o.label == "seabed" and (
+            o.type == "mesh" or o.type == "panel" and o.normal[2] != 0.0))
+
+    @property
     def has_seabed(self) -> bool:
-        """A seabed section, or a mesh object labelled seabed: something to follow and measure coverage over."""
-        return self.seabed is not None or any(o.label == "seabed" for o in self.objects)
+        """A seabed section, or a panel or mesh labelled seabed: something to follow and measure coverage over."""
+        return self.seabed is not None or bool(self.seabed_objects)
 
     @property
     def source_path(self) -> Path | None:

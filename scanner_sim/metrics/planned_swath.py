@@ -68,9 +68,19 @@ def planned_swath(config, trajectory, pulse_rate_hz: float) -> PlannedSwath | No
     if (trajectory.static or sc.mode == "static" or sc.mounting != "along_track" or sc.center_deg != 0.0
             or half_deg > MAX_HALF_SECTOR_DEG or config.seabed is None):
         return None
-    height = p.altitude_m if p.altitude_m is not None else config.seabed.depth_m - p.depth_m
+    s, xyz = trajectory.path()
+    height = p.altitude_m if p.altitude_m is not None else _height_at_depth(config, trajectory, xyz)
     if not height > 0:
         return None
-    s, xyz = trajectory.path()
     return PlannedSwath(np.asarray(s, float), np.asarray(xyz[:, :2], float), trajectory.speed_m_s,
                         height * math.tan(math.radians(half_deg)), float(pulse_rate_hz))
+
+
+def _height_at_depth(config, trajectory, xyz: np.ndarray) -> float:
+    """[m] How far above the seabed a vehicle at constant depth flies: below the procedural seabed's mean level
+    (``seabed.depth_m``), or over a raster's, the median height over the seabed under the track ``xyz`` (k, 3)."""
+    if hasattr(config.seabed, "depth_m"):
+        return config.seabed.depth_m - config.platform.depth_m
+    hf = trajectory.heightfield
+    over = hf.covers(xyz[:, 0], xyz[:, 1])
+    return float(np.median(xyz[over, 2] - hf.height(xyz[over, 0], xyz[over, 1]))) if over.any() else math.nan

@@ -95,13 +95,13 @@ def object_table(scene: DrawnScene) -> list[dict]:
     """The scene's objects with the ``object_id`` their points carry in points.las: the scene's parts are the seabed,
     the rocks (when there are any), then the objects in order (``world.scene.build_scene``)."""
     config = scene.config
-    first = 0 if config.seabed is None else 1 + (config.seabed.rocks.count > 0)
+    rocks = getattr(config.seabed, "rocks", None)  # a raster seabed has none
+    first = 0 if config.seabed is None else 1 + bool(rocks and rocks.count)
     table = []
     if config.seabed is not None:
         table.append({"object_id": 0, "name": "seabed", "type": "seabed", "class": config.seabed.label})
-        if config.seabed.rocks.count:
-            table.append({"object_id": 1, "name": "rocks", "type": "rocks", "class": config.seabed.rocks.label,
-                          "count": config.seabed.rocks.count})
+        if rocks and rocks.count:
+            table.append({"object_id": 1, "name": "rocks", "type": "rocks", "class": rocks.label, "count": rocks.count})
     for k, obj in enumerate(config.objects):
         table.append({"object_id": first + k, "name": obj.name, "type": obj.type, "class": obj.label})
     return table

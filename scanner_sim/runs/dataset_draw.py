@@ -19,8 +19,9 @@ from typing import Any
 import numpy as np
 
 from scanner_sim.config import ConfigError, SceneConfig
-from scanner_sim.config.geometry import OBJECT_TYPES
+from scanner_sim.config.geometry import OBJECT_TYPES, SeabedConfig
 from scanner_sim.runs.dataset_spec import DatasetSpec, ObjectTemplate
+from scanner_sim.world.raster import lawnmower_area, plan_bounds
 
 __all__ = ["OUTPUT_KEYS", "SPLITS", "DrawnScene", "draw_scene", "scene_folder", "scene_seeds", "split_of"]
 
@@ -101,10 +102,10 @@ def draw_scene(spec: DatasetSpec, base: SceneConfig, index: int) -> DrawnScene:
     overrides = {**spec.set, **drawn, "survey.seed": survey_seed, "platform.navigation_noise.seed": navigation_seed,
                  "survey.max_pulses": spec.max_pulses, **OUTPUT_KEYS}
     config = _with(base, overrides, spec, name)
-    if config.seabed is None:
-        seabed_seed = None
-    else:
+    if isinstance(config.seabed, SeabedConfig):
         overrides["seabed.seed"] = seabed_seed
+    else:  # no seabed to draw: none, or a raster's (its micro_relief.seed is the spec's to set or draw)
+        seabed_seed = None
     templates: list[int] = []
     if spec.objects is not None:
         drawn["objects"], templates = place_objects(spec, config, rng, name)
@@ -123,10 +124,7 @@ def place_objects(spec: DatasetSpec, config: SceneConfig, rng: np.random.Generat
     """The objects of every template, as scene-file mappings, placed uniformly in the object area (centred on the
     seabed's centre) and turned to a uniform heading by default; and the template of each. An object closer than
     ``min_spacing_m`` to one placed before it (:func:`_spaced`) is drawn again, heading, place and keys."""
-    if spec.object_area_m is None and config.seabed is None:
-        raise ConfigError(f"{name}: object_area_m: missing; the base scene has no seabed to place objects on")
-    centre = np.array(config.seabed.center_m if config.seabed is not None else (0.0, 0.0))
-    size = np.array(spec.object_area_m if spec.object_area_m is not None else config.seabed.size_m)
+    centre, size = _object_area(spec, config, name)
     low, high = centre - size / 2, centre + size / 2
     objects: list[dict] = []
     templates: list[int] = []
@@ -144,6 +142,25 @@ def place_objects(spec: DatasetSpec, config: SceneConfig, rng: np.random.Generat
             objects.append(obj)
             templates.append(t)
     return objects, templates
+
+
+def _object_area(spec: DatasetSpec, config: SceneConfig, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(centre (2,), size (2,)) [m] of the rectangle objects are placed in: ``object_area_m`` (default: the
+    procedural seabed's size) centred on the procedural seabed's centre, on the survey plan's centre over a raster
+    seabed (whose extent is no area to fill), on the origin without a seabed section."""
+    if spec.object_area_m is None and not isinstance(config.seabed, SeabedConfig):
+        what = "a raster seabed, whose whole extent" if config.seabed is not None else "no seabed section, which"
+        raise ConfigError(f"{name}: object_area_m: missing; the base scene has {what} gives no area to place "
+                          "objects in: give object_area_m [x, y] (centred on the survey's plan)")
+    if isinstance(config.seabed, SeabedConfig):
+        centre = config.seabed.center_m
+    elif config.seabed is not None:
+        bounds = plan_bounds(config)
+        centre = ((bounds[0] + bounds[1]) / 2, (bounds[2] + bounds[3]) / 2) if bounds is not None else (
+            lawnmower_area(config.platform.lawnmower, config.seabed)[0])
+    else:
+        centre = (0.0, 0.0)
+    return np.array(centre, float), np.array(spec.object_area_m or config.seabed.size_m, float)
 
 
 def _spaced(obj: dict, placed: list[dict], spacing_m: float) -> bool:

@@ -135,7 +135,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
 
     if not config.has_seabed:
         raise ParameterError(f"scene '{config.name}': coverage is measured over the seabed's plan area; the "
-                             "scene has no seabed section (nor a mesh labelled seabed)")
+                             "scene has no seabed section (nor a panel or mesh labelled seabed)")
     out = Path(out_dir)
     placed: list[dict] = []
     if cubes is not None:

@@ -88,7 +88,7 @@ def estimate_pass(config) -> PassEstimate:
     if config.output.waveform_every_n_pulses:
         memory["output.waveform_every_n_pulses"] = (min(slots, pulses) * WAVEFORM_BYTES_PER_PULSE,
                                                     f"the list of {pulses:,} pulses to sample")
-    size = seabed_plan_size_m(config.seabed)  # a raster's whole extent: its window is at most that
+    size = seabed_plan_size_m(config)  # a raster's: the window the survey reads
     if size is not None:
         cells = math.prod(math.ceil(s / COVERAGE_CELL_M) for s in size)
         key = "seabed.size_m" if isinstance(config.seabed, SeabedConfig) else "seabed.raster"

@@ -1,4 +1,4 @@
-"""The height field of a seabed given as a mesh (an object labelled ``seabed``): what altitude following, the track
+"""The height field of a seabed given as meshes or panels (objects labelled ``seabed``): what altitude following, the track
 checks and coverage read, as they read the procedural seabed's.
 
 The mesh's top surface is sampled on a square grid: each node takes the highest point of the mesh's triangles
@@ -19,6 +19,9 @@ from scanner_sim.world.terrain import HeightField
 
 #: Most nodes of a mesh seabed's height field: its spacing grows past the mesh's own edge length to stay below.
 MAX_MESH_SEABED_NODES = 4_000_000
+#: [m] Largest node spacing of a seabed with a panel among its surfaces: the procedural seabed's default
+#: ``resolution_m``, so that a panel's edges and the steps between panels lie within 0.1 m of where they are.
+PANEL_SEABED_SPACING_M = 0.1
 
 
 def mesh_heightfield(vertices: np.ndarray, faces: np.ndarray, spacing_m: float | None = None) -> HeightField:
@@ -29,11 +32,10 @@ def mesh_heightfield(vertices: np.ndarray, faces: np.ndarray, spacing_m: float |
     f = np.ascontiguousarray(faces, np.int64)
     lo, hi = v[:, :2].min(axis=0), v[:, :2].max(axis=0)
     if spacing_m is None:
-        edges = np.linalg.norm(v[f[:, [1, 2, 0]], :2] - v[f, :2], axis=2).ravel()
-        spacing_m = float(np.median(edges[edges > 0])) if (edges > 0).any() else 1.0
+        spacing_m = median_edge_m(v, f)
     area = float(np.prod(np.maximum(hi - lo, spacing_m)))
     spacing_m = max(spacing_m, math.sqrt(area / MAX_MESH_SEABED_NODES))
-    nx, ny = (int(math.floor((hi - lo)[k] / spacing_m)) + 1 for k in (0, 1))
+    nx, ny = (int(math.floor((hi - lo)[k] / spacing_m + 1e-9)) + 1 for k in (0, 1))
     if nx < 2 or ny < 2:
         raise ParameterError(f"a seabed mesh {hi[0] - lo[0]:.3g} x {hi[1] - lo[1]:.3g} m in plan: too narrow for a height "
                          f"field at {spacing_m:.3g} m")
@@ -49,19 +51,40 @@ def mesh_heightfield(vertices: np.ndarray, faces: np.ndarray, spacing_m: float |
     return HeightField(float(lo[0]), float(lo[1]), float(spacing_m), z, None if cells.all() else cells)
 
 
-def seabed_of_meshes(objects, meshes: dict) -> tuple[HeightField, dict]:
-    """The height field of the meshes labelled seabed (``meshes``: index in the scene's ``objects`` -> (vertices
-    (n, 3), faces (m, 3)) placed in the world) and what the outputs report about it."""
+def median_edge_m(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """The median plan length [m] of the edges of the mesh ``vertices`` (n, 3), ``faces`` (m, 3) (1 m if all are 0)."""
+    edges = np.linalg.norm(vertices[faces[:, [1, 2, 0]], :2] - vertices[faces, :2], axis=2).ravel()
+    return float(np.median(edges[edges > 0])) if (edges > 0).any() else 1.0
+
+
+def _joined(meshes: dict) -> tuple[np.ndarray, np.ndarray]:
+    """One mesh, vertices (n, 3) and faces (m, 3), of the meshes ``{index: (vertices, faces)}``."""
     starts = np.cumsum([0] + [len(v) for v, _ in meshes.values()])
-    v = np.concatenate([v for v, _ in meshes.values()])
-    f = np.concatenate([f + s for (_, f), s in zip(meshes.values(), starts)])
+    v = np.concatenate([np.asarray(v, np.float64) for v, _ in meshes.values()])
+    f = np.concatenate([np.asarray(f, np.int64) + s for (_, f), s in zip(meshes.values(), starts)])
+    return v, f
+
+
+def seabed_of_meshes(objects, meshes: dict) -> tuple[HeightField, dict]:
+    """The height field of the panels and meshes labelled seabed (``meshes``: index in the scene's ``objects`` ->
+    (vertices (n, 3), faces (m, 3)) placed in the world) and what the outputs report about it. Nodes lie every
+    median edge length of the meshes; a panel's two triangles say nothing of the relief, so with a panel among them
+    every :data:`PANEL_SEABED_SPACING_M` at most."""
+    v, f = _joined(meshes)
+    panels = [i for i in meshes if objects[i].type == "panel"]
+    surveyed = [i for i in meshes if objects[i].type != "panel"]
+    spacing_m = PANEL_SEABED_SPACING_M if panels else None
+    if panels and surveyed:
+        spacing_m = min(spacing_m, median_edge_m(*_joined({i: meshes[i] for i in surveyed})))
     try:
-        hf = mesh_heightfield(v, f)
+        hf = mesh_heightfield(v, f, spacing_m)
     except ParameterError as exc:
         first = next(iter(meshes))
         raise ConfigError(f"objects[{first}] ({objects[first].name!r}): {exc}") from None
-    sources = [objects[i].file if isinstance(objects[i].file, str) else "in memory" for i in meshes]
-    return hf, {"source": sources, "kind": "mesh", "node_spacing_m": hf.spacing_m,
+    sources = [f"panel {objects[i].name!r}" if i in panels else objects[i].file if isinstance(objects[i].file, str)
+               else "in memory" for i in meshes]
+    kind = " and ".join(k for k, some in (("mesh", surveyed), ("panel", panels)) if some)
+    return hf, {"source": sources, "kind": kind, "node_spacing_m": hf.spacing_m,
                 "valid_cell_fraction": float(hf.valid.mean()) if hf.valid is not None else 1.0}
 
 

@@ -29,7 +29,8 @@ import numpy as np
 from scanner_sim.config import ConfigError, reflectance_of
 from scanner_sim.config.crs import horizontal_crs as horizontal_of
 from scanner_sim.config.geometry import MAX_SEABED_TRIANGLES
-from scanner_sim.config.raster_seabed import check_grid, open_raster
+from scanner_sim.config.raster_seabed import check_grid, open_raster, read_pixels
+from scanner_sim.config.sections import MAX_DEPTH_M
 from scanner_sim.world.terrain import HeightField, RasterGrid, fractal_relief
 
 
@@ -123,20 +124,23 @@ def plan_bounds(config) -> tuple[float, float, float, float] | None:
     return float(a[:, 0].min()), float(a[:, 0].max()), float(a[:, 1].min()), float(a[:, 1].max())
 
 
-def seabed_plan_size_m(section) -> tuple[float, float] | None:
-    """(x, y) extent [m] of a seabed section's plan before it is built: a procedural seabed's size, a raster's
-    whole extent from its metadata (the window read is at most that), None for no seabed section."""
+def seabed_plan_size_m(config) -> tuple[float, float] | None:
+    """(x, y) extent [m] of a scene's seabed section's plan before it is built: a procedural seabed's size, the
+    window of a raster the survey reads (``margin_m`` around its plan, from the raster's metadata: what coverage
+    and the height field span), None for no seabed section."""
+    section = config.seabed
     if section is None:
         return None
     if not hasattr(section, "raster"):
         return tuple(section.size_m)
     grid = section.raster
     if isinstance(grid, RasterGrid):
-        (ny, nx), t = np.shape(grid.heights), grid.transform
+        (height, width), t = np.shape(grid.heights), grid.transform
     else:
         with open_raster(section.resolved_raster, "seabed.raster", section.band) as ds:
-            (ny, nx), t = (ds.height, ds.width), ds.transform
-    return abs(t.a) * nx, abs(t.e) * ny
+            (height, width), t = (ds.height, ds.width), ds.transform
+    rows, cols = _window(t, width, height, plan_bounds(config), section.margin_m, "seabed.raster")
+    return abs(t.a) * (cols.stop - cols.start), abs(t.e) * (rows.stop - rows.start)
 
 
 def lawnmower_area(lawnmower, section) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -149,7 +153,9 @@ def lawnmower_area(lawnmower, section) -> tuple[tuple[float, float], tuple[float
         values, transform, nodata = np.asarray(grid.heights), grid.transform, grid.nodata
     else:
         with open_raster(section.resolved_raster, "seabed.raster", section.band) as ds:
-            values, transform, nodata = ds.read(section.band), ds.transform, ds.nodatavals[section.band - 1]
+            node_grid(ds.height, ds.width, ds.transform.a, ds.transform.e, section.resolution_m, "seabed.raster")
+            values = read_pixels(ds, section.band, "seabed.raster", grid)  # the whole raster: refused above if too big
+            transform, nodata = ds.transform, ds.nodatavals[section.band - 1]
     nodata = section.nodata if section.nodata is not None else nodata
     valid = np.isfinite(values) & ((values != nodata) if nodata is not None else True)
     if not valid.any():
@@ -193,7 +199,7 @@ def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raste
             node_grid(rows.stop - rows.start, cols.stop - cols.start, ds.transform.a, ds.transform.e,
                       section.resolution_m, key)  # refused before the pixels are read
             window = Window(cols.start, rows.start, cols.stop - cols.start, rows.stop - rows.start)
-            values = ds.read(section.band, window=window).astype(float)
+            values = read_pixels(ds, section.band, key, section.raster, window).astype(float)
             nodata = section.nodata if section.nodata is not None else ds.nodatavals[section.band - 1]
             sign, reason = vertical_sign(ds, section.band, section.vertical)
             transform, crs, source, driver = ds.transform, ds.crs, section.raster, ds.driver
@@ -211,6 +217,7 @@ def load_raster_seabed(section, bounds, scene_crs=None, key: str = "seabed.raste
         raise ConfigError(f"{key.rpartition('.')[0]}.vertical = 'auto': the raster's values are all above 0 "
                           f"({reason}), which puts the seabed above the water surface (z = 0); if they are depths, "
                           "set vertical: depth_down")
+    refuse_voids(values, valid, -1.0 if sign == "depth_down" else 1.0, key, source)
     hf, node_valid = _refine(values, valid, transform, rows, cols, section, key)
     code = horizontal_crs(crs).to_authority()
     info = {"source": str(source), "driver": driver,
@@ -248,6 +255,26 @@ def check_raster_frame(section, bounds, scene_crs, key: str = "seabed.raster") -
 def _window_centre(transform, rows: slice, cols: slice) -> tuple[float, float]:
     """Map coordinates [m] of the centre of a raster window."""
     return transform @ (cols.start + 0.5 * (cols.stop - cols.start), rows.start + 0.5 * (rows.stop - rows.start))
+
+
+#: [m] Higher than any land (Everest is about 8,849 m): a raster value above it is no height but a void.
+MAX_ELEVATION_M = 9_000.0
+
+
+def refuse_voids(z: np.ndarray, valid: np.ndarray, sign: float, key: str, source) -> None:
+    """Refuse a raster whose ``valid`` pixels hold heights ``z`` [m] (up) no seabed has: deeper than any ocean
+    (:data:`~scanner_sim.config.sections.MAX_DEPTH_M`) or higher than any land (:data:`MAX_ELEVATION_M`), void
+    values (-32767, 3.4e38 ...) the file does not tag as nodata. The message gives the value as the file holds it
+    (``sign`` z), which the scene's nodata key then takes."""
+    impossible = valid & ((z < -MAX_DEPTH_M) | (z > MAX_ELEVATION_M))
+    if impossible.any():
+        first = np.flatnonzero(impossible.ravel())[0]
+        z0, value = float(z.ravel()[first]), float(sign * z.ravel()[first])
+        raise ConfigError(f"{key} = {source!r}: {np.count_nonzero(impossible):,} of the {np.count_nonzero(valid):,} "
+                          f"pixels read hold values such as {value:g}, which put the seabed "
+                          f"{'deeper than any ocean' if z0 < 0 else 'higher than any land'} ({MAX_DEPTH_M:,.0f} m deep, "
+                          f"{MAX_ELEVATION_M:,.0f} m high at most): a void value the file does not tag as nodata; set "
+                          f"{key.rpartition('.')[0]}.nodata: {value:g}")
 
 
 def _window(transform, width: int, height: int, bounds, margin_m: float, key: str) -> tuple[slice, slice]:
@@ -334,11 +361,16 @@ def _cell_reflectance(classes, hf: HeightField, crs, key: str, default: float) -
     gx, gy = np.meshgrid(xc, yc)
     with open_raster(classes.resolved_raster, f"{key}.raster", classes.band) as ds:
         check_same_frame(ds.crs, crs, float(gx.mean()), float(gy.mean()), f"{key}.raster", classes.raster)
-        codes = ds.read(classes.band)
+        from rasterio.windows import Window
+
         col, row = (~ds.transform) @ (gx, gy)
         col, row = np.floor(col).astype(np.int64), np.floor(row).astype(np.int64)
         inside = (col >= 0) & (col < ds.width) & (row >= 0) & (row < ds.height)
-        code = np.where(inside, codes[np.clip(row, 0, ds.height - 1), np.clip(col, 0, ds.width - 1)], -1)
+        c0, r0 = (int(np.clip(a.min(), 0, n - 1)) for a, n in ((col, ds.width), (row, ds.height)))
+        c1, r1 = (int(np.clip(a.max(), 0, n - 1)) + 1 for a, n in ((col, ds.width), (row, ds.height)))
+        codes = read_pixels(ds, classes.band, f"{key}.raster", classes.raster,
+                            Window(c0, r0, c1 - c0, r1 - r0))  # only the pixels under the seabed's cells
+        code = np.where(inside, codes[np.clip(row, r0, r1 - 1) - r0, np.clip(col, c0, c1 - 1) - c0], -1)
     table = {int(c): reflectance_of(m) for c, m in classes.materials.items()}
     seen = set(np.unique(code[inside & (hf.valid if hf.valid is not None else True)]).tolist())
     missing = sorted(seen - set(table) - ({int(ds.nodata)} if ds.nodata is not None else set()))

@@ -342,8 +342,8 @@ def build_scene(config, tile_m: float | None = None) -> Scene:
         parts.insert(0, Part("seabed", "seabed", v, f, LABELS[sb.label], reflectance_of(sb), one_surface=True,
                              face_reflectance=per_face))
 
-    seabed_meshes = {i: placed_mesh(obj, i, None) for i, obj in enumerate(config.objects)
-                     if isinstance(obj, MeshObject) and obj.label == "seabed" and hf is None}
+    seabed_meshes = {} if hf is not None else {i: _seabed_object_mesh(config.objects[i], i)
+                                                for i in config.seabed_objects}
     if seabed_meshes:
         hf, info = seabed_of_meshes(config.objects, seabed_meshes)
     for index, obj in enumerate(config.objects):
@@ -395,6 +395,13 @@ def build_scene(config, tile_m: float | None = None) -> Scene:
         return site_scene(hf, SceneObject(0, "seabed", "seabed", LABELS[sb.label], reflectance_of(sb), 0, 0), parts,
                           tile_m, crs=to_crs(config.crs), seabed_info=info, cell_reflectance=cell_reflectance)
     return Scene(parts, hf, crs=to_crs(config.crs), seabed_info=info)
+
+
+def _seabed_object_mesh(obj, index: int) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices (n, 3) and faces (m, 3) of a surface that is the seabed (:attr:`SceneConfig.seabed_objects`)."""
+    if isinstance(obj, PanelObject):
+        return panel_mesh(obj.center_m, obj.size_m, obj.normal, obj.up)
+    return placed_mesh(obj, index, None)
 
 
 def site_scene(heightfield: HeightField, seabed: SceneObject, parts: list[Part], tile_m: float | None = None,
