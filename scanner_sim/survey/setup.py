@@ -37,7 +37,7 @@ from scanner_sim.rays.hits import Hits
 from scanner_sim.rays.tiles import TiledCast, TiledTarget
 from scanner_sim.survey.budget import check_pass_budget
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
-from scanner_sim.survey.georeference import LinesOfSight, georeference
+from scanner_sim.survey.georeference import LinesOfSight, georeference, ranged_normals
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
@@ -394,10 +394,10 @@ class PassSetup:
         dropouts = DropoutRecords(pulse_index=cast.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
                                   direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
         points = georeference(ranging, cast.hits, sight)
-        mean, var = self.tpu.predict(points, sight)
+        mean, var = self.tpu.predict(points, sight, ranged_normals(ranging, cast.hits))
         points = with_uncertainty(points, mean, var)
         return Chunk(cast.slots, points, dropouts, records, cast.footprint,
-                     errors=checked_errors(points, sight, mean, var))
+                     errors=checked_errors(points, sight, mean, var, self.scene))
 
     def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, every_channel: bool = False,
                        whole_records: bool = False) -> Chunk:
