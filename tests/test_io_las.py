@@ -45,6 +45,7 @@ def make_points(n: int = 500, seed: int = 0, first_pulse: int = 0) -> PointRecor
         pulse_index=pulse,
         thu_m=rng.uniform(0.01, 0.3, n),
         tvu_m=rng.uniform(0.01, 0.3, n),
+        tvu_surface_m=rng.uniform(0.01, 0.4, n),
     )
 
 

@@ -21,6 +21,10 @@ folded normal's; 1.96 sigma_z when b = 0, the one-dimensional 95 % factor, about
 bias dominates). THU = 2.45 sigma_h
 with sigma_h^2 = (sigma_x^2 + sigma_y^2 + |u_xy b|^2) / 2: the 95 % radius of a circular bivariate normal,
 sqrt(-2 ln 0.05) = 2.4477 sigma, of the same mean square horizontal error.
+
+The surface reading, ``tvu_surface_m``, is the same quantile of d = a . e, the point's height above the surface under
+its own (x, y), with a = (-g_x, -g_y, 1) and g the slope of the facet it ranged (:func:`surface_axis`). Its
+variance is sum_k sigma_k^2 (a . J_k)^2, so it carries the horizontal errors times the slope.
 """
 
 from __future__ import annotations
