@@ -4,8 +4,6 @@ finished and written in. :mod:`scanner_sim.render.coverage_map`, :mod:`scanner_s
 
 from __future__ import annotations
 
-from matplotlib.ticker import ScalarFormatter
-
 from scanner_sim.render.figure_png import figure_to_png
 
 #: Colours of the coverage map: not reached, covered, then one per gap cause (scanner_sim.metrics.coverage.GAP_CAUSES).
@@ -39,9 +37,11 @@ def finish_plan_map(fig, ax, path_png, title: str | None, x_label: str = "x east
     figure_to_png(fig, path_png)
 
 
-def map_coordinate_formatter() -> ScalarFormatter:
-    """Tick labels in whole map coordinates as a person reads them off a chart (4494780, not 780 under a
-    ``+4.494e6`` offset): no offset, no scientific notation."""
+def map_coordinate_formatter():
+    """A matplotlib ``ScalarFormatter`` that ticks in whole map coordinates as a person reads them off a chart
+    (4494780, not 780 under a ``+4.494e6`` offset): no offset, no scientific notation."""
+    from matplotlib.ticker import ScalarFormatter
+
     formatter = ScalarFormatter(useOffset=False)
     formatter.set_scientific(False)
     return formatter
