@@ -247,7 +247,7 @@ def tpu_model(config: SceneConfig, model: OpticalModel, physics: Physics, span) 
     geometry = model.instrument.geometry
     return TpuModel(measure_ranging_precision(physics, model.instrument, ranges),
                     NavigationSigmas.of(config.platform.navigation_noise), geometry.beam_diameter_m,
-                    geometry.beam_divergence_full_rad)
+                    geometry.beam_divergence_full_rad, 0.5 * model.water.speed_m_s * model.instrument.pulse.rms_width_s)
 
 
 def checked_trajectory(config: SceneConfig, scene: Scene | None) -> Trajectory:

@@ -10,7 +10,10 @@ their variances times J_k J_k^T (the propagation of variances of Hare 1995 for m
   (:mod:`scanner_sim.survey.ranging_precision`): a mean b (its systematic part) and a standard deviation, along the
   beam: J = u;
 - footprint on the surface: the beam's disc of diameter w = D + 2 rho tan(gamma / 2) met at incidence theta spreads
-  the echo over ranges of standard deviation (w / 4) tan(theta) about the axis's, along the beam: J = u;
+  the echo over ranges of standard deviation sigma_f = (w / 4) tan(theta) centred on the axis's, which moves the
+  ranged echo not at all to first order but widens it from the pulse's rms length sigma_p to
+  sqrt(sigma_p^2 + sigma_f^2); the timing's noise grows with the echo's width, so the ranging's standard deviation s
+  becomes s sqrt(1 + (sigma_f / sigma_p)^2), along the beam: J = u;
 - navigation position (east, north) and depth: J = unit axes;
 - attitude: a small turn e about axis a moves X by e (a x v), v = X - p the lever from the vehicle's reference
   point (mounting and range together): heading turns about the vertical, pitch about the yawed pitch axis
@@ -79,18 +82,21 @@ class NavigationSigmas:
 
 @dataclass(frozen=True)
 class TpuModel:
-    """What the propagation needs of a pass: its measured ranging precision, its navigation's noise, and its beam
-    (exit diameter [m], full divergence in the water [rad])."""
+    """What the propagation needs of a pass: its measured ranging precision, its navigation's noise, its beam
+    (exit diameter [m], full divergence in the water [rad]) and its pulse's rms length in range [m] (the emitted
+    pulse's standard deviation in time, as digitised, times half the speed of light in the water)."""
 
     ranging: RangingPrecision
     navigation: NavigationSigmas
     beam_diameter_m: float
     divergence_full_rad: float
+    pulse_sigma_m: float
 
     def footprint_sigma_m(self, range_m: np.ndarray, incidence_deg: np.ndarray) -> np.ndarray:
         """(n,) range spread [m] of the beam's footprint on a surface met at ``incidence_deg`` (n,) at ``range_m``
-        (n,): (w / 4) tan(theta), the standard deviation of x tan(theta) over a disc of diameter w (a uniform
-        disc's, and a Gaussian beam's to its 1/e^2 radius); 0 where the incidence is unknown (NaN)."""
+        (n,): (w / 4) tan(theta), the standard deviation of x tan(theta) over a uniformly lit disc of diameter w
+        (the pass's ``top_hat`` beam; a Gaussian beam cut at its 1/e^2 radius has 0.21 w, less); 0 where the
+        incidence is unknown (NaN)."""
         width = self.beam_diameter_m + 2.0 * range_m * math.tan(0.5 * self.divergence_full_rad)
         tan = np.tan(np.radians(np.nan_to_num(incidence_deg, nan=0.0)))
         return 0.25 * width * tan
@@ -127,7 +133,7 @@ class TpuModel:
         ``normal`` (n, 3); None or NaN rows: z). Arguments as :meth:`variances` and :meth:`RangingPrecision.of`;
         ``range_m`` (n,) the measured range [m], ``incidence_deg`` (n,)."""
         bias, std = self.ranging.of(channel, snr, saturated, later, range_m)
-        sigma_range = np.hypot(std, self.footprint_sigma_m(range_m, incidence_deg))
+        sigma_range = std * np.hypot(1.0, self.footprint_sigma_m(range_m, incidence_deg) / self.pulse_sigma_m)
         n = len(bias)
         axes = np.concatenate([np.broadcast_to(np.eye(3), (n, 3, 3)),
                                surface_axis(np.full((n, 3), np.nan) if normal is None else normal)[:, None]], axis=1)
