@@ -11,9 +11,9 @@ their variances times J_k J_k^T (the propagation of variances of Hare 1995 for m
   beam: J = u;
 - footprint on the surface: the beam's disc of diameter w = D + 2 rho tan(gamma / 2) met at incidence theta spreads
   the echo over ranges of standard deviation sigma_f = (w / 4) tan(theta) centred on the axis's, which moves the
-  ranged echo not at all to first order but widens it from the pulse's rms length sigma_p to
-  sqrt(sigma_p^2 + sigma_f^2); the timing's noise grows with the echo's width, so the ranging's standard deviation s
-  becomes s sqrt(1 + (sigma_f / sigma_p)^2), along the beam: J = u;
+  ranged echo not at all to first order but widens it from the pulse's rms length sigma_L to
+  sqrt(sigma_L^2 + sigma_f^2); the timing's noise grows with the echo's width, so the ranging's standard deviation s
+  becomes s sqrt(1 + (sigma_f / sigma_L)^2), along the beam: J = u;
 - navigation position (east, north) and depth: J = unit axes;
 - attitude: a small turn e about axis a moves X by e (a x v), v = X - p the lever from the vehicle's reference
   point (mounting and range together): heading turns about the vertical, pitch about the yawed pitch axis
