@@ -242,7 +242,7 @@ def gated(config: SceneConfig, water, target: CastScene, trajectory: Trajectory,
 def tpu_model(config: SceneConfig, model: OpticalModel, physics: Physics, span) -> TpuModel:
     """The pass's uncertainty model (:mod:`scanner_sim.survey.uncertainty`): its ranging precision measured through
     ``physics`` on panels at the ranges of its echoes (``span``: :func:`~scanner_sim.survey.gate.echo_span`; 5 m
-    when no sampled beam meets anything), its navigation noise and its beam."""
+    when no sampled beam meets anything), its navigation noise, its beam and its pulse's rms length in range."""
     ranges = panel_ranges_m(span.delays_s, model.water.speed_m_s) if span.delays_s.size else (5.0,)
     geometry = model.instrument.geometry
     return TpuModel(measure_ranging_precision(physics, model.instrument, ranges),
