@@ -41,6 +41,15 @@ class PulseShape:
         """a = k / dt [1/s]."""
         return PULSE_SHAPE_K / self.width_s
 
+    @property
+    def rms_width_s(self) -> float:
+        """Standard deviation [s] of the pulse's time profile: sqrt(2) / a for Eq. 2 (n = 1, a gamma density of
+        shape 2), and a low-pass of time constant 1 / b adds its variance 1 / b^2 (a convolution's variances add)."""
+        var = 2.0 / self.decay_per_s**2
+        if self.bandwidth_hz is not None:
+            var += 1.0 / (2.0 * math.pi * self.bandwidth_hz) ** 2
+        return math.sqrt(var)
+
     def basis(self) -> tuple[float, float, float, float, float]:
         """(a, b, A, B0, C) with w(t) = (A t + B0) exp(-a t) + C exp(-b t) for t >= 0, in SI units."""
         a = self.decay_per_s

@@ -45,6 +45,7 @@ def make_points(n: int = 500, seed: int = 0, first_pulse: int = 0) -> PointRecor
         pulse_index=pulse,
         thu_m=rng.uniform(0.01, 0.3, n),
         tvu_m=rng.uniform(0.01, 0.3, n),
+        tvu_surface_m=rng.uniform(0.01, 0.4, n),
     )
 
 
@@ -95,7 +96,7 @@ def test_las_layout_is_derived_from_the_point_declarations():
     header = laspy.LasHeader(version="1.4", point_format=6)
     dims = {d for col in columns.values() if isinstance(col.las, LasStandard) for d in col.las.dimensions}
     assert dims <= set(header.point_format.dimension_names)
-    assert 30 + sum(dtype.itemsize for dtype, _ in io.EXTRA_DIMENSIONS.values()) == 64  # thu_m, tvu_m: 8 bytes
+    assert 30 + sum(dtype.itemsize for dtype, _ in io.EXTRA_DIMENSIONS.values()) == 68  # thu_m, tvu_m, tvu_surface_m: 12 bytes
 
 
 # ------------------------------------------------------------------------------------------

@@ -55,6 +55,15 @@ def test_band_limited_pulse_keeps_unit_area_and_is_later_and_lower():
     assert mean_filtered - mean_raw == pytest.approx(1.0 / (2 * math.pi * 200e6), rel=1e-4)
 
 
+@pytest.mark.parametrize("bandwidth_hz", [None, 200e6])
+def test_pulse_rms_width_is_the_standard_deviation_of_its_profile(bandwidth_hz):
+    """rms_width_s against the profile's second central moment integrated numerically."""
+    pulse = PulseShape(10e-9, bandwidth_hz)
+    t = np.linspace(0.0, 400e-9, 400001)
+    mean = np.trapezoid(t * pulse(t), t)
+    assert pulse.rms_width_s == pytest.approx(math.sqrt(np.trapezoid((t - mean) ** 2 * pulse(t), t)), rel=1e-6)
+
+
 @pytest.mark.parametrize("name, expected", [("clean_ocean", 0.119), ("coastal_ocean", 0.202), ("turbid_harbor", 0.521)])
 def test_k_lidar_of_petzold_waters(name, expected):
     assert water_preset(name).k_lidar_per_m == pytest.approx(expected, abs=6e-4)

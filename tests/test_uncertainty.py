@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy.stats import foldnorm
 
+from muls import mul2023
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene, shipped_scenes
 from scanner_sim.metrics.tpu_calibration import UncertaintySink
@@ -38,7 +39,7 @@ DECORRELATED = {"platform.navigation_noise.correlation_time_s": 0.002, "platform
 def _model(**navigation) -> TpuModel:
     table = tabulate(np.zeros(20), np.full(20, 1), np.full(20, 50.0), np.zeros(20, bool), np.zeros(20, bool),
                      np.zeros(20, np.int64), 3, (5.0,))
-    return TpuModel(table, NavigationSigmas(**navigation), 0.01, 0.004)
+    return TpuModel(table, NavigationSigmas(**navigation), 0.01, 0.004, 0.65)
 
 
 def test_tvu_is_the_folded_normal_quantile():
@@ -83,6 +84,36 @@ def test_footprint_spread_is_the_std_of_a_disc_met_on_a_slope():
     got = model.footprint_sigma_m(np.array([range_m]), np.array([incidence]))[0]
     assert got == pytest.approx(drawn, rel=0.01)
     assert model.footprint_sigma_m(np.array([range_m]), np.array([np.nan]))[0] == 0.0
+
+
+def test_footprint_widens_the_ranging_spread_as_it_widens_the_echo():
+    """A footprint met obliquely spreads its echo's delays about the axis's; the ranged echo is the digitised pulse
+    convolved with them, and the timing's noise grows with the echo's rms length. Here the echo is built by hand:
+    mul2023's pulse sampled in time, convolved with the delays 2 x tan(theta) / v across a uniformly lit footprint
+    0.3 m wide (x's density over a disc of radius a: sqrt(1 - (x / a)^2)) met at 85 degrees, far wider than a pass's
+    footprint so that the widening is large; the ratio of its standard deviation to the bare pulse's is the factor on
+    the ranging's standard deviation. At normal incidence the footprint adds nothing."""
+    pulse, speed, dt = mul2023().pulse, 2.2e8, 0.02e-9
+    table = tabulate(np.tile([-0.01, 0.01], 10), np.full(20, 1), np.full(20, 50.0), np.zeros(20, bool),
+                     np.zeros(20, bool), np.zeros(20, np.int64), 3, (5.0,))
+    model = TpuModel(table, NavigationSigmas(), 0.3, 0.0, 0.5 * speed * pulse.rms_width_s)
+
+    def width(profile):  # standard deviation [s] of a profile sampled every dt
+        i = np.arange(profile.size)
+        mean = np.sum(i * profile) / np.sum(profile)
+        return dt * math.sqrt(np.sum((i - mean) ** 2 * profile) / np.sum(profile))
+
+    bare = pulse(np.arange(0.0, 300e-9, dt))
+    for incidence, widening in ((0.0, 1.0), (85.0, 1.5)):
+        x = np.linspace(-0.15, 0.15, 20_001)
+        delay_bin = np.rint(2.0 * x * math.tan(math.radians(incidence)) / speed / dt).astype(np.int64)
+        spread = np.bincount(delay_bin - delay_bin.min(), weights=np.sqrt(np.clip(1.0 - (x / 0.15) ** 2, 0.0, None)))
+        expected = width(np.convolve(bare, spread)) / width(bare)
+        _, var = model.error_model(np.array([[0.0, 0.0, -5.0]]), np.array([[0.0, 0.0, -1.0]]), np.zeros((1, 3)),
+                                   np.ones(1, np.int64), np.array([50.0]), np.zeros(1, bool), np.zeros(1, bool),
+                                   np.array([5.0]), np.array([incidence]))
+        assert math.sqrt(var[0, 2]) / 0.01 == pytest.approx(expected, rel=1e-3), incidence
+        assert expected >= widening
 
 
 def test_ranging_table_holds_mean_and_spread_per_bin_and_fills_empty_bins_from_the_nearest():

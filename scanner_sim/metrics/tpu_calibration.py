@@ -6,6 +6,11 @@ navigation place it, so it holds the ranging error and the navigation's pose err
 them. Points judged: every return the scene's surfaces explain (not noise) whose true beam's first surface is the
 surface ranged (its range along the true beam within :data:`SAME_SURFACE_M` of the truth along the point's own line
 of sight; another surface there is a return behind an edge, whose true point the first hit is not).
+
+The surface reading is checked as a hydrographer checks a sounding: its height against the reference surface under
+its own (x, y), here the seabed's height field (the truth mesh's own triangles) under X, against ``tvu_surface_m``.
+Points judged so: the judged points on the seabed whose (x, y) lies over it (a rock or an object has no single
+height under a point).
 """
 
 from __future__ import annotations
@@ -32,7 +37,9 @@ class CheckedErrors(NamedTuple):
     """The judged points of a chunk (k of them) against their uncertainty: vertical error (k,) [m] signed, horizontal
     error (k,) [m], their TVU and THU (k,) [m], channel (k,), incidence (k,) [deg], and the coverage levels at which
     the errors lie on their predicted distributions (k,) (:func:`~scanner_sim.survey.uncertainty.coverage_levels`);
-    ``skipped`` the points not judged, by reason."""
+    ``skipped`` the points not judged, by reason; the surface reading (module doc) of the s judged points over the
+    seabed: their height above the seabed under their (x, y) (s,) [m], their ``tvu_surface_m`` (s,) and incidence
+    (s,) [deg]."""
 
     vertical_m: np.ndarray
     horizontal_m: np.ndarray
@@ -43,13 +50,17 @@ class CheckedErrors(NamedTuple):
     level_vertical: np.ndarray
     level_horizontal: np.ndarray
     skipped: dict
+    surface_vertical_m: np.ndarray = np.zeros(0)
+    tvu_surface_m: np.ndarray = np.zeros(0)
+    surface_incidence_deg: np.ndarray = np.zeros(0)
 
 
-def checked_errors(points: PointRecords, sight, mean: np.ndarray, var: np.ndarray) -> CheckedErrors:
+def checked_errors(points: PointRecords, sight, mean: np.ndarray, var: np.ndarray, scene=None) -> CheckedErrors:
     """The true errors (module doc) of a chunk's ``points`` against their THU and TVU, from the chunk's lines of
     sight ``sight`` (:class:`~scanner_sim.survey.georeference.LinesOfSight`: the true beam axes and their first hits)
-    and the points' predicted error, ``mean`` (n, 3) and variances ``var`` (n, 3)
-    (:meth:`~scanner_sim.survey.uncertainty.TpuModel.predict`)."""
+    and the points' predicted error, ``mean`` (n, m) and variances ``var`` (n, m)
+    (:meth:`~scanner_sim.survey.uncertainty.TpuModel.predict`); ``scene`` (:class:`~scanner_sim.world.scene.Scene`)
+    gives the seabed of the surface reading (None, or a scene without a height field: none)."""
     row = np.searchsorted(sight.slot, points.pulse_index)
     true_range = sight.axis_range_m[row]
     noise = points.classification == NOISE_CLASS
@@ -62,8 +73,22 @@ def checked_errors(points: PointRecords, sight, mean: np.ndarray, var: np.ndarra
     level_z, level_h = coverage_levels(mean[judged], var[judged], error[:, 2], horizontal)
     skipped = {"noise": int(noise.sum()), "true_beam_meets_nothing": int((~noise & ~met).sum()),
                "other_surface": int((~noise & met & ~same).sum())}
+    on = judged[_over_seabed(points, judged, scene)]
+    surface = (points.xyz[on, 2] - scene.surface_height(points.xyz[on, 0], points.xyz[on, 1]) if on.size
+               else np.zeros(0))
     return CheckedErrors(error[:, 2], horizontal, points.tvu_m[judged], points.thu_m[judged], points.channel[judged],
-                         points.incidence_deg[judged], level_z, level_h, skipped)
+                         points.incidence_deg[judged], level_z, level_h, skipped, surface, points.tvu_surface_m[on],
+                         points.incidence_deg[on])
+
+
+def _over_seabed(points: PointRecords, judged: np.ndarray, scene) -> np.ndarray:
+    """(k,) bool: which ``judged`` points (indices into ``points``) ranged the seabed's height field and lie over it."""
+    if scene is None or scene.heightfield is None:
+        return np.zeros(judged.size, bool)
+    seabed = [o.object_id for o in scene.objects if o.kind == "seabed"]
+    xyz = points.xyz[judged]
+    return (np.isin(points.object_id[judged], seabed) & scene.heightfield.covers(xyz[:, 0], xyz[:, 1])
+            & np.isfinite(points.tvu_surface_m[judged]))
 
 
 #: [m] Bin of the streaming histograms of THU, TVU and the true errors (their medians and 95th percentiles), and the
@@ -84,7 +109,8 @@ class UncertaintySink:
         bins = int(HISTOGRAM_MAX_M / HISTOGRAM_BIN_M) + 1
         self.histograms = {name: np.zeros(bins, np.int64) for name in
                            ("thu_m", "tvu_m", "true_vertical_error_m", "true_horizontal_error_m")}
-        self.groups: dict[str, np.ndarray] = {}  # name -> [points, vertical within, horizontal within]
+        self.groups: dict[str, np.ndarray] = {}  # name -> [points, vertical within, horizontal within,
+        #                                                      points over the seabed, within the surface TVU]
         self.chart = np.zeros((2, CHART_LEVELS.size), np.int64)
         self.judged = 0
         self.skipped = {"noise": 0, "true_beam_meets_nothing": 0, "other_surface": 0}
@@ -100,13 +126,16 @@ class UncertaintySink:
         self._count("true_horizontal_error_m", errors.horizontal_m)
         inside_z = np.abs(errors.vertical_m) <= errors.tvu_m
         inside_h = errors.horizontal_m <= errors.thu_m
-        groups = {"all": np.ones(errors.vertical_m.size, bool)}
-        groups.update({f"ch{c}": errors.channel == c for c in np.unique(errors.channel)})
+        inside_s = np.abs(errors.surface_vertical_m) <= errors.tvu_surface_m
+        groups = {"all": (np.ones(errors.vertical_m.size, bool), np.ones(inside_s.size, bool))}
         for a, b in zip(INCIDENCE_BANDS_DEG[:-1], INCIDENCE_BANDS_DEG[1:]):
-            groups[f"incidence {a:g}-{b:g}"] = (errors.incidence_deg >= a) & (errors.incidence_deg < b)
-        for name, mask in groups.items():
-            tally = np.array([mask.sum(), (inside_z & mask).sum(), (inside_h & mask).sum()], np.int64)
-            self.groups[name] = self.groups.get(name, np.zeros(3, np.int64)) + tally
+            groups[f"incidence {a:g}-{b:g}"] = tuple((inc >= a) & (inc < b) for inc in
+                                                     (errors.incidence_deg, errors.surface_incidence_deg))
+        groups.update({f"ch{c}": (errors.channel == c, None) for c in np.unique(errors.channel)})
+        for name, (mask, on) in groups.items():
+            tally = np.array([mask.sum(), (inside_z & mask).sum(), (inside_h & mask).sum(),
+                              0 if on is None else on.sum(), 0 if on is None else (inside_s & on).sum()], np.int64)
+            self.groups[name] = self.groups.get(name, np.zeros(5, np.int64)) + tally
         self.chart[0] += np.searchsorted(np.sort(errors.level_vertical), CHART_LEVELS, side="right")
         self.chart[1] += np.searchsorted(np.sort(errors.level_horizontal), CHART_LEVELS, side="right")
 
@@ -127,18 +156,21 @@ class UncertaintySink:
     def figures(self) -> dict:
         """The summary's ``uncertainty`` (``docs/outputs.md``)."""
 
-        def shares(tally):
-            n, z, h = (int(v) for v in tally)
-            return {"points": n, "vertical_within_tvu": round(z / n, 4) if n else None,
-                    "horizontal_within_thu": round(h / n, 4) if n else None}
+        def shares(tally, surface=True):
+            n, z, h, m, s = (int(v) for v in tally)
+            out = {"points": n, "vertical_within_tvu": round(z / n, 4) if n else None,
+                   "horizontal_within_thu": round(h / n, 4) if n else None}
+            if surface:
+                out.update({"surface_points": m, "vertical_within_tvu_surface": round(s / m, 4) if m else None})
+            return out
 
-        every = self.groups.get("all", np.zeros(3, np.int64))
+        every = self.groups.get("all", np.zeros(5, np.int64))
         return {
             "thu_m": self._quantiles("thu_m"), "tvu_m": self._quantiles("tvu_m"),
             "confidence": CONFIDENCE,
             "calibration": {
                 **shares(every),
-                "per_channel": {k: shares(v) for k, v in sorted(self.groups.items()) if k.startswith("ch")},
+                "per_channel": {k: shares(v, surface=False) for k, v in sorted(self.groups.items()) if k.startswith("ch")},
                 "per_incidence_deg": {k.split()[1]: shares(v) for k, v in self.groups.items()
                                       if k.startswith("incidence")},
                 "chart": {"levels": CHART_LEVELS.tolist(),

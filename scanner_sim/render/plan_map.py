@@ -24,11 +24,24 @@ NO_SEABED_COLOUR = "#1d3557"
 
 
 def finish_plan_map(fig, ax, path_png, title: str | None, x_label: str = "x east [m]") -> None:
-    """A plan map's axes (x east, y north, equal scale), its title, written to ``path_png``."""
+    """A plan map's axes (x east, y north, equal scale, the ticks in plain map coordinates), its title, written to
+    ``path_png``."""
     ax.set_xlabel(x_label)
     ax.set_ylabel("y north [m]")
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(map_coordinate_formatter())
     ax.set_aspect("equal")
     if title:
         ax.set_title(title, fontsize=10)
     fig.tight_layout()
     figure_to_png(fig, path_png)
+
+
+def map_coordinate_formatter():
+    """A matplotlib ``ScalarFormatter`` that ticks in whole map coordinates as a person reads them off a chart
+    (4494780, not 780 under a ``+4.494e6`` offset): no offset, no scientific notation."""
+    from matplotlib.ticker import ScalarFormatter
+
+    formatter = ScalarFormatter(useOffset=False)
+    formatter.set_scientific(False)
+    return formatter

@@ -9,7 +9,13 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from scanner_sim.io import atomic_path
-from scanner_sim.render.point_colours import SCALAR_COLOUR_MAPS, categorical_rgb
+from scanner_sim.render.point_colours import (
+    HEIGHT_COLOUR_MAP,
+    SCALAR_COLOUR_MAPS,
+    categorical_rgb,
+    shaded_height_rgb,
+)
+from scanner_sim.world.materials import LABELS
 
 #: Largest side of a point-cloud picture or window [px]: the largest framebuffer side GPU OpenGL drivers commonly
 #: render (GL_MAX_RENDERBUFFER_SIZE and the viewport are 16384 on most; Mesa's llvmpipe renders more).
@@ -35,6 +41,11 @@ def check_window_size(key: str, window_size: Sequence[int], available_bytes: int
                  lambda budget: f"at most {int(budget // per):,} pixels (width x height) on this machine",
                  available_bytes)
 
+
+#: Class code of the seabed, whose points ``color_by="height"`` colours by their height.
+SEABED_CODE = LABELS["seabed"]
+#: Title of the colour bar of heights: z in the world frame, up, so a seabed below the surface reads negative.
+HEIGHT_BAR_TITLE = "height z [m]"
 
 _BACKGROUND = "#0b1a2a"  # deep-water navy: white panels and the grey truth mesh stay visible
 
@@ -97,6 +108,7 @@ def render_point_cloud(
     xyz,
     classification=None,
     *,
+    normals=None,
     truth_vertices=None,
     truth_faces=None,
     title: str | None = None,
@@ -116,13 +128,18 @@ def render_point_cloud(
     xyz : (n, 3) float [m]
         Points in the world frame.
     classification : (n,) int or None
-        Class codes; required for ``color_by="class"``.
+        Class codes; required for ``color_by="class"``. With ``color_by="height"``, the points of a class other
+        than the seabed keep their class colours (named in a legend).
+    normals : (n, 3) float or None
+        Unit normals of the surface under each point, which hill-shade it; required for ``color_by="height"``.
     truth_vertices : (n_vertices, 3) float [m], truth_faces : (n_faces, 3) int, optional
         Truth meshes, drawn light grey at opacity 0.25.
     title : str, optional
         Text at the top left.
     color_by : str
-        ``"class"`` (colours of :data:`CLASS_COLOURS`, legend of the classes present), or a scalar
+        ``"class"`` (colours of :data:`CLASS_COLOURS`, legend of the classes present), ``"height"`` (z through
+        :data:`~scanner_sim.render.point_colours.HEIGHT_COLOUR_MAP` between its 1st and 99th percentiles,
+        hill-shaded by ``normals``, with a colour bar of z and a scale bar along the south edge), or a scalar
         colouring with a scalar bar: ``"intensity"``, ``"channel"``, ``"range_error"`` (diverging,
         symmetric about 0), ``"snr"``, ``"amplitude"``, ``"incidence"``, or any other name (viridis);
         then ``scalars`` (n,) gives the values.
@@ -138,7 +155,7 @@ def render_point_cloud(
     points' centre before they reach VTK, so large world coordinates render without float32 jitter.
     """
     plotter = _point_cloud_plotter(
-        xyz, classification, off_screen=True, truth_vertices=truth_vertices, truth_faces=truth_faces,
+        xyz, classification, normals=normals, off_screen=True, truth_vertices=truth_vertices, truth_faces=truth_faces,
         title=title, color_by=color_by, scalars=scalars, class_names=class_names, window_size=window_size,
         point_size=point_size, max_points=max_points,
     )
@@ -153,6 +170,7 @@ def show_point_cloud(
     xyz,
     classification=None,
     *,
+    normals=None,
     truth_vertices=None,
     truth_faces=None,
     title: str | None = None,
@@ -168,7 +186,7 @@ def show_point_cloud(
     Same parameters as :func:`render_point_cloud`, without ``path_png``. Needs a display.
     """
     plotter = _point_cloud_plotter(
-        xyz, classification, off_screen=False, truth_vertices=truth_vertices, truth_faces=truth_faces,
+        xyz, classification, normals=normals, off_screen=False, truth_vertices=truth_vertices, truth_faces=truth_faces,
         title=title, color_by=color_by, scalars=scalars, class_names=class_names, window_size=window_size,
         point_size=point_size, max_points=max_points,
     )
@@ -182,6 +200,7 @@ def _point_cloud_plotter(
     xyz,
     classification,
     *,
+    normals=None,
     off_screen: bool,
     truth_vertices,
     truth_faces,
@@ -200,10 +219,19 @@ def _point_cloud_plotter(
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"xyz: shape {pts.shape} is not allowed; expected (n, 3)")
     n = pts.shape[0]
+    shading = None
     if color_by == "class":
         if classification is None:
             raise ValueError("classification: required when color_by='class'")
         values = np.asarray(classification)
+        name = "classification"
+    elif color_by == "height":
+        if normals is None:
+            raise ValueError("normals: required when color_by='height' (the surface's unit normal under each point)")
+        shading = np.asarray(normals, dtype=np.float64)
+        if shading.shape != (n, 3):
+            raise ValueError(f"normals: shape {shading.shape} is not allowed; expected ({n}, 3)")
+        values = (np.full(n, SEABED_CODE) if classification is None else np.asarray(classification)).astype(np.int64)
         name = "classification"
     else:
         if scalars is None:
@@ -229,8 +257,10 @@ def _point_cloud_plotter(
     if n > max_points:
         stride = int(np.ceil(n / max_points))
         pts, values = pts[::stride], values[::stride]
+        shading = None if shading is None else shading[::stride]
     finite = np.all(np.isfinite(pts), axis=1)
     pts, values = pts[finite], values[finite]
+    shading = None if shading is None else shading[finite]
     if len(pts):
         lo, hi = pts.min(axis=0), pts.max(axis=0)
     elif truth_vertices is not None and len(truth_vertices):
@@ -257,8 +287,15 @@ def _point_cloud_plotter(
                                  smooth_shading=False, show_edges=False)
         if len(pts):
             cloud = pv.PolyData(pts - centre)
-            if color_by in ("class", "channel"):  # categories: one colour each, named in a legend
-                rgb, lut = categorical_rgb(values, color_by, class_names)
+            if color_by in ("class", "channel", "height"):  # categories: one colour each, named in a legend
+                rgb, lut = categorical_rgb(values, "channel" if color_by == "channel" else "class", class_names)
+                if color_by == "height":
+                    seabed = values == SEABED_CODE
+                    lut.pop(SEABED_CODE, None)
+                    clim = _height_limits(pts[seabed, 2])
+                    rgb[seabed] = np.round(255.0 * shaded_height_rgb(pts[seabed, 2], shading[seabed], clim))
+                    _add_height_bar(plotter, pts[:1] - centre, clim)
+                    _add_scale_bar(plotter, lo - centre, hi - centre)
                 cloud["rgb"] = rgb
                 plotter.add_mesh(cloud, scalars="rgb", rgb=True, point_size=point_size,
                                  render_points_as_spheres=False)
@@ -300,3 +337,40 @@ def _point_cloud_plotter(
         plotter.close()
         raise
     return plotter
+
+
+def _height_limits(z: np.ndarray) -> tuple[float, float]:
+    """(lo, hi) [m] of the colour bar of heights ``z`` (n,): their 1st and 99th percentiles, 1 m apart at least
+    apart when flatter (a flat seabed reads one colour, not noise stretched over the whole map)."""
+    if not z.size:
+        return 0.0, 1.0
+    lo, hi = (float(v) for v in np.percentile(z, [1, 99]))
+    mid, half = 0.5 * (lo + hi), max(0.5 * (hi - lo), 0.5)
+    return mid - half, mid + half
+
+
+def _add_height_bar(plotter, anchor: np.ndarray, clim: tuple[float, float]) -> None:
+    """The colour bar of heights: VTK draws a bar from a mapped actor's lookup table, so an invisible point at
+    ``anchor`` (1, 3) carries :data:`HEIGHT_COLOUR_MAP` over ``clim``."""
+    import pyvista as pv
+
+    plotter.add_mesh(pv.PolyData(np.repeat(anchor, 2, axis=0)), scalars=np.array(clim), cmap=HEIGHT_COLOUR_MAP,
+                     clim=clim, opacity=0.0, point_size=1.0,
+                     scalar_bar_args={"title": HEIGHT_BAR_TITLE, "vertical": True, "color": "white", "fmt": "%.1f"})
+
+
+def _add_scale_bar(plotter, lo: np.ndarray, hi: np.ndarray) -> None:
+    """A scale bar: a ruler from the south-west corner of the box ``lo``..``hi`` (3,) [m] eastwards, of the round
+    length (:func:`scale_bar_m`) that fits its width, labelled in metres."""
+    length, divisions = scale_bar_m(float(hi[0] - lo[0]))
+    plotter.add_ruler((lo[0], lo[1], lo[2]), (lo[0] + length, lo[1], lo[2]), title="m", number_labels=divisions + 1,
+                      label_format="%g", label_color="white", tick_color="white", font_size_factor=0.5)
+
+
+def scale_bar_m(width_m: float) -> tuple[float, int]:
+    """(length [m], divisions) of a scale bar across ``width_m`` [m]: the longest 1, 2 or 5 times a power of ten
+    that fits, divided into 5, 4 or 5 steps (0.2, 0.5 or 1 of its power of ten: round labels)."""
+    width = max(width_m, 1e-3)
+    power = 10.0 ** math.floor(math.log10(width))
+    lead = max(m for m in (1, 2, 5) if m * power <= width * (1 + 1e-9))
+    return lead * power, {1: 5, 2: 4, 5: 5}[lead]

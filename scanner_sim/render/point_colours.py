@@ -23,6 +23,9 @@ noise (LAS 7)      magenta                    255   0 255
 =================  =========================  ==========
 
 Other names take a colour from a fixed qualitative cycle indexed by their code.
+
+A seabed is coloured by height (:func:`shaded_height_rgb`): its z through :data:`HEIGHT_COLOUR_MAP`, hill-shaded by
+the surface's normals, so that its relief reads at a glance.
 """
 
 from __future__ import annotations
@@ -70,6 +73,13 @@ SCALAR_COLOUR_MAPS: dict[str, tuple[str, str, bool]] = {
     "incidence": ("plasma", "incidence [deg]", False),
 }
 
+#: Colour map of a seabed's heights: perceptually uniform, dark (deep) to light (shallow), readable in grey and by
+#: colour-blind readers.
+HEIGHT_COLOUR_MAP = "viridis"
+#: Hill-shading light: from the north-west (azimuth 315 deg clockwise from north), 45 deg above the horizon, the
+#: cartographers' convention (light from the top left of a north-up map makes relief read raised, not sunken).
+HILLSHADE_AZIMUTH_DEG = 315.0
+HILLSHADE_ALTITUDE_DEG = 45.0
 #: Detection channels 1, 2, 3... (RGB), the colours of the waveform plots: blue, orange, red, then green, purple.
 CHANNEL_COLOURS: tuple[tuple[int, int, int], ...] = ((31, 119, 180), (255, 127, 14), (214, 39, 40), (44, 160, 44),
                                                      (148, 103, 189))
@@ -124,3 +134,20 @@ def point_rgb(values, color_by: str, class_names: Mapping[int, str] | None = Non
         lo, hi = np.percentile(good, [1, 99]) if good.size else (0.0, 1.0)
     level = np.clip((v - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
     return np.where(np.isfinite(v)[:, None], colormaps[cmap](level)[:, :3], [1.0, 0.0, 1.0])
+
+
+def shaded_height_rgb(z, normals, clim: tuple[float, float]) -> np.ndarray:
+    """(n, 3) float RGB in [0, 1]: heights ``z`` (n,) [m] through :data:`HEIGHT_COLOUR_MAP` between ``clim`` (lo, hi)
+    [m], hill-shaded by the surface's unit ``normals`` (n, 3) under the light of :data:`HILLSHADE_AZIMUTH_DEG` and
+    :data:`HILLSHADE_ALTITUDE_DEG` (matplotlib's :class:`~matplotlib.colors.LightSource`, soft-light blend)."""
+    from matplotlib import colormaps
+    from matplotlib.colors import LightSource
+
+    lo, hi = clim
+    level = np.clip((np.asarray(z, float) - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+    rgb = colormaps[HEIGHT_COLOUR_MAP](level)[:, :3]
+    if not len(rgb):
+        return rgb
+    light = LightSource(azdeg=HILLSHADE_AZIMUTH_DEG, altdeg=HILLSHADE_ALTITUDE_DEG)
+    intensity = light.shade_normals(np.asarray(normals, float), fraction=1.0)
+    return light.blend_soft_light(rgb[:, None, :], intensity[:, None, None])[:, 0, :]

@@ -118,3 +118,13 @@ def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight) -> PointReco
         snr=r.snr, saturated=r.saturated, true_range_m=true_range, range_error_m=r.range_m - true_range,
         incidence_deg=np.degrees(of_hit(hits.incidence_rad, np.nan)), object_id=of_hit(hits.object_id, NO_OBJECT),
         leg=sight.leg[pulse], pulse_index=sight.slot[pulse])
+
+
+def ranged_normals(ranging: Ranging, hits: Hits) -> np.ndarray:
+    """(n, 3) unit normal of the facet whose echo each of the n returns of ``ranging`` ranged (``Peaks.echo_index``
+    into ``hits``, as :func:`georeference` reads it); NaN rows for returns no echo explains (noise)."""
+    echo = ranging.returns.echo_index
+    have = (echo >= 0) & (len(hits) > 0)
+    out = np.full((echo.size, 3), np.nan)
+    out[have] = hits.normal[echo[have]]
+    return out

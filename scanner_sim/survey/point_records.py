@@ -294,6 +294,10 @@ class PointRecords(_Records):
     thu_m: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "THU 95% [m]"), unknown=np.nan)] = None
     #: [m] total vertical uncertainty at 95 % (1.96 sigma); NaN where not known.
     tvu_m: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "TVU 95% [m]"), unknown=np.nan)] = None
+    #: [m] total vertical uncertainty at 95 % against the surface under the point's own (x, y): the horizontal
+    #: errors times the slope of the facet it ranged included; NaN where not known (a near-vertical facet).
+    tvu_surface_m: Annotated[np.ndarray, Column(np.float32, las=_extra(np.float32, "TVU vs surface 95% [m]"),
+                                                unknown=np.nan)] = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -4,7 +4,10 @@ At set-up the pass ranges flat Lambertian panels at normal incidence (:meth:`mul
 the beam filling them) through its own physics (the same instrument, gate, water, echo spread, record mode and
 processing as its pulses): :data:`SHOTS` shots at each of the ranges its survey gives (:data:`PANELS` spread over
 its sampled echo delays, :func:`scanner_sim.survey.gate.echo_span`) and each of :data:`REFLECTANCES`, so that the echoes span
-the signal-to-noise ratios and the clipping the pass meets. Each return the panel's echo explains is binned by the
+the signal-to-noise ratios and the clipping the pass meets. A panel's echo is timed as the pass times its own, by
+half its path out from the laser and back to the receiver beside it (:func:`scanner_sim.rays.echoes.echo_range_m`),
+and its error taken about the panel's true range: the receiver's offset lengthens a near echo's range by about
+d^2 / (4 R), 2 mm at 2 m, where the ranging's spread is 5 mm. Each return the panel's echo explains is binned by the
 channel the instrument chose, whether that channel clipped, whether it was the pulse's first return or a later one (a
 later return inside one broad, multiply scattered echo lies far behind), the nearest panel range (the echo spread's
 late shift grows with range) and its SNR. A bin holds the mean of its range errors about the truth (the ranging's
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from muls.waveform import PulseBatch
+from scanner_sim.rays.echoes import echo_range_m
 
 #: Panel reflectances ranged at each range: dark mud to a white panel, two decades of signal.
 REFLECTANCES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
@@ -128,7 +132,8 @@ def measure_ranging_precision(physics, instrument, ranges_m: tuple[float, ...]) 
     grid_r, grid_rho = np.meshgrid(ranges, np.asarray(REFLECTANCES), indexing="ij")
     truth = np.repeat(grid_r.ravel(), SHOTS)
     rho = np.repeat(grid_rho.ravel(), SHOTS)
-    batch = PulseBatch.flat_target(instrument, truth, rho, pulse_id=FIRST_SHOT_ID + np.arange(truth.size))
+    timed = echo_range_m(truth, np.hypot(truth, instrument.receiver.offset_m))  # out to the panel, back to the receiver
+    batch = PulseBatch.flat_target(instrument, timed, rho, pulse_id=FIRST_SHOT_ID + np.arange(truth.size))
     _, ranging = physics(batch)
     r = ranging.returns
     echo = r.echo_index >= 0

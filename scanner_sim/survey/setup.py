@@ -37,7 +37,7 @@ from scanner_sim.rays.hits import Hits
 from scanner_sim.rays.tiles import TiledCast, TiledTarget
 from scanner_sim.survey.budget import check_pass_budget
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
-from scanner_sim.survey.georeference import LinesOfSight, georeference
+from scanner_sim.survey.georeference import LinesOfSight, georeference, ranged_normals
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.point_records import DropoutRecords, PointRecords
@@ -243,12 +243,12 @@ def gated(config: SceneConfig, water, target: CastScene, trajectory: Trajectory,
 def tpu_model(config: SceneConfig, model: OpticalModel, physics: Physics, span) -> TpuModel:
     """The pass's uncertainty model (:mod:`scanner_sim.survey.uncertainty`): its ranging precision measured through
     ``physics`` on panels at the ranges of its echoes (``span``: :func:`~scanner_sim.survey.gate.echo_span`; 5 m
-    when no sampled beam meets anything), its navigation noise and its beam."""
+    when no sampled beam meets anything), its navigation noise, its beam and its pulse's rms length in range."""
     ranges = panel_ranges_m(span.delays_s, model.water.speed_m_s) if span.delays_s.size else (5.0,)
     geometry = model.instrument.geometry
     return TpuModel(measure_ranging_precision(physics, model.instrument, ranges),
                     NavigationSigmas.of(config.platform.navigation_noise), geometry.beam_diameter_m,
-                    geometry.beam_divergence_full_rad)
+                    geometry.beam_divergence_full_rad, 0.5 * model.water.speed_m_s * model.instrument.pulse.rms_width_s)
 
 
 def checked_trajectory(config: SceneConfig, scene: Scene | None) -> Trajectory:
@@ -397,10 +397,10 @@ class PassSetup:
         dropouts = DropoutRecords(pulse_index=cast.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
                                   direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
         points = georeference(ranging, cast.hits, sight)
-        mean, var = self.tpu.predict(points, sight)
+        mean, var = self.tpu.predict(points, sight, ranged_normals(ranging, cast.hits))
         points = with_uncertainty(points, mean, var)
         return Chunk(cast.slots, points, dropouts, records, cast.footprint,
-                     errors=checked_errors(points, sight, mean, var))
+                     errors=checked_errors(points, sight, mean, var, self.scene))
 
     def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, every_channel: bool = False,
                        whole_records: bool = False) -> Chunk:

@@ -467,10 +467,25 @@ def write_trajectory(out: Path, table: dict[str, np.ndarray], split_legs: bool) 
 
 
 def render_points(path: Path, sample: CloudSample, scene, facts: PassFacts, window_size=(1600, 1000)) -> None:
-    """render.png: the sampled points coloured by class over the faded truth mesh of ``scene``."""
-    render_point_cloud(path, sample.xyz, sample.classification, truth_vertices=scene.vertices,
-                       truth_faces=scene.faces, title=f"{facts.label}: {len(sample.xyz):,} points ({facts.fidelity})",
-                       window_size=window_size)
+    """render.png: the sampled points over the faded truth mesh of ``scene``; over a seabed, its points coloured by
+    height and hill-shaded by the seabed's normals under them, with a colour bar and a scale bar, the other classes'
+    points in their class colours; without one, every point by class."""
+    xyz = sample.xyz
+    shading = ({"color_by": "height", "normals": seabed_normals(scene.heightfield, xyz[:, 0], xyz[:, 1])}
+               if scene.heightfield is not None else {})
+    render_point_cloud(path, xyz, sample.classification, truth_vertices=scene.vertices, truth_faces=scene.faces,
+                       title=f"{facts.label}: {len(xyz):,} points ({facts.fidelity})", window_size=window_size,
+                       **shading)
+
+
+def seabed_normals(heightfield, x_m, y_m) -> np.ndarray:
+    """(n, 3) unit upward normals of ``heightfield`` at (x, y) (n,) [m]: its slope by central differences one node
+    spacing either side (the relief the grid resolves, not one triangle's facet)."""
+    h = heightfield.spacing_m
+    gx = (heightfield.height(x_m + h, y_m) - heightfield.height(x_m - h, y_m)) / (2.0 * h)
+    gy = (heightfield.height(x_m, y_m + h) - heightfield.height(x_m, y_m - h)) / (2.0 * h)
+    normal = np.c_[-gx, -gy, np.ones_like(gx)]
+    return normal / np.linalg.norm(normal, axis=1, keepdims=True)
 
 
 def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts: PassFacts, figures: dict) -> None:

@@ -10,7 +10,10 @@ their variances times J_k J_k^T (the propagation of variances of Hare 1995 for m
   (:mod:`scanner_sim.survey.ranging_precision`): a mean b (its systematic part) and a standard deviation, along the
   beam: J = u;
 - footprint on the surface: the beam's disc of diameter w = D + 2 rho tan(gamma / 2) met at incidence theta spreads
-  the echo over ranges of standard deviation (w / 4) tan(theta) about the axis's, along the beam: J = u;
+  the echo over ranges of standard deviation sigma_f = (w / 4) tan(theta) centred on the axis's, which moves the
+  ranged echo not at all to first order but widens it from the pulse's rms length sigma_L to
+  sqrt(sigma_L^2 + sigma_f^2); the timing's noise grows with the echo's width, so the ranging's standard deviation s
+  becomes s sqrt(1 + (sigma_f / sigma_L)^2), along the beam: J = u;
 - navigation position (east, north) and depth: J = unit axes;
 - attitude: a small turn e about axis a moves X by e (a x v), v = X - p the lever from the vehicle's reference
   point (mounting and range together): heading turns about the vertical, pitch about the yawed pitch axis
@@ -21,6 +24,10 @@ folded normal's; 1.96 sigma_z when b = 0, the one-dimensional 95 % factor, about
 bias dominates). THU = 2.45 sigma_h
 with sigma_h^2 = (sigma_x^2 + sigma_y^2 + |u_xy b|^2) / 2: the 95 % radius of a circular bivariate normal,
 sqrt(-2 ln 0.05) = 2.4477 sigma, of the same mean square horizontal error.
+
+The surface reading, ``tvu_surface_m``, is the same quantile of d = a . e, the point's height above the surface under
+its own (x, y), with a = (-g_x, -g_y, 1) and g the slope of the facet it ranged (:func:`surface_axis`). Its
+variance is sum_k sigma_k^2 (a . J_k)^2, so it carries the horizontal errors times the slope.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr, ndtri
 
+from scanner_sim.survey.georeference import GRAZING_COS
 from scanner_sim.survey.ranging_precision import RangingPrecision
 
 #: The confidence of THU and TVU.
@@ -44,6 +52,9 @@ NEWTON_STEPS = 4
 REPORTED_DECIMALS = 3
 #: 95 % factor of a circular bivariate normal error (horizontal): sqrt(-2 ln 0.05) = 2.4477.
 K95_HORIZONTAL = 2.45
+#: Column of the predicted error's mean and variances (:meth:`TpuModel.error_model`) along the surface reading's
+#: axis (:func:`surface_axis`), after x, y and z.
+SURFACE = 3
 
 
 @dataclass(frozen=True)
@@ -71,67 +82,100 @@ class NavigationSigmas:
 
 @dataclass(frozen=True)
 class TpuModel:
-    """What the propagation needs of a pass: its measured ranging precision, its navigation's noise, and its beam
-    (exit diameter [m], full divergence in the water [rad])."""
+    """What the propagation needs of a pass: its measured ranging precision, its navigation's noise, its beam
+    (exit diameter [m], full divergence in the water [rad]) and its pulse's rms length in range [m] (the emitted
+    pulse's standard deviation in time, as digitised, times half the speed of light in the water)."""
 
     ranging: RangingPrecision
     navigation: NavigationSigmas
     beam_diameter_m: float
     divergence_full_rad: float
+    pulse_sigma_m: float
 
     def footprint_sigma_m(self, range_m: np.ndarray, incidence_deg: np.ndarray) -> np.ndarray:
         """(n,) range spread [m] of the beam's footprint on a surface met at ``incidence_deg`` (n,) at ``range_m``
-        (n,): (w / 4) tan(theta), the standard deviation of x tan(theta) over a disc of diameter w (a uniform
-        disc's, and a Gaussian beam's to its 1/e^2 radius); 0 where the incidence is unknown (NaN)."""
+        (n,): (w / 4) tan(theta), the standard deviation of x tan(theta) over a uniformly lit disc of diameter w
+        (the pass's ``top_hat`` beam; a Gaussian beam cut at its 1/e^2 radius has 0.21 w, less); 0 where the
+        incidence is unknown (NaN)."""
         width = self.beam_diameter_m + 2.0 * range_m * math.tan(0.5 * self.divergence_full_rad)
         tan = np.tan(np.radians(np.nan_to_num(incidence_deg, nan=0.0)))
         return 0.25 * width * tan
 
-    def variances(self, lever_m, direction, attitude_rad, range_sigma_m) -> np.ndarray:
-        """(n, 3) variances [m^2] of the x, y and z errors (the covariance's diagonal, sum of sigma_k^2 J_k^2) of points
-        whose lever from the vehicle's reference point is ``lever_m`` (n, 3) [m], along beam ``direction`` (n, 3)
-        unit, the vehicle at ``attitude_rad`` (n, 3) roll, pitch, yaw, with range standard uncertainty
-        ``range_sigma_m`` (n,) [m] (ranging and footprint together)."""
+    def variances(self, lever_m, direction, attitude_rad, range_sigma_m, axes=None) -> np.ndarray:
+        """(n, m) variances [m^2] of the point's error along each of m ``axes`` (n, m, 3) (sum over the sources of
+        sigma_k^2 (a . J_k)^2; None: x, y and z, the covariance's diagonal) of points whose lever from the vehicle's
+        reference point is ``lever_m`` (n, 3) [m], along beam ``direction`` (n, 3) unit, the vehicle at
+        ``attitude_rad`` (n, 3) roll, pitch, yaw, with range standard uncertainty ``range_sigma_m`` (n,) [m]
+        (ranging and footprint together). An axis need not be a unit vector: the surface reading's is not
+        (:func:`surface_axis`)."""
         nav = self.navigation
         u = np.asarray(direction, np.float64)
-        var = range_sigma_m[:, None] ** 2 * u**2
-        var += np.array([nav.position_m**2, nav.position_m**2, nav.depth_m**2])
+        a = np.broadcast_to(np.eye(3), (len(u), 3, 3)) if axes is None else np.asarray(axes, np.float64)
+
+        def along(jacobian):  # (n, m): a . J for a Jacobian (n, 3)
+            return np.einsum("nmk,nk->nm", a, jacobian)
+
+        var = (range_sigma_m[:, None] * along(u)) ** 2
+        var += nav.position_m**2 * (a[..., 0] ** 2 + a[..., 1] ** 2) + nav.depth_m**2 * a[..., 2] ** 2
         yaw, pitch = attitude_rad[:, 2], attitude_rad[:, 1]
-        lx, ly = lever_m[:, 0], lever_m[:, 1]
         if nav.heading_rad:  # z x v
-            var[:, 0] += (nav.heading_rad * ly) ** 2
-            var[:, 1] += (nav.heading_rad * lx) ** 2
+            var += (nav.heading_rad * along(np.cross([0.0, 0.0, 1.0], lever_m))) ** 2
         if nav.attitude_rad:
             for axis in (np.c_[np.sin(yaw), -np.cos(yaw), np.zeros_like(yaw)],  # pitch: -Rz(yaw) y
                          np.c_[np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)]):  # roll: R x
-                var += (nav.attitude_rad * np.cross(axis, lever_m)) ** 2
+                var += (nav.attitude_rad * along(np.cross(axis, lever_m))) ** 2
         return var
 
-    def error_model(self, lever_m, direction, attitude_rad, channel, snr, saturated, later, range_m, incidence_deg
-                    ) -> tuple[np.ndarray, np.ndarray]:
-        """The predicted error of n points: its mean (n, 3) [m] (the ranging's bias along the beam) and variances
-        (n, 3) [m^2]. Arguments as :meth:`variances` and :meth:`RangingPrecision.of`; ``range_m`` (n,) the measured
-        range [m], ``incidence_deg`` (n,)."""
+    def error_model(self, lever_m, direction, attitude_rad, channel, snr, saturated, later, range_m, incidence_deg,
+                    normal=None) -> tuple[np.ndarray, np.ndarray]:
+        """The predicted error of n points: its mean (n, 4) [m] (the ranging's bias along the beam) and variances
+        (n, 4) [m^2], along x, y, z and the surface reading's axis (:func:`surface_axis` of the ranged facet's
+        ``normal`` (n, 3); None or NaN rows: z). Arguments as :meth:`variances` and :meth:`RangingPrecision.of`;
+        ``range_m`` (n,) the measured range [m], ``incidence_deg`` (n,)."""
         bias, std = self.ranging.of(channel, snr, saturated, later, range_m)
-        sigma_range = np.hypot(std, self.footprint_sigma_m(range_m, incidence_deg))
-        return bias[:, None] * direction, self.variances(lever_m, direction, attitude_rad, sigma_range)
+        sigma_range = std * np.hypot(1.0, self.footprint_sigma_m(range_m, incidence_deg) / self.pulse_sigma_m)
+        n = len(bias)
+        axes = np.concatenate([np.broadcast_to(np.eye(3), (n, 3, 3)),
+                               surface_axis(np.full((n, 3), np.nan) if normal is None else normal)[:, None]], axis=1)
+        return (bias[:, None] * np.einsum("nmk,nk->nm", axes, direction),
+                self.variances(lever_m, direction, attitude_rad, sigma_range, axes))
 
-    def predict(self, points, sight) -> tuple[np.ndarray, np.ndarray]:
+    def predict(self, points, sight, normal=None) -> tuple[np.ndarray, np.ndarray]:
         """The predicted error (:meth:`error_model`) of a chunk's ``points`` (:class:`PointRecords`) from its lines of
         sight ``sight`` (:class:`~scanner_sim.survey.georeference.LinesOfSight`: each pulse's estimated beam and
-        pose); the measured range is the point's distance from its beam's origin."""
+        pose) and the unit normals (n, 3) of the facets they ranged (NaN rows for noise); the measured range is the
+        point's distance from its beam's origin."""
         row = np.searchsorted(sight.slot, points.pulse_index)
         origin, direction = sight.origin_m[row], sight.direction[row]
         range_m = np.einsum("ij,ij->i", points.xyz - origin, direction)
         return self.error_model(points.xyz - sight.platform_m[row], direction, sight.attitude_rad[row], points.channel,
-                                points.snr, points.saturated, points.return_number > 1, range_m, points.incidence_deg)
+                                points.snr, points.saturated, points.return_number > 1, range_m, points.incidence_deg,
+                                normal)
+
+
+def surface_axis(normal) -> np.ndarray:
+    """(n, 3) the axis a = (-g_x, -g_y, 1) whose product with a point's error e is its vertical error against the
+    surface under its own (x, y): on the plane z = z0 + g . (x - x0, y - y0) through the true point, the surface
+    under X = P + e lies at z0 + g . e_xy, so X_z minus it is e_z - g . e_xy = a . e, with g = -n_xy / n_z the
+    slope of a facet of unit ``normal`` (n, 3). A normal unknown (NaN) gives (0, 0, 1), the plain vertical; a facet
+    within :data:`~scanner_sim.survey.georeference.GRAZING_COS` of vertical has no surface under (x, y) to read, and
+    gives NaN."""
+    normal = np.asarray(normal, np.float64)
+    known = np.isfinite(normal).all(axis=1)
+    nz = np.where(known, normal[:, 2], 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = np.where(known[:, None], -normal[:, :2] / nz[:, None], 0.0)
+    axis = np.c_[-g, np.ones(len(normal))]
+    axis[np.abs(nz) < GRAZING_COS] = np.nan
+    return axis
 
 
 def with_uncertainty(points, mean, var):
-    """``points`` (:class:`PointRecords`) with ``thu_m`` and ``tvu_m`` (95 %, to the millimetre) of their predicted
-    error of ``mean`` (n, 3) and variances ``var`` (n, 3)."""
+    """``points`` (:class:`PointRecords`) with ``thu_m``, ``tvu_m`` and ``tvu_surface_m`` (95 %, to the millimetre)
+    of their predicted error of ``mean`` (n, 4) and variances ``var`` (n, 4) (:meth:`TpuModel.error_model`)."""
     return dataclasses.replace(points, thu_m=np.round(thu_of(mean, var), REPORTED_DECIMALS),
-                               tvu_m=np.round(tvu_of(mean, var), REPORTED_DECIMALS))
+                               tvu_m=np.round(tvu_of(mean, var), REPORTED_DECIMALS),
+                               tvu_surface_m=np.round(tvu_of(mean, var, SURFACE), REPORTED_DECIMALS))
 
 
 def horizontal_sigma(mean, var) -> np.ndarray:
@@ -145,9 +189,15 @@ def thu_of(mean, var) -> np.ndarray:
     return K95_HORIZONTAL * horizontal_sigma(mean, var)
 
 
-def tvu_of(mean, var) -> np.ndarray:
-    """(n,) TVU [m]: the 95 % quantile of |vertical error| of errors of ``mean`` (n, 3) and variances ``var``."""
-    return folded_normal_quantile(mean[:, 2], np.sqrt(var[:, 2]), CONFIDENCE)
+def tvu_of(mean, var, axis: int = 2) -> np.ndarray:
+    """(n,) TVU [m]: the 95 % quantile of |vertical error| of errors of ``mean`` (n, m) and variances ``var`` (n, m),
+    along the true beam (``axis`` 2, z) or against the surface under the point (:data:`SURFACE`); NaN where the
+    figure is unknown."""
+    sigma = np.sqrt(var[:, axis])
+    known = np.isfinite(sigma)
+    out = np.full(len(sigma), np.nan)
+    out[known] = folded_normal_quantile(mean[known, axis], sigma[known], CONFIDENCE)
+    return out
 
 
 def coverage_levels(mean, var, vertical_m, horizontal_m) -> tuple[np.ndarray, np.ndarray]:
