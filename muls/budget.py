@@ -1,5 +1,5 @@
 """The photon budget of one echo: photons at the aperture, photoelectrons, peak codes and noise per channel,
-and what limits its detection (MULS Eqs. 7, 12, 13 and the noise model of muls.channels).
+and what limits its detection (MULS Eqs. 7, 12, 13 and the noise model of muls.instrument.channels).
 
 Everything here is noise-free arithmetic on the model's own numbers (no simulation), so it shows why a
 channel can or cannot see an echo: for a flat Lambertian panel at normal incidence filling the beam, the
@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import math
 
-from .channels import ELECTRON_CHARGE_C
-from .radiometry import lambertian_weight, target_factor
-from .waveform import OpticalModel
+from .instrument.channels import ELECTRON_CHARGE_C
+from .optics.optical_model import OpticalModel
+from .optics.radiometry import lambertian_weight, target_factor
 
 PLANCK_J_S = 6.62607015e-34
 SPEED_OF_LIGHT_M_S = 299_792_458.0

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from .detection import Records, digitise
-from .ranging import Ranging, range_batch
-from .waveform import OpticalModel, PulseBatch
+from .optics.optical_model import OpticalModel, PulseBatch
+from .ranging.returns import Ranging, range_batch
+from .receiver.digitiser import Records, digitise
 
 
 def simulate(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
@@ -12,7 +12,7 @@ def simulate(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
              ) -> tuple[Records, Ranging]:
     """Digitise the channels of ``batch`` (Eqs. 1-13) and range it (Eq. 14); ``seed`` keys all noise.
     ``deciding_only``: only the channels that can decide a return; ``ranging_only``: only the samples the ranging may
-    read, the same ranges for less work (:func:`muls.detection.digitise`)."""
+    read, the same ranges for less work (:func:`muls.receiver.digitiser.digitise`)."""
     echoes = model.echoes(batch)
     records = digitise(model, batch, seed, mode=mode, keep_noise_free=keep_noise_free, noise=noise, echoes=echoes,
                        deciding_only=deciding_only, ranging_only=ranging_only)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from muls.detection import Records
+from muls.receiver.digitiser import Records
 from scanner_sim.studies.accuracy import MATCH_TOLERANCE_M, WaveformFit, match_returns, vs_reference, vs_truth
 from scanner_sim.survey.point_records import PointRecords
 

@@ -4,11 +4,11 @@ against the peak of the noise-free residual computed from the waveform model alo
 import numpy as np
 import pytest
 
+from muls.optics.optical_model import OpticalModel, PulseBatch
 from muls.presets import mul2023, study_water
 from muls.simulate import simulate
 from muls.studies.common import detections, range_tolerance_m, truth_batch
 from muls.studies.edge import EDGE_GATE_S, edge_bias_study
-from muls.waveform import OpticalModel, PulseBatch
 
 SHOTS = 200
 

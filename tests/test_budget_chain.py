@@ -16,9 +16,9 @@ import pytest
 
 from muls import Channel, mul2023, water_preset
 from muls.budget import channel_budget, quantum_efficiency
-from muls.channels import ChannelArrays, noise_bandwidth_hz, shot_noise_lsb2_per_w
+from muls.instrument.channels import ChannelArrays, noise_bandwidth_hz, shot_noise_lsb2_per_w
+from muls.optics.optical_model import OpticalModel, PulseBatch
 from muls.simulate import simulate
-from muls.waveform import OpticalModel, PulseBatch
 
 # --- by hand -----------------------------------------------------------------------------------------------
 # V/W of Eq. 12: xi_i xi_v S_k M R_L

@@ -6,8 +6,8 @@ import math
 import pytest
 import yaml
 
-from muls.detection import RECORD_MODES
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
+from muls.receiver.digitiser import RECORD_MODES
 from scanner_sim.config import (
     SCENES_DIR,
     ConfigError,

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from scanner_sim.config import load_scene, parse_scene
 from scanner_sim.metrics.coverage import (
     COVERED,

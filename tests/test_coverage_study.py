@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from matplotlib import image as mpimg
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
 from scanner_sim.studies.coverage_study import StudyPlan, combination_config, combination_name
@@ -27,7 +27,7 @@ def cable_survey():
 
 def test_gate_follows_the_nadir_echo(cable_survey):
     base = cable_survey.instrument.gate_delay_ns
-    speed = 0.2197892  # m/ns, coastal ocean group velocity (muls.water)
+    speed = 0.2197892  # m/ns, coastal ocean group velocity (muls.water.properties)
     same = combination_config(cable_survey, "coastal_ocean", 6.0, "mul2023")
     assert same.instrument.gate_delay_ns == pytest.approx(base)
     higher = combination_config(cable_survey, "coastal_ocean", 10.0, "mul2023")
@@ -237,7 +237,7 @@ ALTITUDES_M = (3.0, 5.0, 8.0, 12.0)
 @pytest.mark.slow
 @pytest.mark.parametrize("scene", SURVEY_SCENES)
 def test_coverage_falls_with_turbidity_and_altitude_and_multichannel_wins(scene, tmp_path):
-    from muls.ranging import DROPOUT_CAUSES
+    from muls.ranging.returns import DROPOUT_CAUSES
 
     study = run_study_quietly(scene, tmp_path)
     cov = {(r["water"], r["instrument"], r["altitude_m"]): r for r in study["records"]}

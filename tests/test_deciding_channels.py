@@ -1,13 +1,13 @@
-"""The digitiser's ``deciding_only`` mode (muls.deciding_channels): which channels of a window can decide a return,
+"""The digitiser's ``deciding_only`` mode (muls.receiver.deciding_channels): which channels of a window can decide a return,
 judged before the noise is drawn, checked against the digitisation of every channel with the same seed."""
 
 import numpy as np
 import pytest
 
 from muls import mul2023, water_preset
-from muls.noise import NORMAL_BOUND, _inverse_normal_cdf, centred_unit
+from muls.infra.noise import NORMAL_BOUND, _inverse_normal_cdf, centred_unit
+from muls.optics.optical_model import OpticalModel, PulseBatch
 from muls.simulate import simulate
-from muls.waveform import OpticalModel, PulseBatch
 
 
 def _model(water="pool", gate=(150e-9, 400e-9)):

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from muls import mul2023
+from muls.optics.optical_model import OpticalModel, PulseBatch
 from muls.presets import study_water
-from muls.ranging import DROPOUT_CAUSES, NO_DROPOUT, echo_span_samples
+from muls.ranging.returns import DROPOUT_CAUSES, NO_DROPOUT, echo_span_samples
 from muls.simulate import simulate
-from muls.waveform import OpticalModel, PulseBatch
 from scanner_sim.config.loading import load_scene
 from scanner_sim.survey.setup import PassOptions, PassSetup
 

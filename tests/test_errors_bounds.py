@@ -26,7 +26,7 @@ REPO = Path(__file__).resolve().parents[1]
 CAP_BYTES = 6 * 2**30
 #: What a refusal ends with: the limit on this machine, in the option's own terms.
 LIMIT = r"; (at most [\d,]+ [a-z ()]+|cells of at least [\d.e-]+ m) on this machine$"
-#: The memory figures of a refusal (muls.memory.check_memory).
+#: The memory figures of a refusal (muls.infra.memory.check_memory).
 MEMORY = (r" would need about [\d,.]+ [GM]B of memory, more than the [\d,.]+ [GM]B it may use "
           r"\(80% of the [\d,.]+ [GM]B available\)")
 

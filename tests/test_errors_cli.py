@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import muls.cli as muls_cli
-import muls.command as muls_command
+import muls.infra.command as muls_command
 import scanner_sim.cli as sim_cli
 
 COMMANDS = {"scanner-sim": sim_cli, "muls": muls_cli}

@@ -9,9 +9,9 @@ import pytest
 
 from muls.cli import main
 from muls.experiments import EXPERIMENTS, RANGING, experiment_preset, pool
+from muls.optics.optical_model import OpticalModel, PulseBatch
 from muls.simulate import simulate
 from muls.studies import experiment_study
-from muls.waveform import OpticalModel, PulseBatch
 
 STAT_KEYS = {"detected_fraction", "precision_m", "mean_abs_deviation_m", "bias_m", "clipped_fraction"}
 #: CH1's shot-noise variance per LSB of signal at PMT gain 2000, xi_v 0.9 (tests/test_budget_chain.py, by

@@ -87,7 +87,7 @@ def test_regression_windowed_records_keep_every_return_of_eight_surfaces_in_one_
     """Root cause: each echo got its own window; an echo 9-64 ns behind the one before had its window start in the
     first one's tail, a run chaining them was cut by a window edge and dropped, and both echoes were lost (eight
     surfaces 1.2 m apart: 995 points windowed against 2,113 in the full record). A pulse's echoes whose windows
-    would overlap now share one window (muls.detection._plan), so the windowed record ranges what the full one
+    would overlap now share one window (muls.receiver.digitiser._plan), so the windowed record ranges what the full one
     does, return for return."""
     config = _static_scene(_staircase(top_m, 1.2), water=water, fidelity="reference", pulses=200)
     windowed, full = _points(config, "windowed"), _points(config, "full")
@@ -180,7 +180,7 @@ def test_regression_a_clipped_echos_tail_does_not_take_the_next_returns_truth():
     echo's tail (0.28 of its peak) still gave more power than the second echo did: the second return, ranged
     correctly, got the first surface's class, object and truth, a +1.17 m range error (300 of 600 points). At a
     peak the signal's slope is zero, so an echo well down its tail cannot have made it; the peak's echo is now the
-    most powerful of those still rising or within half their maximum past it (muls.peak_echoes.dominant_echo).
+    most powerful of those still rising or within half their maximum past it (muls.ranging.peak_echoes.dominant_echo).
 
     The top surface is 2.2 m down: it covers the beam's edge away from the receiver, which the finite aperture
     sees only from about 2 m on (at 1.8 m, where this was found under MULS Eq. 11, it gives 17 points). Each

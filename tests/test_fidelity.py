@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from scanner_sim.rays.echoes import ECHO_BIN_M
 from scanner_sim.survey.handoff import column_cuts
 

@@ -1,11 +1,11 @@
-"""muls.filters.first_order_filter against scipy's lfilter (a second engine) and a closed form."""
+"""muls.infra.filters.first_order_filter against scipy's lfilter (a second engine) and a closed form."""
 
 import math
 
 import numpy as np
 from scipy.signal import lfilter
 
-from muls.filters import first_order_filter
+from muls.infra.filters import first_order_filter
 
 
 def test_first_order_filter_matches_lfilter_bit_for_bit():

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from muls.peaks import Peaks
-from muls.ranging import Ranging
+from muls.ranging.peaks import Peaks
+from muls.ranging.returns import Ranging
 from scanner_sim.config import load_scene, parse_scene
 from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.georeference import NO_OBJECT, NOISE_CLASS, LinesOfSight, georeference

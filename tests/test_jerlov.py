@@ -7,7 +7,7 @@ by two methods that do not use Jerlov's table, and compared with that table, typ
 
 - radiative transfer: a plane-parallel Monte Carlo of sunlight entering deep, homogeneous water (pure-water
   scattering with Morel's phase function, particle scattering with Petzold's average phase function from
-  muls.phase, total internal reflection of upwelling light at the surface);
+  muls.water.phase, total internal reflection of upwelling light at the surface);
 - the closed form of Lee, Du and Arnone (2005, J. Geophys. Res. 110, C02016), fitted to HydroLight:
   K_d = (1 + 0.005 theta_s) a + 4.18 (1 - 0.52 exp(-10.8 a)) b_b, theta_s the solar zenith angle [deg].
 
@@ -26,13 +26,13 @@ import yaml
 
 from muls import WATER_PRESETS, water_preset
 from muls.cli import main as muls_main
-from muls.phase import petzold
 from muls.presets import (
     PARTICLE_PHASE_PI_PER_SR,
     PURE_WATER_PHASE_PI_PER_SR,
     PURE_WATER_SCATTERING_532_PER_M,
 )
-from muls.water import GROUP_INDEX_SEAWATER
+from muls.water.phase import petzold
+from muls.water.properties import GROUP_INDEX_SEAWATER
 from scanner_sim.config import SCENES_DIR, parse_scene
 
 OCEANIC = ("I", "IA", "IB", "II", "III")

@@ -1,4 +1,4 @@
-"""The process's runtime set-up (muls/runtime.py): where numba caches the compiled kernels, and that importing the
+"""The process's runtime set-up (muls/infra/runtime.py): where numba caches the compiled kernels, and that importing the
 packages changes nothing until an entry point asks."""
 
 import json
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from muls.runtime import source_key
+from muls.infra.runtime import source_key
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -30,8 +30,8 @@ def _run(code: str, **env) -> str:
 
 def test_regression_a_change_to_a_helper_module_starts_a_fresh_kernel_cache(tmp_path):
     """Root cause: numba's cache checks only the source file of the function it compiled, while a kernel compiles
-    in the helpers it calls from other modules. Changing the normal draws in muls/noise.py (or the deciding test in
-    muls/deciding_channels.py) alone left the digitiser's cached kernel running the old helper: results from code
+    in the helpers it calls from other modules. Changing the normal draws in muls/infra/noise.py (or the deciding test in
+    muls/receiver/deciding_channels.py) alone left the digitiser's cached kernel running the old helper: results from code
     no longer in the tree. The cache directory is keyed by every source file's size and modification time: a
     change to any file, in either package and at any depth, gives a new key; nothing else does."""
     root = _tree(tmp_path)
@@ -55,7 +55,7 @@ def test_each_packages_kernels_cache_under_the_key_of_its_sources_and_the_physic
     """A muls kernel caches in <XDG_CACHE_HOME>/muls-scanner/numba/<key of muls's sources>; a mission kernel under
     the key of muls's and scanner_sim's sources (it may compile in helpers of both); a NUMBA_CACHE_DIR the user set
     wins for both."""
-    code = ("from muls.detection import _phases; from scanner_sim.rays.kernels import hit_block\n"
+    code = ("from muls.receiver.digitiser import _phases; from scanner_sim.rays.kernels import hit_block\n"
             "print(_phases._cache._cache_path); print(hit_block._cache._cache_path)")
     physics, mission = map(Path, _run(code, XDG_CACHE_HOME=str(tmp_path)).splitlines())
     base = tmp_path / "muls-scanner" / "numba"
@@ -72,7 +72,7 @@ def test_importing_the_packages_changes_nothing_until_an_entry_point_configures_
     wait policy, and a policy the user set wins."""
     code = ("import os, numba, muls, scanner_sim, scanner_sim.cli\n"
             "print(os.environ.get('OMP_WAIT_POLICY'), repr(numba.config.CACHE_DIR))\n"
-            "from muls.runtime import configure_process; configure_process(); print(os.environ['OMP_WAIT_POLICY'])")
+            "from muls.infra.runtime import configure_process; configure_process(); print(os.environ['OMP_WAIT_POLICY'])")
     assert _run(code, XDG_CACHE_HOME=str(tmp_path)).splitlines() == ["None ''", "PASSIVE"]
     assert _run(code, XDG_CACHE_HOME=str(tmp_path), OMP_WAIT_POLICY="ACTIVE").splitlines()[-1] == "ACTIVE"
 

@@ -1,7 +1,7 @@
-"""The multiple-scattering Monte Carlo (muls.montecarlo, muls.phase) against limits, closed forms and itself.
+"""The multiple-scattering Monte Carlo (muls.montecarlo, muls.water.phase) against limits, closed forms and itself.
 
-Expected values come from elsewhere: MULS Eqs. 4 and 7 in muls.radiometry, the Henyey-Greenstein closed
-form in muls.water, published phase-function figures (Petzold's b_b/b and g, Mobley et al. 2002 for
+Expected values come from elsewhere: MULS Eqs. 4 and 7 in muls.optics.radiometry, the Henyey-Greenstein closed
+form in muls.water.properties, published phase-function figures (Petzold's b_b/b and g, Mobley et al. 2002 for
 Fournier-Forand), scipy quadrature, and a second estimator (packets counted as they cross the aperture).
 """
 
@@ -22,10 +22,10 @@ from muls.montecarlo import (
     multiscatter_waters_study,
     run_monte_carlo,
 )
-from muls.phase import PHASE_FUNCTIONS, cumulative_at, phase_function, sample_angle
-from muls.radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission
-from muls.water import henyey_greenstein as hg_closed_form
-from muls.water import hg_backward_fraction
+from muls.optics.radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission
+from muls.water.phase import PHASE_FUNCTIONS, cumulative_at, phase_function, sample_angle
+from muls.water.properties import henyey_greenstein as hg_closed_form
+from muls.water.properties import hg_backward_fraction
 
 #: Tolerances: statistical comparisons allow this many standard errors.
 SIGMAS = 3.5

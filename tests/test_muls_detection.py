@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from muls import mul2023, water_preset
-from muls.channels import shot_noise_lsb2_per_w
-from muls.noise import standard_normal
-from muls.ranging import DROPOUT_CAUSES, NO_DROPOUT
+from muls.infra.noise import standard_normal
+from muls.instrument.channels import shot_noise_lsb2_per_w
+from muls.optics.optical_model import OpticalModel, PulseBatch
+from muls.ranging.returns import DROPOUT_CAUSES, NO_DROPOUT
 from muls.simulate import simulate
-from muls.waveform import OpticalModel, PulseBatch
 
 RANGE_TOL_NOISE_FREE_M = 0.01
 
@@ -36,7 +36,7 @@ def test_echoes_are_sorted_by_delay_within_each_pulse_as_a_stable_sort_leaves_th
     """Pulses of 0 to 91 echoes (the reference level's footprint), with ties and with every delay equal: in place,
     the order numpy's stable lexsort gives, energy and source moved along (both the insertion sort of a few echoes
     and the delay buckets that come first for more)."""
-    from muls.waveform import INSERTION_SORT_MAX, _sort_by_delay_within
+    from muls.optics.optical_model import INSERTION_SORT_MAX, _sort_by_delay_within
 
     rng = np.random.default_rng(3)
     counts = np.array([0, 1, 7, INSERTION_SORT_MAX, INSERTION_SORT_MAX + 1, 40, 91, 91, 91])
@@ -62,7 +62,7 @@ def test_ranging_only_ch0_records_give_the_ranges_of_whole_ones(mode, dark_std, 
     and one whose peak clips at the top code (a plateau, where the first top code is the peak)."""
     from dataclasses import replace
 
-    from muls.peaks import find_peaks
+    from muls.ranging.peaks import find_peaks
 
     ins = mul2023()
     ins = replace(ins, reference=replace(ins.reference, dark_std_lsb=dark_std, peak_lsb=peak_lsb))
@@ -110,8 +110,8 @@ def test_full_records_coded_only_where_the_peak_search_reads_give_the_same_peaks
     every record), dark noise of 12 LSB, strong background light (shot noise over the whole record), clean ocean water's
     strong backscatter and clipped near targets, and a range gate opening on the column."""
 
-    from muls.peaks import find_peaks
-    from muls.waveform import baseline_values
+    from muls.optics.optical_model import baseline_values
+    from muls.ranging.peaks import find_peaks
 
     ins, water, background = _sparse_case(case)
     model = OpticalModel.build(ins, paper_water(water))
@@ -157,7 +157,7 @@ def test_the_search_within_a_sample_of_nonzero_codes_finds_what_the_search_of_ev
     of the same records (the records relabelled ``windowed`` take that one): a code of 0 is under every run."""
     from dataclasses import replace
 
-    from muls.peaks import find_peaks
+    from muls.ranging.peaks import find_peaks
 
     ins, water, _ = _sparse_case(case)
     model = OpticalModel.build(ins, paper_water(water))
@@ -177,7 +177,7 @@ def test_the_search_within_a_sample_of_nonzero_codes_finds_what_the_search_of_ev
 def test_code_segments_cover_each_nonzero_code_and_its_neighbours_and_merge_where_they_touch():
     """By hand: stretches within a sample of a nonzero code; two stretches two zeros apart share a zero and merge,
     three apart stay two; a record's ends clip them."""
-    from muls.peaks import _code_segments
+    from muls.ranging.peaks import _code_segments
 
     row = np.array([5, 0, 0, 0, 0, 7, 7, 0, 0, 3, 0, 0, 0, 0, 0, 0, 0, 9], np.uint16)
     first, end = np.zeros(10, np.int64), np.zeros(10, np.int64)
@@ -192,7 +192,7 @@ def test_the_peak_fits_table_lookup_is_numpys_interp_bit_for_bit():
     np.interp) gives numpy.interp's values exactly: inside the grid, on its points, beyond both ends, at +-inf and NaN."""
     import numba
 
-    from muls.lookup import bracket, interp_at
+    from muls.infra.lookup import bracket, interp_at
 
     @numba.njit
     def lookup(xs, xp, fp):
@@ -213,7 +213,7 @@ def test_peak_order_is_the_two_stable_lexsorts_with_duplicates_dropped():
     """``peak_order`` (one pass over each pulse's few peaks) against numpy: a stable lexsort by (pulse, channel, index),
     repeats of (pulse, channel, index) dropped but the first, then a stable lexsort by (pulse, time); with runs found
     twice by overlapping windows, equal times on different channels, and pulses without peaks between."""
-    from muls.peaks import peak_order
+    from muls.ranging.peaks import peak_order
 
     rng = np.random.default_rng(11)
     pulse = np.sort(rng.choice(np.arange(0, 3000, 3), 4000))
@@ -233,7 +233,7 @@ def test_peak_order_is_the_two_stable_lexsorts_with_duplicates_dropped():
 def test_each_return_keeps_the_peak_a_stable_lexsort_would_put_last():
     """``best_of_clusters`` (one pass over runs of peaks) against numpy: the last of a stable lexsort by (cluster,
     unsaturated, score) in each cluster; with saturated and unsaturated peaks mixed, tied scores and NaN."""
-    from muls.ranging import best_of_clusters
+    from muls.ranging.returns import best_of_clusters
 
     rng = np.random.default_rng(5)
     n = 5000
@@ -263,7 +263,7 @@ def test_inverse_normal_cdf_is_the_exact_one_to_acklams_accuracy_tails_included(
     1e-10 to 1 - 1e-10: both tails and the switch between the formulas at p = 0.02425 and 0.97575."""
     from scipy.special import ndtri
 
-    from muls.noise import _inverse_normal_cdf
+    from muls.infra.noise import _inverse_normal_cdf
 
     tail = np.logspace(-10.0, -1.3, 60)
     p = np.concatenate([tail, np.linspace(0.02, 0.98, 97), [0.02424, 0.02426, 0.97574, 0.97576], 1.0 - tail])
@@ -275,7 +275,7 @@ def test_the_uniforms_behind_the_normals_stay_inside_0_1_and_are_symmetric():
     """Each 32-bit half of a draw maps to the centre of one of 2^32 equal cells of (0, 1): the extreme halves
     give 2^-33 and 1 - 2^-33 (never 0 or 1, where the inverse normal CDF is infinite), and k and 2^32 - 1 - k
     give p and 1 - p exactly, so the normals are symmetric. Cases sampling cannot reach (4e9 draws apart)."""
-    from muls.noise import centred_unit
+    from muls.infra.noise import centred_unit
 
     top = 2**32 - 1
     assert centred_unit(np.uint64(0)) == 2.0**-33 and centred_unit(np.uint64(top)) == 1.0 - 2.0**-33
@@ -287,7 +287,7 @@ def test_block_draws_equal_the_draws_one_by_one_tails_included():
     """The digitiser draws a window's normals a block at once (``fill_normal_pairs``: the central formula on SIMD
     lanes, then the tails patched); each must equal the draw-by-draw ``normal_half_at`` bit for bit, in both
     halves, with the low half skipped or not, at any first index: else records would depend on the blocking."""
-    from muls.noise import fill_hashes, fill_normal_pairs, fill_normals_of, normal_half_at, seed_key, stream_base
+    from muls.infra.noise import fill_hashes, fill_normal_pairs, fill_normals_of, normal_half_at, seed_key, stream_base
 
     n = 5000
     for pulse, stream, first in ((0, 2, 0), (17, 3, 123), (2**40, 4, 999_983)):
@@ -314,7 +314,7 @@ def test_the_table_bound_on_a_normal_lies_above_it_and_close():
     """``normal_upper_bound`` (a table of 4,096 cells of the 32-bit half) is at least the normal of every half, checked
     at both ends of every cell and at random halves, and within 0.015 of it where |x| < 2.5: a bound below a draw would
     leave a code out of a full record that the peak search reads."""
-    from muls.noise import UPPER_BOUND_SHIFT, normal_of_bits, normal_upper_bound
+    from muls.infra.noise import UPPER_BOUND_SHIFT, normal_of_bits, normal_upper_bound
 
     cells = np.arange(1 << (32 - int(UPPER_BOUND_SHIFT)), dtype=np.uint64)
     edges = np.concatenate([cells << UPPER_BOUND_SHIFT, ((cells + np.uint64(1)) << UPPER_BOUND_SHIFT) - np.uint64(1)])
@@ -488,7 +488,7 @@ def test_regression_second_plateau_explained_by_the_first_echo_does_not_hang():
     single_channel coastal water). Once the first echo's model was taken off, the second plateau's clip level
     was negative, log() gave NaN, the peak index -inf, and adding that echo's model looped ~2^63 times.
     A plateau whose clip level the echoes before it already explain is not ranged; the grid lookup is total."""
-    from muls.lookup import on_geometric_grid
+    from muls.infra.lookup import on_geometric_grid
 
     ratio, rise, _ = _model().clip_table
     for x in (0.0, -1.0, float("nan")):
@@ -540,7 +540,7 @@ def test_return_behind_clipped_echo_is_ranged(mode, deciding_only, near_reflecta
     on every pulse, in both record modes and with only the deciding channels (every fidelity level's path). With
     the whiter plate CH1's plateau runs on over the sand's echo (one plateau, two echoes): the model fitted to it
     is wrong behind it, and what that leaves in the residual must not be reported as a third surface."""
-    from muls.radiometry import lambertian_weight
+    from muls.optics.radiometry import lambertian_weight
 
     model = _model()
     ins = model.instrument
@@ -569,7 +569,7 @@ def test_no_late_return_from_an_echo_rising_inside_a_plateau():
     ranges it. Two-thirds of the beam on sand 5.7 m away, a third on sand 1 m lower (step_edges' geometry, CH1
     clipped over the upper echo on every pulse): every return lies on one of the two surfaces, within 0.25 m (the
     late points lay 0.3-0.54 m behind the lower one)."""
-    from muls.radiometry import lambertian_weight
+    from muls.optics.radiometry import lambertian_weight
 
     ins = mul2023(26e-9, 158e-9)  # step_edges' gate (a CH3 gate that opens past both echoes)
     model = OpticalModel.build(ins, water_preset("coastal_ocean"))
@@ -647,7 +647,7 @@ def test_gate_closes_after_its_width():
 
 def test_channel_arrays_reference_slot_and_detectors():
     """Slot 0 is CH0: no gain, never gated, no shot noise, no detector; CH1 and CH2 share PMT1 (0), CH3 is 1."""
-    from muls.channels import ChannelArrays
+    from muls.instrument.channels import ChannelArrays
 
     arrays = ChannelArrays.of(mul2023())
     assert arrays.lsb_per_w[0] == 0.0 and arrays.shot_lsb2_per_w[0] == 0.0
@@ -662,7 +662,7 @@ def test_digitise_defaults_and_records():
     gives full records of CH0 in full mode, uses the reference's own dark level for CH0, and names a bad mode."""
     from dataclasses import replace
 
-    from muls.detection import digitise
+    from muls.receiver.digitiser import digitise
 
     base = _model()
     ins = replace(base.instrument, reference=replace(base.instrument.reference, dark_mean_lsb=20.0))
@@ -688,7 +688,7 @@ def test_noise_free_records_of_a_single_pulse_are_its_codes_before_rounding(mode
     """With noise off, each code is its noise-free level rounded and clipped to [0, 1023] (Eq. 13), for CH0
     and every channel, also for a batch of one pulse in one window (what muls waveform and muls experiment
     draw their noise-free curves from)."""
-    from muls.detection import digitise
+    from muls.receiver.digitiser import digitise
 
     model = _model()
     for n in (1, 3):
@@ -703,7 +703,7 @@ def test_noise_free_records_of_a_single_pulse_are_its_codes_before_rounding(mode
 def test_an_echo_that_brings_no_light_gets_no_window():
     """A black panel (reflectance 0) sends no echo: the windowed record has no window for it, only CH0's
     record (an empty window would cost samples and carry only noise)."""
-    from muls.detection import digitise
+    from muls.receiver.digitiser import digitise
 
     model = _model()
     batch = PulseBatch.flat_target(model.instrument, np.array([5.0, 5.0, 5.0]), reflectance=np.array([0.1, 0.0, 0.1]))
@@ -835,7 +835,7 @@ def test_ch0_uses_the_references_own_dark_noise():
 def test_seed_key_accepts_ints_and_generators_and_names_what_it_refuses():
     """A seed is an integer from 0, or a numpy Generator, which is advanced once: its key is that of the integer
     the generator draws from [0, 2**63). Negative numbers, booleans and floats are refused, naming the seed."""
-    from muls.noise import seed_key
+    from muls.infra.noise import seed_key
 
     assert seed_key(0) != seed_key(1)
     drawn = int(np.random.default_rng(7).integers(0, 2**63))

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from muls import Digitizer, ParameterError, PulseShape, Transmitter, Water, mul2023, water_preset
-from muls.presets import coaxial
-from muls.radiometry import (
+from muls.optics.optical_model import OpticalModel
+from muls.optics.radiometry import (
     background_power_w,
     column_density_per_m,
     lambertian_weight,
@@ -17,7 +17,7 @@ from muls.radiometry import (
     two_way_transmission,
     window_factor,
 )
-from muls.waveform import OpticalModel
+from muls.presets import coaxial
 
 REL_TOL_TABLE = 2e-3  # column tables: trapezoid rule on a 25 ps grid
 
@@ -28,7 +28,7 @@ def paper(name: str) -> Water:
 
 
 def with_overlap(instrument, model: str):
-    """``instrument`` whose receiver sees the beam by overlap ``model`` (muls.overlap.OVERLAP_MODELS)."""
+    """``instrument`` whose receiver sees the beam by overlap ``model`` (muls.instrument.overlap.OVERLAP_MODELS)."""
     return replace(instrument, receiver=replace(instrument.receiver, overlap_model=model))
 
 
@@ -164,8 +164,8 @@ def test_flat_plate_factor_is_eq7():
 
 def test_flat_plate_echo_energy_in_the_record_equals_eq7():
     """The noise-free waveform of a plate minus that of a black plate at the same range is the Eq. 7 echo."""
+    from muls.optics.optical_model import PulseBatch
     from muls.simulate import simulate
-    from muls.waveform import PulseBatch
 
     ins, water = mul2023(), water_preset("pool")
     ins = ins.with_channel("ch3", gate_delay_s=None, gate_width_s=None)
@@ -220,7 +220,7 @@ def test_baselines_a_window_at_once_are_the_uncut_column_plus_background():
     """The peak search and the channel test take a window's baseline from ``baseline_values`` (a loop of selects
     over the uncut column table); it must be the background plus the column that meets nothing, as the exact
     column (``column_power_w`` with no cut, a second engine) gives it, zero before emission and past the tables."""
-    from muls.waveform import baseline_values
+    from muls.optics.optical_model import baseline_values
 
     model = OpticalModel.build(mul2023(), water_preset("coastal_ocean"))
     end = model.column.step_s * (model.column.uncut.shape[0] - 1)
@@ -293,7 +293,7 @@ def test_background_terms_eqs_8_to_10():
     # linear in L_b (1 W/(m^2 sr nm) too), the shape of the ranges kept when dark, and any attenuation rule
     assert float(background_power_w(ins, water, 1.0, z, rho)[()]) == pytest.approx(1e3 * expected, rel=1e-9, abs=0)
     assert background_power_w(ins, water, 0.0, np.array([5.0, 6.0]), np.array([0.1, 0.1])).shape == (2,)
-    from muls.radiometry import attenuation_per_m
+    from muls.optics.radiometry import attenuation_per_m
 
     small = water.with_models(attenuation_model="small_angle")
     k5 = float(attenuation_per_m(ins, small, 5.0))
@@ -314,16 +314,16 @@ def test_bad_parameters_are_rejected_with_their_name(build, key):
 
 
 def test_reflectance_over_one_is_rejected():
-    from muls.waveform import PulseBatch
+    from muls.optics.optical_model import PulseBatch
 
     with pytest.raises(ParameterError, match="reflectance"):
         PulseBatch.flat_target(mul2023(), [5.0], 1.2)
 
 
-# --- the small_angle attenuation rule (muls.smallangle) ---------------------------------------------------------
+# --- the small_angle attenuation rule (muls.water.smallangle) ---------------------------------------------------------
 
 def _small_angle(water, fov_full_rad=0.1, ranges=(5.0, 10.0, 20.0)):
-    from muls.radiometry import attenuation_per_m
+    from muls.optics.radiometry import attenuation_per_m
 
     ins = mul2023()
     ins = replace(ins, receiver=replace(ins.receiver, fov_full_rad=fov_full_rad))
@@ -340,7 +340,7 @@ def test_small_angle_rule_at_low_optical_depth_is_single_scattering_kept_in_the_
     """Through the pool (b Z = 0.06 at 10 m) only single scattering counts: k = a + b (1 - s), s the share of
     single scattering that lands inside the footprint, int_0^1 F(theta_h / (1 - u)) du, computed directly
     from Petzold's cumulative distribution (a different path from the rule's Hankel integral)."""
-    from muls.phase import petzold
+    from muls.water.phase import petzold
 
     phase = petzold()
     u = (np.arange(4000) + 0.5) / 4000
@@ -369,7 +369,7 @@ def test_small_angle_rule_keeps_more_through_a_wider_aperture():
     """The footprint is the aperture plus the field's spread (Eq. 11's r2 = d_r/2 + z tan(theta_r/2)): a wider
     aperture with the same field keeps more forward scattering, so k falls, most where the aperture is a large
     part of the footprint (close in: at 1 m it is 43 % of r2 for the 75 mm lens, 3 % at 20 m)."""
-    from muls.radiometry import attenuation_per_m
+    from muls.optics.radiometry import attenuation_per_m
 
     pond = water_preset("pond").with_models(attenuation_model="small_angle")
     ins = mul2023()

@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from muls import water_preset
-from muls.water import HG_ASYMMETRY, henyey_greenstein
+from muls.water.properties import HG_ASYMMETRY, henyey_greenstein
 from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, load_scene
 from scanner_sim.io import read_las_metadata, read_waveforms_npz

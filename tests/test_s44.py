@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from scanner_sim.config import load_scene
 from scanner_sim.metrics import s44
 from scanner_sim.metrics.coverage import CoverageAccumulator, CoverageSettings, Footprint

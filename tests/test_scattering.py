@@ -1,5 +1,6 @@
-"""Multiple scattering in the model (muls/scattering.py, muls/montecarlo/tables.py, muls/waveform.py): the Monte
-Carlo's tables, the monte_carlo attenuation rule, the echo's spread in time and the column."""
+"""Multiple scattering in the model (muls/optics/scattering.py, muls/montecarlo/tables.py,
+muls/optics/optical_model.py): the Monte Carlo's tables, the monte_carlo attenuation rule, the echo's spread in time
+and the column."""
 
 import math
 from dataclasses import replace
@@ -9,10 +10,10 @@ import pytest
 
 from muls import Water, mul2023, water_preset
 from muls.montecarlo.tables import build_tables, farthest_range_m, find_tables, scattering_tables
+from muls.optics.optical_model import OpticalModel, PulseBatch
+from muls.optics.radiometry import attenuation_per_m
+from muls.optics.scattering import SHIPPED_DIR, ScatteringTables, tables_key
 from muls.presets import WATER_PRESETS, coaxial
-from muls.radiometry import attenuation_per_m
-from muls.scattering import SHIPPED_DIR, ScatteringTables, tables_key
-from muls.waveform import OpticalModel, PulseBatch
 
 
 def test_every_preset_ships_its_tables_with_each_instrument_geometry():

@@ -2,7 +2,7 @@
 
 import pytest
 
-from muls.command import EXIT_SIGINT, EXIT_SIGTERM, Terminated, run_guarded
+from muls.infra.command import EXIT_SIGINT, EXIT_SIGTERM, Terminated, run_guarded
 
 
 @pytest.mark.parametrize("signal_exc, code", [(KeyboardInterrupt(), EXIT_SIGINT), (Terminated(15), EXIT_SIGTERM)])

@@ -131,7 +131,7 @@ def test_pass_over_a_site_builds_windows_as_it_goes(lawnmower, monkeypatch):
 
 
 def test_a_tile_size_that_is_not_positive_is_refused_in_one_line():
-    from muls.errors import ParameterError
+    from muls.infra.errors import ParameterError
 
     with pytest.raises(ParameterError, match=r"^tile_m = -4\.0: must be a tile's side in metres, > 0"):
         build_scene(load_scene("seabed_lawnmower"), tile_m=-4.0)

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from muls import studies
-from muls.peaks import Peaks
+from muls.optics.optical_model import OpticalModel, PulseBatch
 from muls.presets import POND_GATE_S, POOL_GATE_S, water_preset
+from muls.ranging.peaks import Peaks
 from muls.simulate import simulate
-from muls.waveform import OpticalModel, PulseBatch
 
 MAXRANGE_KEYS = {"single_channel_m", "near_field_m", "far_field_m", "total_m", "improvement"}
 CHANNEL_KEYS = {"precision_m", "mean_deviation_m", "detected_fraction", "saturated_fraction"}

@@ -118,7 +118,7 @@ def test_same_seed_same_points_whatever_the_thread_count(tmp_path):
 
 
 def test_idle_parallel_workers_sleep_unless_the_user_says_otherwise():
-    """A pass's set-up sets OpenMP's wait policy to PASSIVE before any parallel kernel runs (muls.runtime): spinning
+    """A pass's set-up sets OpenMP's wait policy to PASSIVE before any parallel kernel runs (muls.infra.runtime): spinning
     workers take a core from the threads working beside them (measured when a ray-stage thread ran beside the
     physics: ``fast`` on cable_survey 91,000 against 103,000 pulses/s, medians of five). A policy the user set is
     kept."""

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from muls.waveform import PulseBatch
+from muls.optics.optical_model import PulseBatch
 from scanner_sim.config import load_scene
 from scanner_sim.studies import features
 from scanner_sim.studies.coverage_study import combination_config

@@ -9,13 +9,13 @@ import time
 
 import numpy as np
 
-from ..errors import ParameterError, check_positive
-from ..phase import check_phase
+from ..infra.errors import ParameterError, check_positive
+from ..optics.optical_model import OpticalModel
+from ..optics.radiometry import lambertian_weight, target_factor
 from ..presets import instrument_preset, water_preset
-from ..radiometry import lambertian_weight, target_factor
 from ..studies import maxrange_study
-from ..water import MAX_ATTENUATION_EXPONENT, Water
-from ..waveform import OpticalModel
+from ..water.phase import check_phase
+from ..water.properties import MAX_ATTENUATION_EXPONENT, Water
 from .correction import MultipleScatteringCorrection, same_phase
 from .power import effective_attenuation_per_m, geometry_factor, mc_power_w, muls_power_w, two_way_transmission
 from .run import TargetPlanes, run_monte_carlo

@@ -7,8 +7,8 @@ import math
 
 from ..budget import channel_budget
 from ..experiments import experiment_preset
+from ..optics.optical_model import OpticalModel
 from ..presets import STUDY_ATTENUATION_MODEL, designed_mul, single_channel, study_water
-from ..waveform import OpticalModel
 from .common import FAR_GATE_WIDTH_S, MAXRANGE_WATERS, far_gate_delay_s
 
 #: Ranges of the Petzold waters in the budget [m] (the maximum-range study's span).

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import check_positive
+from ..infra.errors import check_positive
+from ..optics.optical_model import OpticalModel, PulseBatch
+from ..optics.radiometry import attenuation_per_m
 from ..presets import coaxial, mul2023, study_water
-from ..radiometry import attenuation_per_m
-from ..water import Water
-from ..waveform import OpticalModel, PulseBatch
+from ..water.properties import Water
 from .common import (
     _list,
     _water,

@@ -7,11 +7,11 @@ import time
 import numpy as np
 
 from ..budget import LIMITS, channel_budget, limiting_cause
-from ..errors import check_fraction, check_positive
+from ..infra.errors import check_fraction, check_positive
+from ..optics.optical_model import OpticalModel
 from ..presets import designed_mul, single_channel, study_water
 from ..simulate import simulate
-from ..water import Water
-from ..waveform import OpticalModel
+from ..water.properties import Water
 from .common import (
     COARSE_CHUNK,
     COARSE_START_M,

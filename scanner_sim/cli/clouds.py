@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from muls.command import (
+from muls.infra.command import (
     nonempty,
     output_file,
     positive_float,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from muls.command import (
+from muls.infra.command import (
     nonempty,
     positive_int,
 )
@@ -81,7 +81,7 @@ def _add_bench_rays(sub):
 
 
 def _cmd_bench_rays(args) -> int:
-    from muls.memory import check_memory
+    from muls.infra.memory import check_memory
     from scanner_sim.perf.raybench import bench_rays
     from scanner_sim.survey.budget import CHUNK_BYTES_PER_SUBRAY
 

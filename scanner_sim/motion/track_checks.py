@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 
-from muls.water import MAX_ATTENUATION_EXPONENT
+from muls.water.properties import MAX_ATTENUATION_EXPONENT
 from scanner_sim.config.errors import ConfigError, SetupWarning, config_value
 from scanner_sim.motion.trajectory import PATH_STEP_M, Trajectory, trajectory_of
 from scanner_sim.world.raster import lawnmower_area

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 
 #: Sub-ray counts the ring layout allows: 1 + 3 N (N + 1).
 SUBRAY_COUNTS = tuple(1 + 3 * n * (n + 1) for n in range(0, 9))  # 1, 7, 19, 37, 61, 91, 127, 169, 217

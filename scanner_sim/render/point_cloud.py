@@ -21,9 +21,9 @@ WINDOW_BYTES_PER_PIXEL = 100
 
 def check_window_size(key: str, window_size: Sequence[int], available_bytes: int | None = None) -> None:
     """Refuse, before VTK allocates it, a (width, height) [px] with a side beyond :data:`MAX_WINDOW_SIDE_PX` or a
-    picture needing more memory than a command may plan on (:func:`muls.memory.check_memory`): a ValueError
+    picture needing more memory than a command may plan on (:func:`muls.infra.memory.check_memory`): a ValueError
     naming ``key``."""
-    from muls.memory import check_memory
+    from muls.infra.memory import check_memory
 
     w, h = (int(v) for v in window_size)
     shown = f"{w} {h}"

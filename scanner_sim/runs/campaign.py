@@ -24,7 +24,7 @@ from typing import Annotated, Any
 
 from pydantic import BeforeValidator, model_validator
 
-from muls.command import NAME_MAX_BYTES
+from muls.infra.command import NAME_MAX_BYTES
 from scanner_sim import io
 from scanner_sim.config import ConfigError, SceneConfig, build, load_scene
 from scanner_sim.config.base import Choice, Integer, Positive, StrictModel

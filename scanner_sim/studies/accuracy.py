@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.detection import Records
+from muls.receiver.digitiser import Records
 from scanner_sim.survey.georeference import NO_OBJECT
 from scanner_sim.survey.point_records import PointRecords
 

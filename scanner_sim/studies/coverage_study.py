@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from muls.presets import instrument_preset, water_preset
 from scanner_sim.config import SceneConfig
 from scanner_sim.io.run_dir import hold_output

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from scanner_sim.config import SCENES_DIR, SceneConfig
 from scanner_sim.metrics import s44
 from scanner_sim.metrics.coverage import CoverageSettings

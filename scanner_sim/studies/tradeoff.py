@@ -191,9 +191,9 @@ def run_plan(levels, knobs, convergence: bool) -> list[tuple[str, FidelityLevel]
 def check_tradeoff_memory(config: SceneConfig, levels, knobs, pulses: int, waveform_pulses: int, convergence: bool,
                           keys=("pulses", "waveform_pulses"), available_bytes: int | None = None) -> None:
     """Refuse, before any run, ``pulses`` or ``waveform_pulses`` (named by ``keys``, the larger share's) when the
-    runs would keep more than a command may plan on (:func:`muls.memory.check_memory`): each run keeps
+    runs would keep more than a command may plan on (:func:`muls.infra.memory.check_memory`): each run keeps
     :data:`KEPT_BYTES_PER_PULSE` a pulse the pass fires and :data:`RECORD_BYTES_PER_PULSE` a waveform pulse."""
-    from muls.memory import check_memory
+    from muls.infra.memory import check_memory
     from scanner_sim.survey.budget import estimate_pass
 
     runs = len(run_plan(levels, knobs, convergence))

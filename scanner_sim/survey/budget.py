@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from muls.memory import MEMORY_SHARE, available_memory_bytes, gb
+from muls.infra.memory import MEMORY_SHARE, available_memory_bytes, gb
 from scanner_sim.config import SeabedConfig
 from scanner_sim.config.errors import ConfigError, config_value
 from scanner_sim.motion.track_checks import track_length_m, track_span_s

@@ -1,7 +1,7 @@
 """Georeferencing: the instrument's ranged returns to world points with their ground truth attached.
 
 :func:`georeference` is a pure function of what the stages before it produced: the ranging of a chunk (each
-return carries the index of the echo that dominates it, :attr:`muls.ranging.Peaks.echo_index`), the hits that
+return carries the index of the echo that dominates it, :attr:`muls.ranging.returns.Peaks.echo_index`), the hits that
 made those echoes, and each pulse's line of sight as navigation estimates it, with the truth along it.
 """
 
@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from muls.ranging import Ranging
+from muls.ranging.returns import Ranging
 from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.point_records import PointRecords
 from scanner_sim.world.materials import NOISE_CLASS

@@ -23,7 +23,7 @@ from typing import Annotated, ClassVar, Literal, get_type_hints
 
 import numpy as np
 
-from muls.ranging import DROPOUT_CAUSES as MULS_DROPOUT_CAUSES
+from muls.ranging.returns import DROPOUT_CAUSES as MULS_DROPOUT_CAUSES
 
 __all__ = [
     "DROPOUT_CAUSES",
@@ -36,7 +36,7 @@ __all__ = [
 ]
 
 #: Dropout cause names; a cause's index in this tuple is its code in ``DropoutRecords.cause``. The physics
-#: decides them (muls.ranging): no_hit, blind_zone, below_threshold, saturated, masked_by_backscatter,
+#: decides them (muls.ranging.returns): no_hit, blind_zone, below_threshold, saturated, masked_by_backscatter,
 #: outside_gate.
 DROPOUT_CAUSES: tuple[str, ...] = MULS_DROPOUT_CAUSES
 

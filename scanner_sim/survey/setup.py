@@ -16,11 +16,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from muls.detection import Records
-from muls.ranging import Ranging
-from muls.runtime import configure_process
+from muls.infra.runtime import configure_process
+from muls.optics.optical_model import OpticalModel, PulseBatch
+from muls.ranging.returns import Ranging
+from muls.receiver.digitiser import Records
 from muls.simulate import simulate
-from muls.waveform import OpticalModel, PulseBatch
 from scanner_sim.config import SceneConfig
 from scanner_sim.config.unit_slips import warn_unit_slips
 from scanner_sim.fidelity import FidelityLevel
@@ -191,7 +191,7 @@ class Physics:
                  whole_records: bool = False) -> tuple[Records, Ranging]:
         """``record_mode`` and ``every_channel`` override the level's record mode and its ``deciding_only`` (for
         records kept whole, as waveforms.npz keeps them). Unless ``every_channel`` or ``whole_records``, only the
-        samples the ranging reads are synthesised (the same points, :func:`muls.detection.digitise`'s
+        samples the ranging reads are synthesised (the same points, :func:`muls.receiver.digitiser.digitise`'s
         ``ranging_only``): of each CH0 record the span of its peak, and of a full record the samples the peak
         search may read."""
         return simulate(self.model, batch, self.seed, record_mode or self.record_mode,

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from muls.ranging import DROPOUT_CAUSES
+from muls.ranging.returns import DROPOUT_CAUSES
 from scanner_sim import io
 from scanner_sim.io.rosbag import RosbagWriter
 from scanner_sim.metrics.coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from scanner_sim.config import (
     CableObject,
     ConeMineObject,

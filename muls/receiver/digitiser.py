@@ -16,11 +16,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from .channel_codes import channel_codes, quantise, ranging_codes
-from .channels import gate_open_at, level_lsb
-from .deciding_channels import deciding_channels
-from .errors import check_choice
-from .noise import (
+from ..infra.errors import check_choice
+from ..infra.noise import (
     FIRST_SIGNAL_STREAM,
     NORMAL_BOUND,
     PHASE_STREAM,
@@ -31,8 +28,11 @@ from .noise import (
     stream_base,
     uniform_at,
 )
-from .runtime import kernel
-from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values, column_integrals_at
+from ..infra.runtime import kernel
+from ..instrument.channels import gate_open_at, level_lsb
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, baseline_values, column_integrals_at
+from .channel_codes import channel_codes, quantise, ranging_codes
+from .deciding_channels import deciding_channels
 
 RECORD_MODES = ("windowed", "full")
 
@@ -169,11 +169,11 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
 
     ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
     ``echoes``: ``model.echoes(batch)`` if already computed. ``deciding_only``: in each window, synthesise only the
-    channels that can decide a return (:mod:`muls.deciding_channels`); the others' codes are 0 and
+    channels that can decide a return (:mod:`muls.receiver.deciding_channels`); the others' codes are 0 and
     ``Records.synthesised`` says which. ``ranging_only``: only the samples the ranging may read get their codes,
     the others 0: of each CH0 record the samples around its peak (:func:`_reference`), and of ``full`` records
     the samples where a run of the peak search may start or go on or a code may clip, and those beside them
-    (:func:`muls.channel_codes.ranging_codes`; windows are mostly echo, and draw faster whole). The same peaks and
+    (:func:`muls.receiver.channel_codes.ranging_codes`; windows are mostly echo, and draw faster whole). The same peaks and
     ranges, the records not whole.
     """
     ins = model.instrument
@@ -211,9 +211,9 @@ WINDOW_BLOCK = 64
 def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_mean, dark_std, max_code,
                noise_scale, peak_only):
     """The CH0 records (n_pulses, n_ref) from sample 0 (MULS Eqs. 2, 13 through the photodiode). ``peak_only``:
-    only the samples that can hold the record's highest code or flank it (what :func:`muls.peaks._reference_peaks`
+    only the samples that can hold the record's highest code or flank it (what :func:`muls.ranging.peaks._reference_peaks`
     reads) get their noise and code, the others code 0: a sample whose noise-free level lies more than two noise
-    bounds (:data:`muls.noise.NORMAL_BOUND` sigma and a rounding each) under the highest level is below the highest
+    bounds (:data:`muls.infra.noise.NORMAL_BOUND` sigma and a rounding each) under the highest level is below the highest
     code whatever the draws, and so is 0."""
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
@@ -226,7 +226,7 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
             for k in range(n_ref):
                 u = sampling.t0_s + k * sampling.dt_s + sampling.phase_s[p]
                 levels[k] = 0.0
-                if 0.0 <= u < extent:  # the filtered pulse (MULS Eq. 2), as muls.waveform.pulse_value
+                if 0.0 <= u < extent:  # the filtered pulse (MULS Eq. 2), as muls.optics.optical_model.pulse_value
                     if ea < 0.0:
                         ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
                     levels[k] = lsb_per_density * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
@@ -265,9 +265,9 @@ def _reference_span(levels, dark_mean, bound, max_code):
 
 class DigitiserSettings(NamedTuple):
     """Scalars of the digitiser kernel: the top code [LSB], the noise's scale (1, or 0 for no noise), whether only
-    the channels that can decide a return are synthesised (:mod:`muls.deciding_channels`), the threshold [sigma]
+    the channels that can decide a return are synthesised (:mod:`muls.receiver.deciding_channels`), the threshold [sigma]
     that decides it and that the peak search uses, and whether only the samples the peak search may read get their
-    codes (:func:`muls.channel_codes.ranging_codes`)."""
+    codes (:func:`muls.receiver.channel_codes.ranging_codes`)."""
 
     max_code: float
     noise_scale: float

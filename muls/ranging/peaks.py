@@ -23,12 +23,12 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from .channels import processor_sigma_lsb
-from .detection import WINDOW_BLOCK, Records, sample_times
-from .lookup import bracket, interp_at, on_geometric_grid, on_log_grid, steps_per_log
+from ..infra.lookup import bracket, interp_at, on_geometric_grid, on_log_grid, steps_per_log
+from ..infra.runtime import kernel
+from ..instrument.channels import processor_sigma_lsb
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, baseline_values, pulse_value
+from ..receiver.digitiser import WINDOW_BLOCK, Records, sample_times
 from .peak_echoes import dominant_echo
-from .runtime import kernel
-from .waveform import Echoes, OpticalModel, PulseBatch, baseline_values, pulse_value
 
 #: Most peaks kept per window and channel (more means noise, not echoes).
 MAX_PEAKS_PER_WINDOW = 8
@@ -226,7 +226,7 @@ def _reference_peaks(reference, dark_mean, fit, table):
 def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
            clip_table, out, sparse):
     """The peak search over every window and channel (module doc), into ``out``. ``sparse``: records mostly 0 (full
-    records coded where the search reads, :func:`muls.channel_codes.ranging_codes`): a channel's residuals are
+    records coded where the search reads, :func:`muls.receiver.channel_codes.ranging_codes`): a channel's residuals are
     computed, and its runs looked for, only within a sample of its nonzero codes (:func:`_code_segments`)."""
     n_windows, n_chan, n_samples = codes.shape
     cap = out.window.shape[0] // max(1, n_windows * n_chan)

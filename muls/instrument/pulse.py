@@ -17,7 +17,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .errors import check_positive
+from ..infra.errors import check_positive
 
 #: k of Eq. 2 for n = 1 that makes the width parameter the full width at half maximum: the two roots of
 #: x exp(1 - x) = 1/2 are k apart.

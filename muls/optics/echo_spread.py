@@ -1,4 +1,4 @@
-"""An echo spread in time by multiple scattering, as the Monte Carlo's tables give it (:mod:`muls.scattering`): each
+"""An echo spread in time by multiple scattering, as the Monte Carlo's tables give it (:mod:`muls.optics.scattering`): each
 echo becomes its share on the straight path and equal shares of the rest at the tables' quantile delays, or one echo
 at their mean delay where they lie close, interpolated linearly in range over the rows the Monte Carlo saw. Compiled
 kernels: each return's row is found once, and the node delays' mean and mean square are closed forms per interval.
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .runtime import kernel
+from ..infra.runtime import kernel
 from .scattering import ScatteringTables
 
 #: [s] An echo whose delays spread by less than this (their energy-weighted standard deviation) is one echo at their

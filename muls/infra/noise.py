@@ -22,7 +22,7 @@ _INV_2_32 = 1.0 / 4294967296.0
 
 #: Stream numbers: the sampling phase, the CH0 noise, then one stream per pair of signal channels for their
 #: dark noise (the two normals of one draw serve channels 2j and 2j + 1), then one stream per pair of
-#: detectors for their shot noise (channels of one detector share its draw; muls.detection).
+#: detectors for their shot noise (channels of one detector share its draw; muls.receiver.digitiser).
 PHASE_STREAM = 0
 REFERENCE_STREAM = 1
 FIRST_SIGNAL_STREAM = 2

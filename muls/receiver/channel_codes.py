@@ -8,9 +8,9 @@ import math
 
 import numpy as np
 
-from .channels import gate_open_at, level_lsb
-from .noise import fill_normals_of, half_bits, normal_upper_bound
-from .runtime import kernel
+from ..infra.noise import fill_normals_of, half_bits, normal_upper_bound
+from ..infra.runtime import kernel
+from ..instrument.channels import gate_open_at, level_lsb
 
 
 @kernel(inline="always")
@@ -40,13 +40,13 @@ READ_MARGIN_LSB = 1e-3
 @kernel(nogil=True, error_model="numpy")
 def ranging_codes(out, power, baseline, times, dark_hashes, dark_half, shot_hashes, shot_half, chans, c, max_code,
                   noise_scale, k_sigma, read, at, dark_normal, shot_normal, tails):
-    """One channel's codes (n,) of a window where the peak search (:func:`muls.peaks._peaks`) may read them, 0
+    """One channel's codes (n,) of a window where the peak search (:func:`muls.ranging.peaks._peaks`) may read them, 0
     elsewhere: the same codes as :func:`channel_codes` there, with the normals computed only there.
 
     The search reads a code where a run may start or go on (its residual over the baseline above half the threshold,
     ``k_sigma`` / 2 of the processor's sigma), where it may be clipped (the top code), and the samples next to those
     (a run's ends, the three-point fit, a plateau's edges). A code cannot be either where even its largest possible
-    noise cannot take it there: each normal at most :func:`muls.noise.normal_upper_bound` of its bits (read from the
+    noise cannot take it there: each normal at most :func:`muls.infra.noise.normal_upper_bound` of its bits (read from the
     hash, not drawn), and a code is an integer, so one over the run level must reach the least integer over it. The
     echo model the search takes off a residual is never negative, and a code of 0 lies under every run's level and the
     top code, so the search finds the same runs. ``dark_hashes``, ``shot_hashes`` (n,): the

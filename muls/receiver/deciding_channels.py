@@ -1,8 +1,8 @@
 """Which signal channels of a record window can decide a return, judged on the noise-free signal before any noise
 is drawn: the digitiser's ``deciding_only`` mode synthesises only those (the ``auto`` and ``fast`` levels).
 
-Ranging keeps, for each echo, the unsaturated peak with the best SNR (:func:`muls.ranging.choose_returns`), and
-every normal the noise streams give is smaller than :data:`muls.noise.NORMAL_BOUND` in magnitude, so some outcomes
+Ranging keeps, for each echo, the unsaturated peak with the best SNR (:func:`muls.ranging.returns.choose_returns`), and
+every normal the noise streams give is smaller than :data:`muls.infra.noise.NORMAL_BOUND` in magnitude, so some outcomes
 are certain before the noise is drawn:
 
 - a channel with no open sample that both escapes the column's clipping (the processor's calibrated baseline below
@@ -26,9 +26,9 @@ import math
 
 import numpy as np
 
-from .channels import gate_open_at, level_lsb, processor_sigma_lsb
-from .noise import NORMAL_BOUND
-from .runtime import kernel
+from ..infra.noise import NORMAL_BOUND
+from ..infra.runtime import kernel
+from ..instrument.channels import gate_open_at, level_lsb, processor_sigma_lsb
 
 #: The kept channel's worst SNR must exceed a lower-gain channel's best by this factor for that one to be dropped:
 #: room for the peak fit's amplitude ratio (the centre sample over the fitted peak, within a few per cent).
@@ -36,7 +36,7 @@ SNR_MARGIN = 1.25
 #: [s] Most spread of a pulse's echo delays for its echo to count as one: a sample interval, so the echo is the
 #: pulse's shape to a few per cent and the peak search finds it once. A footprint stretched over range (grazing
 #: incidence) makes a long hump in which the search finds several peaks per channel, and which of them become
-#: returns depends on how the other channels' peaks chain them (muls.ranging's merge window).
+#: returns depends on how the other channels' peaks chain them (muls.ranging.returns's merge window).
 ECHO_SPAN_S = 1e-9
 #: A peak surely this far over its noise is timed within a fraction of a nanosecond (a 10 ns pulse's edge over
 #: the SNR), far inside the 4 ns within which ranging merges the peaks of different channels into one return; a
@@ -50,8 +50,8 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
     ``scratch``: (3, n_channels) bool work space.
 
     power: (n,) noise-free optical power at the window's samples [W]; baseline: (n,) the processor's calibrated
-    baseline there [W] (background plus the uncut column, as :mod:`muls.peaks` uses it); times: (n,) the sample
-    times [s]; chans: the signal channels' :class:`muls.channels.ChannelArrays`; max_code: the top code [LSB];
+    baseline there [W] (background plus the uncut column, as :mod:`muls.ranging.peaks` uses it); times: (n,) the sample
+    times [s]; chans: the signal channels' :class:`muls.instrument.channels.ChannelArrays`; max_code: the top code [LSB];
     k_sigma: the detection threshold [sigma]; echo_span_s: the spread of the pulse's echo delays [s].
     """
     n_chan, n = out.shape[0], power.shape[0]
@@ -96,7 +96,7 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
             else:
                 clipped[c] = _clipped_from_blindness(c, power, baseline, times, top, chans, max_code)
     if best < 0:
-        # every channel that sees is clipped: the return is the lowest-gain saturated peak (muls.ranging)
+        # every channel that sees is clipped: the return is the lowest-gain saturated peak (muls.ranging.returns)
         every_clipped = lowest >= 0
         for c in range(n_chan):
             every_clipped = every_clipped and (clipped[c] or not out[c])
@@ -153,7 +153,7 @@ def _clipped_from_blindness(c, power, baseline, times, top, chans, max_code):
 @kernel(nogil=True)
 def _snr_bounds(c, power, baseline, top, chans):
     """(least, most) SNR of channel c's peak at the hump: its amplitude over the baseline, less or plus the noise's
-    reach, over the processor's noise there (dark, rounding and the baseline's shot noise, as muls.peaks has it)."""
+    reach, over the processor's noise there (dark, rounding and the baseline's shot noise, as muls.ranging.peaks has it)."""
     amplitude = chans.lsb_per_w[c] * (power[top] - baseline[top])
     reach = _noise_reach(chans, c, power[top])
     sigma = processor_sigma_lsb(chans, c, baseline[top])

@@ -20,7 +20,7 @@ phase function p (backscattered light is lost). Overlapping the two patterns giv
 which replaces exp(-2 k Z) in Eqs. 4, 7, 9 and 10 through k = -ln T / (2 Z). To first order in b it keeps
 the share of single scattering that lands inside the footprint, int_0^1 F(theta_r/2 / (1 - u)) du of b,
 with F the cumulative phase function: 0.60 for the MUL's 100 mrad field and Petzold's phase function.
-The phase function is Petzold's average particle phase function (:mod:`muls.phase`), the one whose
+The phase function is Petzold's average particle phase function (:mod:`muls.water.phase`), the one whose
 b_b / b = 0.0183 the K_d estimate already uses. The approximation neglects the longer paths of scattered
 light (pulse stretching) and scattering back into the field from large angles; docs/design.md compares it
 with the Monte Carlo reference (:mod:`muls.montecarlo`).

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from .errors import ParameterError, check_choice, check_non_negative
+from ..infra.errors import ParameterError, check_choice, check_non_negative
 from .phase import petzold
 
 SPEED_OF_LIGHT_M_S = 299_792_458.0
@@ -33,15 +33,15 @@ GROUP_INDEX_FRESHWATER = 1.357
 MAX_ATTENUATION_EXPONENT = 40.0
 
 #: Attenuation rules (docs/design.md#attenuation). ``monte_carlo`` (the default): the two-way transmission of the
-#: Monte Carlo reference for this water and receiver, tabulated against range (muls.scattering); ``small_angle``:
-#: forward scattering kept by the receiver's field of view, from the small-angle approximation (muls.smallangle);
+#: Monte Carlo reference for this water and receiver, tabulated against range (muls.optics.scattering); ``small_angle``:
+#: forward scattering kept by the receiver's field of view, from the small-angle approximation (muls.water.smallangle);
 #: both depend on the range and the receiver. ``k_lidar``: MULS Eq. 6; ``c``: beam attenuation; ``kd``: diffuse.
 ATTENUATION_MODELS = ("monte_carlo", "k_lidar", "c", "kd", "small_angle")
-#: The rules that depend on the range and the receiver (muls.radiometry.attenuation_per_m evaluates them).
+#: The rules that depend on the range and the receiver (muls.optics.radiometry.attenuation_per_m evaluates them).
 RANGE_DEPENDENT_MODELS = ("monte_carlo", "small_angle")
 
 #: The particle phase function of every water's scattering in the model: the Monte Carlo's tables
-#: (muls.montecarlo.tables) and the small-angle rule (muls.smallangle) integrate Petzold's average (muls.phase).
+#: (muls.montecarlo.tables) and the small-angle rule (muls.water.smallangle) integrate Petzold's average (muls.water.phase).
 PHASE_FUNCTION = "petzold"
 
 #: Backscatter rules (docs/design.md#backscatter): ``measured`` (the default) takes beta(180 deg) measured in the water
@@ -135,7 +135,7 @@ class Water:
         """The k used in exp(-2 k z) of Eqs. 4, 7, 9, 10, per ``attenuation_model`` [1/m].
 
         The ``monte_carlo`` and ``small_angle`` rules depend on the range and the receiver
-        (:func:`muls.radiometry.attenuation_per_m` gives them); here they give K_d, about their value for a
+        (:func:`muls.optics.radiometry.attenuation_per_m` gives them); here they give K_d, about their value for a
         footprint many free paths wide.
         """
         if self.attenuation_model == "k_lidar":

@@ -4,10 +4,11 @@ wait, and how glibc keeps chunk-sized arrays. Importing a module changes nothing
 :func:`configure_process` once.
 
 **Kernel cache.** numba's on-disk cache (``cache=True``) checks only the source file of the function it compiled,
-but a kernel compiles in the helpers it calls from other modules (:mod:`muls.noise`'s draws and
-:mod:`muls.deciding_channels` in :mod:`muls.detection`'s digitiser, :mod:`muls.waveform`'s column in the peak
-search). After a change to such a helper alone (an edit, or a ``git pull`` into an editable install) a cached
-kernel would go on running the old helper, silently. So :func:`kernel` caches each kernel in a directory keyed by
+but a kernel compiles in the helpers it calls from other modules (:mod:`muls.infra.noise`'s draws and
+:mod:`muls.receiver.deciding_channels` in :mod:`muls.receiver.digitiser`'s digitiser,
+:mod:`muls.optics.optical_model`'s column in the peak search). After a change to such a helper alone (an edit, or
+a ``git pull`` into an editable install) a cached kernel would go on running the old helper, silently. So
+:func:`kernel` caches each kernel in a directory keyed by
 the size and modification time of every source file of ``muls`` and of the package that defines the kernel (a
 package that builds on muls, such as the mission, registers its own sources by defining its kernels with
 :func:`kernel`): any change starts a fresh cache, and the first run after it compiles again.

@@ -1,5 +1,5 @@
 """Per-channel constants of the compiled kernels: gain in LSB per watt (Eqs. 12, 13), gates, dark and shot
-noise. Built once per :class:`muls.waveform.OpticalModel` and passed to the kernels as one named tuple."""
+noise. Built once per :class:`muls.optics.optical_model.OpticalModel` and passed to the kernels as one named tuple."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .instrument import Channel, Instrument
-from .runtime import kernel
+from ..infra.runtime import kernel
+from .description import Channel, Instrument
 
 ELECTRON_CHARGE_C = 1.602176634e-19
 

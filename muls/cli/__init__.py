@@ -10,7 +10,7 @@ a short table), and, except ``bench``, writes a picture (``--out``, a default na
 skips it). Bad arguments give one line on stderr naming the option and what is allowed, and exit code 2.
 
 The command-line plumbing it shares with ``scanner-sim`` (argument types, one-line errors, exit codes) is in
-:mod:`muls.command`.
+:mod:`muls.infra.command`.
 
 It is longer than the other modules on purpose: it holds only the subcommands' parsers and the thin functions
 that print each study's result, one pair per subcommand; the studies themselves live in :mod:`muls.studies`,
@@ -26,8 +26,8 @@ import os
 import sys
 from pathlib import Path
 
-from . import montecarlo, studies
-from .command import (
+from .. import montecarlo, studies
+from ..infra.command import (
     OneLineParser,
     checked_types,
     fraction,
@@ -43,9 +43,9 @@ from .command import (
     seed,
     write_atomically,
 )
-from .presets import WATER_PRESETS, water_preset
-from .runtime import configure_process
-from .studies.common import check_pulse_memory
+from ..infra.runtime import configure_process
+from ..presets import WATER_PRESETS, water_preset
+from ..studies.common import check_pulse_memory
 
 
 def _water_name(name: str) -> str:
@@ -76,7 +76,7 @@ def _shots(option: str, value: int, per_shot: int, what: str, unit: str = "shots
 def _packets(option: str, value: int, factor: int = 1) -> int:
     """A count of Monte Carlo packets, a run tracing up to ``factor`` times it: at most what its 64-bit packet
     numbers allow (:func:`muls.montecarlo.run.max_packets`)."""
-    from .montecarlo.run import max_packets
+    from ..montecarlo.run import max_packets
 
     limit = max_packets() // factor
     if _count(option, value) > limit:
@@ -123,14 +123,14 @@ def _cmd_waveform(args):
         lines.append(f"no return: dropout cause {result['dropout_cause']}")
     for p in result["peaks"]:
         lines.append(f"peak: {p['channel']} at {p['range_m']:.3f} m{' (clipped)' if p['saturated'] else ''}")
-    from .plots import plot_waveform
+    from ..plots import plot_waveform
 
     return result, "\n".join(lines), plot_waveform
 
 
 def _cmd_maxrange(args):
     waters = [_water_name(w) for w in args.waters]
-    from .studies.maxrange import MAX_BATCH_RANGES
+    from ..studies.maxrange import MAX_BATCH_RANGES
 
     shots = _shots("--shots", args.shots, MAX_BATCH_RANGES, f"up to {MAX_BATCH_RANGES} ranges at once x ")
     result = studies.maxrange_study(waters, shots=shots, seed=args.seed,
@@ -154,7 +154,7 @@ def _cmd_maxrange(args):
             cells.append(f"{group} -" if lim is None else
                          f"{group} {lim['channel']} {lim['cause']} (SNR {_fmt(lim['snr'], 1)})")
         lines.append(f"{w:15s} " + "; ".join(cells))
-    from .plots import plot_maxrange
+    from ..plots import plot_maxrange
 
     return result, "\n".join(lines), plot_maxrange
 
@@ -174,7 +174,7 @@ def _cmd_precision(args):
         for ch, st in result[key].items():
             lines.append(f"{key:>8s} {ch:8s} {_fmt(st['precision_m'], 4):>8s} {_fmt(st['mean_deviation_m'], 4):>11s} "
                          f"{_fmt(st['detected_fraction'], 3):>9s} {_fmt(st['saturated_fraction'], 3):>8s}")
-    from .plots import plot_precision
+    from ..plots import plot_precision
 
     return result, "\n".join(lines), plot_precision
 
@@ -208,7 +208,7 @@ def _cmd_edge_bias(args):
 
 
 def _experiment_name(name: str) -> str:
-    from .experiments import EXPERIMENTS
+    from ..experiments import EXPERIMENTS
 
     if name not in EXPERIMENTS:
         raise ValueError(f"experiment {name!r}: must be one of {', '.join(EXPERIMENTS)}")
@@ -216,7 +216,7 @@ def _experiment_name(name: str) -> str:
 
 
 def _ranging(name: str) -> str:
-    from .experiments import RANGING
+    from ..experiments import RANGING
 
     if name not in RANGING:
         raise ValueError(f"--ranging {name!r}: must be one of {', '.join(RANGING)}")
@@ -224,7 +224,7 @@ def _ranging(name: str) -> str:
 
 
 def _attenuation(name: str) -> str:
-    from .water import ATTENUATION_MODELS
+    from ..water.properties import ATTENUATION_MODELS
 
     if name not in ATTENUATION_MODELS:
         raise ValueError(f"--attenuation {name!r}: must be one of {', '.join(ATTENUATION_MODELS)}")
@@ -236,7 +236,7 @@ EXPERIMENT_KEYS = ("distances", "settings")
 
 
 def _cmd_experiment(args):
-    from .experiments import experiment_preset
+    from ..experiments import experiment_preset
 
     exp = experiment_preset(_experiment_name(args.experiment), _attenuation(args.attenuation))
     shots = _shots("--shots", args.shots, len(exp.distances_m), f"{len(exp.distances_m)} distances x ")
@@ -254,7 +254,7 @@ def _cmd_experiment(args):
             lines.append(f"{key:>6s} {ch:4s} {_fmt(st['detected_fraction'], 3):>8s} {_fmt(st['precision_m'], 4):>8s} "
                          f"{_fmt(st['mean_abs_deviation_m'], 4):>8s} {_fmt(st['bias_m'], 4):>8s} "
                          f"{_fmt(st['clipped_fraction'], 3):>8s}")
-    from .plots import plot_experiment
+    from ..plots import plot_experiment
 
     result = {k: full[k] for k in EXPERIMENT_KEYS}
 
@@ -274,7 +274,7 @@ def _dump_json(result, path):
 
 
 def _cmd_budget(args):
-    from .studies.budget import budget_table
+    from ..studies.budget import budget_table
 
     result = studies.budget_study(_attenuation(args.attenuation))
     head = (f"photon budget, {result['settings']['attenuation_model']} attenuation, panel "
@@ -290,7 +290,7 @@ def _cmd_coaxial(args):
             f"  peak coaxial {result['coaxial_peak_w']:.4g} W at {result['coaxial_peak_time_ns']:.1f} ns, "
             f"peak non-coaxial {result['non_coaxial_peak_w']:.4g} W at {result['non_coaxial_peak_time_ns']:.1f} ns\n"
             f"  peak_ratio = {result['peak_ratio']:.2f}")
-    from .plots import plot_coaxial
+    from ..plots import plot_coaxial
 
     def plot(res, path):
         others = {w: studies.coaxial_study(w, attenuation_model=rule) for w in studies.MAXRANGE_WATERS if w != s["water"]}
@@ -353,7 +353,7 @@ def _cmd_multiscatter(args):
     for t, mc, err, mu in list(zip(full["time_ns"], full["mc_w"], full["mc_rel_err"], full["muls_w"]))[::step]:
         ratio = f"{mc / mu:8.3g}" if mu > 0 else "       -"
         lines.append(f"{t:8.1f} {mc:11.4g} {_fmt(err, 3):>8s} {mu:11.4g} {ratio}")
-    from .plots import plot_multiscatter
+    from ..plots import plot_multiscatter
 
     result = {k: full[k] for k in MULTISCATTER_KEYS}
     return result, "\n".join(lines), lambda res, path: plot_multiscatter(full, path)
@@ -391,7 +391,7 @@ def _cmd_multiscatter_study(args):
         r_mu = "-" if det is None else f"{det['muls_m']:.1f}"
         lines.append(f"{w:14s} {rules} {c['mc_first_order_peak_w'] / c['mc_peak_w']:9.3g} {c['mc_peak_rel_err']:6.1%} "
                      f"{r_mu:>10s} {r_mc:>9s} {worst:10.1%}")
-    from .plots import plot_multiscatter_study
+    from ..plots import plot_multiscatter_study
 
     def write(res, out_dir):  # the study's directory: its chart and its JSON, each written whole
         os.makedirs(out_dir, exist_ok=True)
@@ -422,13 +422,13 @@ def _cmd_mobley1993(args):
     inside = sum(r["within"] for r in records)
     lines.append(f"{inside} of {len(records)} values within the paper's range widened by the Monte Carlo's 2 standard "
                  "errors")
-    from .plots import plot_mobley1993
+    from ..plots import plot_mobley1993
 
     return result, "\n".join(lines), plot_mobley1993
 
 
 def _cmd_validate_pass(args):
-    from .montecarlo.validate import validate_pass, within_acceptance
+    from ..montecarlo.validate import validate_pass, within_acceptance
 
     full = validate_pass(tuple(_water_name(w) for w in args.waters), packets=_packets("--packets", args.packets),
                          seed=args.seed)
@@ -577,7 +577,7 @@ def build_parser() -> argparse.ArgumentParser:
     common(p)
     p.set_defaults(run=_cmd_mobley1993)
 
-    from .montecarlo.validate import VALIDATION_PACKETS, VALIDATION_SEED, VALIDATION_WATERS
+    from ..montecarlo.validate import VALIDATION_PACKETS, VALIDATION_SEED, VALIDATION_WATERS
 
     p = sub.add_parser("validate-pass", help="the pass's waveform model against a Monte Carlo run, five waters, 2-30 m")
     p.add_argument("--waters", nargs="+", default=list(VALIDATION_WATERS), type=nonempty(), metavar="WATER",
@@ -592,7 +592,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Entry point of the ``muls`` console script; returns the exit code (``run_guarded``: 0, 1, 2, 130, 143)."""
-    configure_process()  # threads, memory and the kernel cache, before any kernel runs (muls/runtime.py)
+    configure_process()  # threads, memory and the kernel cache, before any kernel runs (muls/infra/runtime.py)
     args, code = parse_guarded(build_parser(), argv)
     if args is None:
         return code

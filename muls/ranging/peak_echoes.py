@@ -1,4 +1,4 @@
-"""Which echo explains each peak of the peak search (:mod:`muls.peaks`): the one giving the most noise-free power
+"""Which echo explains each peak of the peak search (:mod:`muls.ranging.peaks`): the one giving the most noise-free power
 there among the echoes that can make a peak there, the way trimesh returns ``index_ray`` for each hit."""
 
 from __future__ import annotations
@@ -6,13 +6,13 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .runtime import kernel
-from .waveform import Echoes, pulse_value
+from ..infra.runtime import kernel
+from ..optics.optical_model import Echoes, pulse_value
 
 
 def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, shape) -> np.ndarray:
     """(n,) int64: the :class:`PulseBatch` return whose echo explains each peak (``pulse`` (n,) batch index,
-    ``time_s`` (n,) [s]; ``shape`` the instrument's :class:`muls.pulse.PulseShape`), or -1 where the echoes together
+    ``time_s`` (n,) [s]; ``shape`` the instrument's :class:`muls.instrument.pulse.PulseShape`), or -1 where the echoes together
     give less than ``need_w`` (n,) [W] there (a footprint's sub-ray echoes add up: one of them alone may be faint).
 
     The echo that explains a peak is the one giving the most noise-free power there among the echoes that can

@@ -7,8 +7,8 @@ at a grid of ranges says about a water and a receiver, in the form the model app
 interpolation:
 
 - the echo's **two-way transmission** T(R) [-]: the Monte Carlo's echo energy over Eq. 7 with the finite-aperture
-  overlap (:mod:`muls.overlap`) and no attenuation. It is the ``monte_carlo`` attenuation rule
-  (:data:`muls.water.ATTENUATION_MODELS`): k(R) = -ln T(R) / (2 R), interpolated linearly in ln R, the end values
+  overlap (:mod:`muls.instrument.overlap`) and no attenuation. It is the ``monte_carlo`` attenuation rule
+  (:data:`muls.water.properties.ATTENUATION_MODELS`): k(R) = -ln T(R) / (2 R), interpolated linearly in ln R, the end values
   held outside the grid;
 - the echo's **spread in time**: the share of its energy that comes back on the straight path (both legs
   unscattered, at the geometric delay), and the delays [s] of equal-energy quantile nodes of the rest after the
@@ -33,15 +33,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .overlap import TransceiverGeometry
-from .water import Water
+from ..instrument.overlap import TransceiverGeometry
+from ..water.properties import Water
 
 #: Version of the tables' content: a change to how they are built makes a new key (old files are not read).
 TABLE_FORMAT = 2
 #: Quantile nodes of the scattered part of an echo (even: the model pairs them where the spread is narrow).
 SPREAD_NODES = 8
 #: Tables shipped with the package (the presets, with the instruments' geometries: python3 -m muls.montecarlo.shipped_tables).
-SHIPPED_DIR = Path(__file__).resolve().parent / "data" / "scattering"
+SHIPPED_DIR = Path(__file__).resolve().parents[1] / "data" / "scattering"
 
 
 @dataclass(frozen=True)

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import ParameterError, check_non_negative, check_positive
-from .runtime import kernel
+from ..infra.errors import ParameterError, check_non_negative, check_positive
+from ..infra.runtime import kernel
 
 #: How the receiver's view of the beam is modelled: each aperture point's own field (default), or MULS Eq. 11.
 OVERLAP_MODELS = ("finite_aperture", "eq11")

@@ -2,14 +2,14 @@
 and background (Eq. 8), summed as in MULS Eq. 1.
 
 With multiple scattering (``multiple_scattering="table"``, the default under the ``monte_carlo`` attenuation
-rule) the Monte Carlo reference's tables for the water and the receiver (:mod:`muls.scattering`) replace the two
+rule) the Monte Carlo reference's tables for the water and the receiver (:mod:`muls.optics.scattering`) replace the two
 single-scattering parts: the column is the Monte Carlo's impulse response, rescaled to the water's beta_pi, and
 each echo is spread in time as the Monte Carlo spreads it, as one echo on the straight path plus equal-energy
 echoes at the quantile delays of its scattered part (one echo at the mean delay where they all lie within
-:data:`~muls.echo_spread.SPREAD_MERGE_S`).
+:data:`~muls.optics.echo_spread.SPREAD_MERGE_S`).
 
 The water column of a pulse is the pulse convolved with the Eq. 4 profile, cut where the beam meets a
-surface. With the exponential pulse basis of :mod:`muls.pulse` the cut is exact and cheap: writing
+surface. With the exponential pulse basis of :mod:`muls.instrument.pulse` the cut is exact and cheap: writing
 tau = 2 z / c_w and h(tau) the column density per unit two-way time, the column power at time t of a beam
 cut at tau_c is, with tau_e = min(t, tau_c) and u = t - tau_e,
 
@@ -28,16 +28,16 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .channels import ChannelArrays
+from ..infra.errors import ParameterError
+from ..infra.filters import first_order_filter
+from ..infra.runtime import kernel
+from ..instrument.channels import ChannelArrays
+from ..instrument.description import Instrument
+from ..instrument.shape_tables import ClipTable, FitTable
+from ..water.properties import Water
 from .echo_spread import spread_echoes, spread_rows
-from .errors import ParameterError
-from .filters import first_order_filter
-from .instrument import Instrument
 from .radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission, window_factor
-from .runtime import kernel
 from .scattering import ScatteringTables
-from .shape_tables import ClipTable, FitTable
-from .water import Water
 
 #: Step of the column tables in two-way time [s]: 1/160 of the 4 ns pulse decay time.
 COLUMN_TABLE_STEP_S = 25e-12
@@ -59,7 +59,7 @@ class ColumnTables:
     def build(cls, instrument: Instrument, water: Water, step_s: float = COLUMN_TABLE_STEP_S,
               scattering: ScatteringTables | None = None, tables: ScatteringTables | None = None) -> ColumnTables:
         """``scattering``: the Monte Carlo's tables whose column replaces Eq. 4's (None: Eq. 4); ``tables``: the
-        tables of the water's attenuation rule if the caller holds them (:func:`muls.radiometry.attenuation_per_m`)."""
+        tables of the water's attenuation rule if the caller holds them (:func:`muls.optics.radiometry.attenuation_per_m`)."""
         a, b, _, _, _ = instrument.pulse.basis()
         dig = instrument.digitizer
         n = int(math.ceil((dig.record_length_s + 4.0 * instrument.pulse.duration_s) / step_s)) + 2
@@ -221,7 +221,7 @@ class OpticalModel:
                                  f"{', '.join(map(repr, MULTIPLE_SCATTERING))}")
         tables = None
         if water.attenuation_model == "monte_carlo":
-            from .montecarlo.tables import scattering_tables  # the Monte Carlo sits above the model: lazily
+            from ..montecarlo.tables import scattering_tables  # the Monte Carlo sits above the model: lazily
 
             tables = scattering_tables(instrument.geometry, water)
         scattering = tables if multiple_scattering == "table" else None
@@ -284,15 +284,15 @@ class OpticalModel:
 
     @cached_property
     def _spread_rows(self) -> tuple:
-        """The seen table rows and their moments (:func:`muls.echo_spread.spread_rows`), once per model."""
+        """The seen table rows and their moments (:func:`muls.optics.echo_spread.spread_rows`), once per model."""
         return spread_rows(self.scattering)
 
     def spread(self, pulse, delay, energy, source, range_m):
-        """Echoes (m,) spread in time by multiple scattering (:mod:`muls.scattering`): each becomes its share on the
+        """Echoes (m,) spread in time by multiple scattering (:mod:`muls.optics.scattering`): each becomes its share on the
         straight path at ``delay`` and equal shares of the rest at quantile delays after it: one echo at their
-        energy-weighted mean delay where their spread is under :data:`~muls.echo_spread.SPREAD_MERGE_S`, the means
-        of :data:`~muls.scattering.SPREAD_NODES` / 2 pairs of neighbouring nodes where it is under
-        :data:`~muls.echo_spread.SPREAD_FINE_S`, every node beyond (:func:`muls.echo_spread.spread_echoes`).
+        energy-weighted mean delay where their spread is under :data:`~muls.optics.echo_spread.SPREAD_MERGE_S`, the means
+        of :data:`~muls.optics.scattering.SPREAD_NODES` / 2 pairs of neighbouring nodes where it is under
+        :data:`~muls.optics.echo_spread.SPREAD_FINE_S`, every node beyond (:func:`muls.optics.echo_spread.spread_echoes`).
         Returns (pulse, delay, energy, source) of the echoes, pulse ascending."""
         index, out_delay, out_energy = spread_echoes(self._spread_rows, delay, energy, range_m)
         return pulse[index], out_delay, out_energy, source[index]

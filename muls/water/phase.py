@@ -24,9 +24,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from .errors import ParameterError
-from .lookup import bracket
-from .runtime import kernel
+from ..infra.errors import ParameterError
+from ..infra.lookup import bracket
+from ..infra.runtime import kernel
 
 # Petzold's average particle phase function [1/sr], the values published in Mobley (1994), Light and Water,
 # Table 3.10, derived from Petzold (1972), SIO Ref. 72-78. Angles 10^(-1 + 0.1 i) deg for i = 0..20 (0.1 to

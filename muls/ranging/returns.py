@@ -1,4 +1,4 @@
-"""Ranging as the instrument does it (MULS Eq. 14): the peaks of every channel (:mod:`muls.peaks`) grouped into
+"""Ranging as the instrument does it (MULS Eq. 14): the peaks of every channel (:mod:`muls.ranging.peaks`) grouped into
 returns with one channel chosen per return, several returns per pulse, and a cause for every pulse left
 without one.
 """
@@ -10,10 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .detection import Records
+from ..infra.runtime import kernel
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, column_value, uncut_column_value
+from ..receiver.digitiser import Records
 from .peaks import Peaks, find_peaks
-from .runtime import kernel
-from .waveform import Echoes, OpticalModel, PulseBatch, column_value, uncut_column_value
 
 DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
 NO_DROPOUT = -1

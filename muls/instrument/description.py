@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
-from .errors import ParameterError, check_choice, check_fraction, check_non_negative, check_positive
+from ..infra.errors import ParameterError, check_choice, check_fraction, check_non_negative, check_positive
 from .overlap import TransceiverGeometry
 from .pulse import PulseShape
 
@@ -47,7 +47,7 @@ class Receiver:
     window_reflectance: float = 0.0039  # assumption: T_s, Fresnel glass (n 1.52) to water (n 1.34)
     window_distance_m: float = 0.05  # assumption: D of Eq. 3, window 5 cm in front of the receiver lens
     window_coupling: float = 0.0  # O of Eq. 3: 0 for non-coaxial optics (the window is outside the FOV)
-    overlap_model: str = "finite_aperture"  # each aperture point sees its own field (muls.overlap); "eq11": MULS Eq. 11
+    overlap_model: str = "finite_aperture"  # each aperture point sees its own field (instrument.overlap); "eq11": Eq. 11
 
     def __post_init__(self):
         for key in ("area_m2", "fov_full_rad", "filter_bandwidth_m", "window_distance_m"):
