@@ -110,3 +110,17 @@ def test_bad_water_lists_the_allowed_names(capsys):
 def test_console_script_help_exits_0(capsys):
     assert main(["--help"]) == 0
     assert "maxrange" in capsys.readouterr().out
+
+
+def test_help_imports_no_command_module():
+    """``muls --help`` lists every subcommand from the registry without importing the studies, the Monte Carlo or
+    the plots behind them (they load only for the subcommand that runs)."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom muls.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('muls.montecarlo', 'muls.studies', 'muls.plots', "
+            "'muls.cli.commands', 'matplotlib'))))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert "validate-pass" in proc.stdout and "mobley1993" in proc.stdout
+    assert proc.stdout.strip().splitlines()[-1] == "[]"
