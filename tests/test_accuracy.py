@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from muls.receiver.digitiser import Records
+from scanner_sim.records.point_records import PointRecords
 from scanner_sim.studies.accuracy import MATCH_TOLERANCE_M, WaveformFit, match_returns, vs_reference, vs_truth
-from scanner_sim.survey.point_records import PointRecords
 
 
 def _points(pulse, z, classification=None, object_id=None, range_error=None):

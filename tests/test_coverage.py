@@ -15,8 +15,8 @@ from scanner_sim.metrics.coverage import (
     Footprint,
     PlanGrid,
 )
+from scanner_sim.records.point_records import DROPOUT_CAUSES, DropoutRecords, PointRecords
 from scanner_sim.survey.pipeline import run_pass
-from scanner_sim.survey.point_records import DROPOUT_CAUSES, DropoutRecords, PointRecords
 from scanner_sim.survey.setup import PassOptions
 from scanner_sim.world.scene import build_scene
 

@@ -21,11 +21,11 @@ from hypothesis import strategies as st
 
 from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, build, load_scene
+from scanner_sim.config.materials import LABELS
 from scanner_sim.runs.cluster import dask_client
 from scanner_sim.runs.dataset import MANIFEST, SPEC_RECORD, load_dataset, parse_dataset, run_dataset
 from scanner_sim.runs.dataset_draw import cable_points, split_of
 from scanner_sim.runs.dataset_spec import Distribution
-from scanner_sim.world.materials import LABELS
 from scanner_sim.world.scene import build_scene
 
 EXAMPLE = SCENES_DIR / "datasets" / "example.yaml"

@@ -18,8 +18,8 @@ import pytest
 
 from muls.cli import main as muls_main
 from scanner_sim import io
+from scanner_sim.records.point_records import PointRecords
 from scanner_sim.render import point_cloud
-from scanner_sim.survey.point_records import PointRecords
 
 REPO = Path(__file__).resolve().parents[1]
 #: The address space of each subprocess [bytes]: a command starts in well under this.

@@ -15,8 +15,8 @@ from scanner_sim.config import load_scene
 from scanner_sim.io import atomic_path, read_las, write_las
 from scanner_sim.io import las as las_module
 from scanner_sim.io.run_dir import OutputBusyError, RunDirectory, abort_on_error
+from scanner_sim.records.point_records import PointRecords
 from scanner_sim.survey.pipeline import run_pass
-from scanner_sim.survey.point_records import PointRecords
 from scanner_sim.survey.setup import PassOptions
 
 

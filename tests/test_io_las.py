@@ -12,7 +12,7 @@ import pytest
 
 from scanner_sim import io
 from scanner_sim.io.las import _set_extra_bytes_ranges
-from scanner_sim.survey.point_records import LasExtra, LasStandard, PointRecords
+from scanner_sim.records.point_records import LasExtra, LasStandard, PointRecords
 
 OFFSET = (500_000.0, 6_000_000.0, -40.0)  # a UTM-like local origin: large world coordinates
 

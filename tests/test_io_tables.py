@@ -11,7 +11,7 @@ import pytest
 
 from scanner_sim import io
 from scanner_sim.metrics.coverage import GAP_CAUSES, PlanGrid
-from scanner_sim.survey.point_records import DROPOUT_CAUSES, DropoutRecords
+from scanner_sim.records.point_records import DROPOUT_CAUSES, DropoutRecords
 
 
 def make_dropouts(n: int = 300, seed: int = 1, first_pulse: int = 0) -> DropoutRecords:

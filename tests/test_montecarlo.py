@@ -19,10 +19,10 @@ from muls.montecarlo import (
     TargetPlanes,
     geometry_factor,
     mc_power_w,
-    multiscatter_waters_study,
     run_monte_carlo,
 )
 from muls.optics.radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission
+from muls.studies import multiscatter_waters_study
 from muls.water.phase import PHASE_FUNCTIONS, cumulative_at, phase_function, sample_angle
 from muls.water.properties import henyey_greenstein as hg_closed_form
 from muls.water.properties import hg_backward_fraction

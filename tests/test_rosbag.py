@@ -294,7 +294,7 @@ def test_float32_keeps_every_millimetre_count_within_16384_m():
 
 def test_points_beyond_float32_millimetres_are_refused(tmp_path):
     """float32 keeps 1 mm only within 16,384 m of the local origin: a point farther is refused, not rounded."""
-    from scanner_sim.survey.point_records import PointRecords
+    from scanner_sim.records.point_records import PointRecords
 
     n = 2
     records = PointRecords(gps_time_s=np.zeros(n), xyz=np.array([[10.0, 0, 0], [20000.0, 0, 0]]),

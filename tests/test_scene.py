@@ -5,8 +5,8 @@ import pytest
 import yaml
 
 from scanner_sim.config import SCENES_DIR, load_scene, parse_scene
+from scanner_sim.config.materials import LABELS, MATERIALS
 from scanner_sim.rays.caster import RayCaster
-from scanner_sim.world.materials import LABELS, MATERIALS
 from scanner_sim.world.scene import build_scene, cable_centreline, tube
 from scanner_sim.world.terrain import generate_heightfield
 

@@ -13,8 +13,8 @@ import trimesh
 
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
+from scanner_sim.records.point_records import DROPOUT_CAUSES
 from scanner_sim.survey.pipeline import last_cut, run_pass
-from scanner_sim.survey.point_records import DROPOUT_CAUSES
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import LABELS
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from scanner_sim.metrics import swath
-from scanner_sim.survey.point_records import PointRecords
+from scanner_sim.records.point_records import PointRecords
 
 try:
     import open3d  # noqa: F401

@@ -1,5 +1,5 @@
 """THU and TVU per point (scanner_sim/survey/uncertainty.py, ranging_precision.py) and their calibration against the
-truth (scanner_sim/metrics/tpu_calibration.py)."""
+truth (scanner_sim/survey/tpu_calibration.py)."""
 
 from __future__ import annotations
 
@@ -14,12 +14,12 @@ from scipy.stats import foldnorm
 
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene, shipped_scenes
-from scanner_sim.metrics.tpu_calibration import UncertaintySink
-from scanner_sim.metrics.tpu_ensemble import ensemble_calibration, ensemble_seeds
 from scanner_sim.motion.trajectory import rotation_matrices
+from scanner_sim.studies.tpu_ensemble import ensemble_calibration, ensemble_seeds
 from scanner_sim.survey.pipeline import pass_chunks, run_pass, simulate_pass, warm_up
 from scanner_sim.survey.ranging_precision import tabulate
 from scanner_sim.survey.setup import PassOptions, PassSetup
+from scanner_sim.survey.tpu_calibration import UncertaintySink
 from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel, folded_normal_quantile
 
 WATERS = ("clean_ocean", "coastal_ocean", "turbid_harbor")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from scanner_sim import cli, io
+from scanner_sim.records.point_records import PointRecords
 from scanner_sim.render import point_cloud, point_colours
-from scanner_sim.survey.point_records import PointRecords
 from scanner_sim.world.scene import LABELS
 
 OFFSET = np.array([500_000.0, 6_000_000.0, -40.0])

@@ -306,8 +306,8 @@ MULTISCATTER_KEYS = ("time_ns", "mc_w", "mc_rel_err", "muls_w", "mc_column_w", "
 
 def _cmd_multiscatter(args):
     water = _water_name(args.water)
-    range_m = montecarlo.study.check_range_m("--range-m", water_preset(water), args.range_m)
-    full = montecarlo.multiscatter_study(water, range_m,
+    range_m = studies.multiscatter.check_range_m("--range-m", water_preset(water), args.range_m)
+    full = studies.multiscatter_study(water, range_m,
                                          geometry=_geometry(args.geometry), packets=_packets("--packets", args.packets),
                                          seed=args.seed, reflectance=args.reflectance,
                                          attenuation_model=_attenuation(args.attenuation))
@@ -340,7 +340,7 @@ def _cmd_multiscatter(args):
 
 def _cmd_multiscatter_study(args):
     waters = [_water_name(w) for w in args.waters]
-    result = montecarlo.multiscatter_waters_study(waters, packets=_packets("--packets", args.packets), seed=args.seed,
+    result = studies.multiscatter_waters_study(waters, packets=_packets("--packets", args.packets), seed=args.seed,
                                                   geometry=_geometry(args.geometry),
                                                   attenuation_model=_attenuation(args.attenuation))
     s = result["settings"]
@@ -364,7 +364,7 @@ def _cmd_multiscatter_study(args):
     for w in s["waters"]:
         c, det = result[w]["column"], result[w]["detection"]
         rules = " ".join(f"{c['rules'][q]['peak_ratio']:7.3g} ({c['rules'][q]['peak_ratio_same_beta_pi']:6.3g})"
-                         for q in montecarlo.ATTENUATION_RULES)
+                         for q in studies.ATTENUATION_RULES)
         worst = max(abs(q["error"]) for q in result[w]["correction_check"])
         r_mc = "-" if det is None or det["mc_implied_m"] is None else f"{det['mc_implied_m']:.1f}"
         r_mu = "-" if det is None else f"{det['muls_m']:.1f}"
@@ -536,7 +536,7 @@ def _add_multiscatter(p: argparse.ArgumentParser) -> None:
     p.add_argument("--range-m", type=positive_float(), required=True, help="plate range [m]")
     p.add_argument("--geometry", default="mul2023", type=nonempty(),
                    help="mul2023 (receiver 130 mm beside the beam) or coaxial")
-    p.add_argument("--packets", type=positive_int(), default=montecarlo.DEFAULT_PACKETS, help="beam packets")
+    p.add_argument("--packets", type=positive_int(), default=studies.DEFAULT_PACKETS, help="beam packets")
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--seed", type=seed(), default=0)
     p.add_argument("--attenuation", default="small_angle", type=nonempty(),
@@ -546,10 +546,10 @@ def _add_multiscatter(p: argparse.ArgumentParser) -> None:
 
 
 def _add_multiscatter_study(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--waters", nargs="+", type=nonempty(), default=list(montecarlo.STUDY_WATERS),
+    p.add_argument("--waters", nargs="+", type=nonempty(), default=list(studies.STUDY_WATERS),
                    help=f"water presets ({_waters()})")
     p.add_argument("--geometry", default="mul2023", type=nonempty(), help="mul2023 or coaxial")
-    p.add_argument("--packets", type=positive_int(), default=montecarlo.STUDY_PACKETS, help="beam packets per water")
+    p.add_argument("--packets", type=positive_int(), default=studies.STUDY_PACKETS, help="beam packets per water")
     p.add_argument("--seed", type=seed(), default=0)
     p.add_argument("--attenuation", default="small_angle", type=nonempty(),
                    help="MULS's own rule for its maximum range and the correction table (k_lidar, c, kd, small_angle)")

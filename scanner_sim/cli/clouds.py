@@ -97,7 +97,7 @@ def _cmd_swath(args) -> int:
 
     from scanner_sim.io import read_las
     from scanner_sim.metrics.swath import swath_consistency
-    from scanner_sim.survey.point_records import PointRecords
+    from scanner_sim.records.point_records import PointRecords
 
     path = Path(args.path)
     if path.is_file():

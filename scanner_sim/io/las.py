@@ -1,8 +1,8 @@
 """points.las: :class:`PointRecords` as LAS 1.4, point data record format 6 plus extra dimensions, streamed.
 
-The layout comes from the field declarations of :class:`~scanner_sim.survey.point_records.PointRecords`: a
-:class:`~scanner_sim.survey.point_records.LasStandard` field fills standard dimensions through its conversion
-(:data:`_TO_LAS`, :data:`_FROM_LAS`), a :class:`~scanner_sim.survey.point_records.LasExtra` field is an extra
+The layout comes from the field declarations of :class:`~scanner_sim.records.point_records.PointRecords`: a
+:class:`~scanner_sim.records.point_records.LasStandard` field fills standard dimensions through its conversion
+(:data:`_TO_LAS`, :data:`_FROM_LAS`), a :class:`~scanner_sim.records.point_records.LasExtra` field is an extra
 dimension (:data:`EXTRA_DIMENSIONS`). Header, VLRs and time mapping: ``docs/outputs.md``. Writer and reader stay in
 one module because both are built from the same field tables.
 
@@ -27,7 +27,7 @@ import numpy as np
 
 from scanner_sim.io.atomic import PathLike, StreamingWriter, atomic_path
 from scanner_sim.io.summary import jsonable
-from scanner_sim.survey.point_records import LasExtra, LasStandard, PointRecords
+from scanner_sim.records.point_records import LasExtra, LasStandard, PointRecords
 
 __all__ = [
     "EXTRA_DIMENSIONS",

@@ -62,7 +62,7 @@ def _prefer_headless_vtk() -> None:
 
 
 def points_polydata(points):
-    """A pyvista ``PolyData`` of :class:`scanner_sim.survey.point_records.PointRecords`: one vertex per point, every other
+    """A pyvista ``PolyData`` of :class:`scanner_sim.records.point_records.PointRecords`: one vertex per point, every other
     field as point data (by its field name)."""
     import pyvista as pv
 

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from muls.receiver.digitiser import Records
+from scanner_sim.records.point_records import PointRecords
 from scanner_sim.survey.georeference import NO_OBJECT
-from scanner_sim.survey.point_records import PointRecords
 
 #: [m] Largest distance at which a return is the same return as the reference's in the same pulse: under half the
 #: range length of the 10 ns pulse in water (1.1 m, the nearest two returns of one pulse the ranging resolves), and

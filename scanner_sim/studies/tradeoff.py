@@ -22,10 +22,10 @@ from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.fidelity import FIDELITY_LEVELS, FidelityLevel
 from scanner_sim.io.run_dir import hold_output
+from scanner_sim.records.point_records import PointRecords
 from scanner_sim.studies import accuracy
 from scanner_sim.survey import sinks
 from scanner_sim.survey.pipeline import pass_chunks, stream_pass
-from scanner_sim.survey.point_records import PointRecords
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import build_scene
 

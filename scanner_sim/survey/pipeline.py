@@ -27,12 +27,12 @@ from scanner_sim.config.crs import crs_label
 from scanner_sim.io.rosbag import ROSBAG_NAME
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.metrics.planned_swath import planned_swath
-from scanner_sim.metrics.tpu_calibration import UncertaintySink
+from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.render import point_cloud
 from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.gis_products import write_gis_products
-from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup, check_pass_arguments
+from scanner_sim.survey.tpu_calibration import UncertaintySink
 from scanner_sim.world.scene import Scene
 
 

@@ -26,7 +26,6 @@ from scanner_sim.config.unit_slips import warn_unit_slips
 from scanner_sim.fidelity import FidelityLevel
 from scanner_sim.io.rosbag import ROSBAG_NAME, bag_files
 from scanner_sim.metrics.coverage import CoverageSettings, Footprint, nominal_footprint
-from scanner_sim.metrics.tpu_calibration import CheckedErrors, checked_errors
 from scanner_sim.motion.scanner import Scanner
 from scanner_sim.motion.track_checks import build_trajectory
 from scanner_sim.motion.trajectory import Poses, Trajectory
@@ -35,13 +34,14 @@ from scanner_sim.rays.beams import BeamPattern, beam_pattern
 from scanner_sim.rays.cast import BeamCast, CastScene
 from scanner_sim.rays.hits import Hits
 from scanner_sim.rays.tiles import TiledCast, TiledTarget
+from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.budget import check_pass_budget
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.georeference import LinesOfSight, georeference
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
-from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.ranging_precision import measure_ranging_precision, panel_ranges_m
+from scanner_sim.survey.tpu_calibration import CheckedErrors, checked_errors
 from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel, with_uncertainty
 from scanner_sim.world.scene import Scene, build_scene
 from scanner_sim.world.site import SiteScene
@@ -166,7 +166,7 @@ class Chunk(NamedTuple):
     (``waveforms``; as far as the ranging read them, None once dropped), the nominal beam footprint (None unless
     the pass measures coverage), and the whole records of the pulses among its slots that the pass keeps
     (``kept_waveforms``: slots (k,) and records; None when none), and its points' true errors against their THU and
-    TVU (``errors``, :func:`~scanner_sim.metrics.tpu_calibration.checked_errors`)."""
+    TVU (``errors``, :func:`~scanner_sim.survey.tpu_calibration.checked_errors`)."""
 
     slots: np.ndarray
     points: PointRecords

@@ -16,10 +16,10 @@ from __future__ import annotations
 import numpy as np
 
 from scanner_sim.config import SceneConfig
-from scanner_sim.metrics.tpu_calibration import UncertaintySink
 from scanner_sim.runs.dataset_draw import scene_seeds
 from scanner_sim.survey.pipeline import pass_chunks, warm_up
 from scanner_sim.survey.setup import PassOptions, PassSetup
+from scanner_sim.survey.tpu_calibration import UncertaintySink
 
 
 def ensemble_seeds(seed: int, count: int) -> list[tuple[int, int]]:

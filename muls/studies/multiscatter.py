@@ -10,15 +10,15 @@ import time
 import numpy as np
 
 from ..infra.errors import ParameterError, check_positive
+from ..montecarlo.correction import MultipleScatteringCorrection, same_phase
+from ..montecarlo.power import effective_attenuation_per_m, geometry_factor, mc_power_w, muls_power_w, two_way_transmission
+from ..montecarlo.run import TargetPlanes, run_monte_carlo
 from ..optics.optical_model import OpticalModel
 from ..optics.radiometry import lambertian_weight, target_factor
 from ..presets import instrument_preset, water_preset
-from ..studies import maxrange_study
 from ..water.phase import check_phase
 from ..water.properties import MAX_ATTENUATION_EXPONENT, Water
-from .correction import MultipleScatteringCorrection, same_phase
-from .power import effective_attenuation_per_m, geometry_factor, mc_power_w, muls_power_w, two_way_transmission
-from .run import TargetPlanes, run_monte_carlo
+from .maxrange import maxrange_study
 
 #: Beam packets of ``muls multiscatter`` by default: the pond at 10 m then has every bin within 100 times
 #: of the column's and of the echo's peak below 5 % relative error (docs/multiple-scattering.md).

@@ -14,9 +14,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from scanner_sim.survey.point_records import PointRecords
+from scanner_sim.config.materials import NOISE_CLASS
+from scanner_sim.records.point_records import PointRecords
 from scanner_sim.survey.uncertainty import CONFIDENCE, coverage_levels
-from scanner_sim.world.materials import NOISE_CLASS
 
 #: [m] A true beam whose first hit lies further than this along it from the truth of the point's own line of sight
 #: met another surface than the one ranged (an edge between them): the point is not judged.
