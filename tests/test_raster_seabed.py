@@ -14,8 +14,8 @@ from scipy.interpolate import RegularGridInterpolator
 
 import scanner_sim
 from scanner_sim.config import ConfigError, parse_scene
+from scanner_sim.config.raster_seabed import RasterGrid
 from scanner_sim.world.scene import build_scene
-from scanner_sim.world.terrain import RasterGrid
 
 ROOT = Path(__file__).resolve().parent.parent
 X0, Y0, CELL = 500_000.0, 5_600_000.0, 1.0  # UTM zone 31N: a real place in the North Sea

@@ -9,7 +9,7 @@ import pytest
 
 from muls.optics.optical_model import PulseBatch
 from scanner_sim.config import load_scene
-from scanner_sim.studies import features
+from scanner_sim.metrics import feature_cubes as features
 from scanner_sim.studies.coverage_study import combination_config
 from scanner_sim.survey.gate import echo_span
 from scanner_sim.survey.pipeline import simulate_pass

@@ -114,7 +114,7 @@ def test_run_writes_thu_and_tvu_extra_bytes_that_laspy_reads(tmp_path):
 
 def _calibration(setup: PassSetup, options: PassOptions) -> dict:
     warm_up(setup, options)
-    sink = UncertaintySink(setup)
+    sink = UncertaintySink(setup.tpu)
     for chunk in pass_chunks(setup, options):
         sink.add(chunk)
     return sink.figures()["calibration"]

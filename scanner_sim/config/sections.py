@@ -30,12 +30,15 @@ from scanner_sim.config.base import (
 )
 from scanner_sim.config.errors import invalid
 from scanner_sim.fidelity import FIDELITY_LEVELS, FidelityLevel
-from scanner_sim.rays.beams import PROFILES, SUBRAY_COUNTS
 
 WaterPreset = Choice(*sorted(WATER_PRESETS))
 
 #: Largest seed: numpy's generators and muls's noise keys take 0 .. 2**63 - 1 without wrapping.
 MAX_SEED = 2**63 - 1
+#: Sub-ray counts the beam's ring layout allows (:func:`scanner_sim.rays.beams.beam_pattern`): 1 + 3 N (N + 1).
+SUBRAY_COUNTS = tuple(1 + 3 * n * (n + 1) for n in range(0, 9))  # 1, 7, 19, 37, 61, 91, 127, 169, 217
+#: Energy profiles across the beam.
+PROFILES = ("top_hat", "gaussian")
 #: Deeper than any ocean (the Challenger Deep is about 10,935 m) [m]: a larger depth is a unit slip.
 MAX_DEPTH_M = 11_000.0
 

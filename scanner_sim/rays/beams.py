@@ -27,10 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from muls.infra.errors import ParameterError
+from scanner_sim.config.sections import PROFILES, SUBRAY_COUNTS
 
-#: Sub-ray counts the ring layout allows: 1 + 3 N (N + 1).
-SUBRAY_COUNTS = tuple(1 + 3 * n * (n + 1) for n in range(0, 9))  # 1, 7, 19, 37, 61, 91, 127, 169, 217
-PROFILES = ("top_hat", "gaussian")
 #: Rotation of ring n relative to ring n - 1 [rad]. Chosen by minimising the worst ray-cast overlap error against
 #: Eq. 11 over 1-8 m for the mul2023 geometry (edge of the footprint across the shaft direction u): 1.5 degrees
 #: gives 0.021 at 61 sub-rays and 0.014 at 91; the golden angle gives 0.032 and 0.018, no stagger 0.08.

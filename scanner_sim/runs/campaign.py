@@ -183,7 +183,7 @@ class Campaign:
     jobs: list[PassJob]
     source_path: Path | None = None
     cubes: list[dict] = dataclasses.field(default_factory=list)
-    """The cubes placed for feature detection (:func:`scanner_sim.studies.features.cube_positions`)."""
+    """The cubes placed for feature detection (:func:`scanner_sim.metrics.feature_cubes.cube_positions`)."""
 
     @property
     def axes(self) -> list[str]:
@@ -200,7 +200,7 @@ def parse_campaign(data: Any, base_dir: Path | None = None, name: str = "campaig
     fixed = {key: getattr(opts, option) for option, key in OPTION_KEYS.items() if getattr(opts, option) is not None}
     cubes = []
     if opts.cubes_m:
-        from scanner_sim.studies import features
+        from scanner_sim.metrics import feature_cubes as features
 
         cubes = features.cube_positions(base.with_overrides(fixed), opts.cubes_m, opts.cube_count, opts.cube_seed,
                                         opts.max_pulses, "options.cube_count")
@@ -330,7 +330,7 @@ def table_row(values: Mapping[str, Any], outcome: PassOutcome, cubes: list[dict]
         row["points_per_pulse"] = summary["points"] / summary["pulses"] if summary.get("pulses") else None
         row |= _flatten(summary)
         if cubes and summary.get("coverage"):
-            from scanner_sim.studies.features import detection_table
+            from scanner_sim.metrics.feature_cubes import detection_table
 
             table = detection_table(summary["coverage"]["objects"], cubes)
             row |= _flatten({"features": {size: {k: v for k, v in c.items() if k != "valid_soundings"}

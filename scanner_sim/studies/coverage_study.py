@@ -139,7 +139,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     out = Path(out_dir)
     placed: list[dict] = []
     if cubes is not None:
-        from scanner_sim.studies import features
+        from scanner_sim.metrics import feature_cubes as features
 
         lowest = min(a for _, a, _ in plan.combinations(config))
         narrowest = combination_config(config, SCENE_WATER, lowest, plan.instruments[0], plan.gate)
@@ -167,7 +167,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
         records = [study_record(job.config, o.summary, water, altitude, instrument, job.name)
                    for (water, altitude, instrument), job, o in zip(combos, jobs, outcomes)]
         if placed:
-            from scanner_sim.studies.features import detection_table
+            from scanner_sim.metrics.feature_cubes import detection_table
 
             for record in records:
                 record["features"] = detection_table(record["objects"], placed)

@@ -36,10 +36,10 @@ def ensemble_calibration(config: SceneConfig, options: PassOptions, count: int) 
         raise ValueError(f"count: {count!r} is not allowed; the number of passes is an integer >= 1")
     base = PassSetup.build(config, options)
     warm_up(base, options)
-    pooled, members, pulses, points = UncertaintySink(base), [], 0, 0
+    pooled, members, pulses, points = UncertaintySink(base.tpu), [], 0, 0
     for survey_seed, navigation_seed in ensemble_seeds(base.seed, count):
         setup = base.with_seeds(survey_seed, navigation_seed)
-        own = UncertaintySink(setup)
+        own = UncertaintySink(setup.tpu)
         for chunk in pass_chunks(setup, options):
             own.add(chunk)
             pooled.add(chunk)

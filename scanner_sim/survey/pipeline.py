@@ -99,7 +99,7 @@ def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), sce
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup - setup.ranging_s
     compile_s = setup.ranging_s + warm_up(setup, options)
-    memory, uncertainty = sinks.MemorySink(), UncertaintySink(setup)
+    memory, uncertainty = sinks.MemorySink(), UncertaintySink(setup.tpu)
     stats, coverage, wall_s = stream_pass(setup, pass_chunks(setup, options), [memory, uncertainty], options)
     dropouts = memory.dropouts()
     summary = sinks.pass_summary(pass_facts(setup, options), stats, stats.points, dropouts.counts_by_cause(), wall_s,
@@ -286,7 +286,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
         clouds += [stack.enter_context(sink) for sink in bag_sinks(setup, out, facts)]
         dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
         waveforms = sinks.WaveformSink(setup.model.instrument.digitizer, facts.channels)
-        sample, uncertainty = sinks.CloudSample(), UncertaintySink(setup)
+        sample, uncertainty = sinks.CloudSample(), UncertaintySink(setup.tpu)
         stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts, waveforms, uncertainty]
                                               + ([sample] if render else []), options)
     summary = sinks.pass_summary(facts, stats, stats.points, dropouts.counts_by_cause(), wall_s + earlier_wall_s,

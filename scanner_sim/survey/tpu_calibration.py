@@ -77,10 +77,11 @@ class UncertaintySink:
     point, and the calibration of the judged points (:func:`checked_errors`): the shares within THU and TVU over all,
     per channel and per incidence band, the predicted-against-observed coverage curve, the true errors' quantiles.
     Counts and histograms only, whatever the pass's size: each chunk brings its points' checked errors
-    (``Chunk.errors``). ``setup``: the pass's :class:`PassSetup`, whose tables the figures state."""
+    (``Chunk.errors``). ``tpu``: the pass's TPU model (``PassSetup.tpu``, a
+    :class:`~scanner_sim.survey.uncertainty.TpuModel`), whose ranging and navigation tables the figures state."""
 
-    def __init__(self, setup):
-        self.setup = setup
+    def __init__(self, tpu):
+        self.tpu = tpu
         bins = int(HISTOGRAM_MAX_M / HISTOGRAM_BIN_M) + 1
         self.histograms = {name: np.zeros(bins, np.int64) for name in
                            ("thu_m", "tvu_m", "true_vertical_error_m", "true_horizontal_error_m")}
@@ -149,6 +150,6 @@ class UncertaintySink:
                 "true_horizontal_error_m": self._quantiles("true_horizontal_error_m"),
                 "skipped": dict(self.skipped),
             },
-            "ranging": self.setup.tpu.ranging.as_dict(),
-            "navigation": self.setup.tpu.navigation.as_dict(),
+            "ranging": self.tpu.ranging.as_dict(),
+            "navigation": self.tpu.navigation.as_dict(),
         }
