@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from .optics.optical_model import OpticalModel, PulseBatch
 from .ranging.returns import Ranging, range_batch
-from .receiver.digitiser import Records, digitise
+from .receiver.digitiser import Waveforms, digitise
 
 
 def simulate(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
              keep_noise_free: bool = False, noise: bool = True, deciding_only: bool = False, ranging_only: bool = False
-             ) -> tuple[Records, Ranging]:
+             ) -> tuple[Waveforms, Ranging]:
     """Digitise the channels of ``batch`` (Eqs. 1-13) and range it (Eq. 14); ``seed`` keys all noise.
     ``deciding_only``: only the channels that can decide a return; ``ranging_only``: only the samples the ranging may
     read, the same ranges for less work (:func:`muls.receiver.digitiser.digitise`)."""

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from muls.receiver.digitiser import Records
+from muls.receiver.digitiser import Waveforms
 from scanner_sim.records.point_records import PointRecords
 from scanner_sim.studies.accuracy import MATCH_TOLERANCE_M, WaveformFit, match_returns, vs_reference, vs_truth
 
@@ -69,7 +69,7 @@ def test_class_agreement_is_the_share_of_partners_with_the_same_class():
 
 
 def _records(codes, window_pulse, window_start, mode, n_pulses):
-    return Records(reference=np.zeros((n_pulses, 4), np.uint16), codes=np.asarray(codes, np.uint16),
+    return Waveforms(reference=np.zeros((n_pulses, 4), np.uint16), codes=np.asarray(codes, np.uint16),
                    window_pulse=np.asarray(window_pulse, np.int64), window_start=np.asarray(window_start, np.int64),
                    phase_s=np.zeros(n_pulses), mode=mode)
 

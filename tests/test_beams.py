@@ -13,7 +13,7 @@ from scanner_sim.studies.raycast_overlap import raycast_overlap
 
 GEOMETRY = mul2023().geometry
 GEOMETRIES = {model: replace(GEOMETRY, overlap_model=model) for model in ("finite_aperture", "eq11")}
-OVERLAP_TOLERANCE = 0.03  # issue 3 acceptance: ray-cast overlap within 0.03 of the analytic one with >= 61 sub-rays
+OVERLAP_TOLERANCE = 0.03  # ray-cast overlap within 0.03 of the analytic one with >= 61 sub-rays
 
 
 @pytest.mark.parametrize("count", SUBRAY_COUNTS[:7])

@@ -1,4 +1,4 @@
-"""Issue 14, class 4: every option of every subcommand of ``scanner-sim`` and ``muls`` is range-checked by
+"""Command-line arguments (docs/errors.md): every option of every subcommand of ``scanner-sim`` and ``muls`` is range-checked by
 argparse; a malformed value is exit code 2 and one line on stderr naming the option, never a traceback.
 
 The cases come from the parsers themselves: each option's type carries the values it must reject

@@ -1,4 +1,4 @@
-"""Issue 14, class 5: a pass interrupted by Ctrl-C or SIGTERM ends with one line and exit code 130 or 143 and
+"""Interruptions (docs/errors.md): a pass interrupted by Ctrl-C or SIGTERM ends with one line and exit code 130 or 143 and
 removes its temporary files; ``kill -9`` leaves nothing incomplete under a final name (and the next run into the
 folder cleans up and takes the stale lock over); a full disk ends with one line saying so and no partial file.
 A second run into a folder being written is refused with one line. In every case an earlier complete run in the

@@ -1,4 +1,4 @@
-"""Issue 14, class 2: mesh files that are empty, unreadable or garbage, with NaN or infinite vertices, faces
+"""Mesh files (docs/errors.md): mesh files that are empty, unreadable or garbage, with NaN or infinite vertices, faces
 that index missing vertices, or only degenerate triangles, are one-line ConfigErrors naming the object (its key
 ``objects[i]`` and name) and the file, never a traceback or a scene with silently missing triangles.
 

@@ -1,4 +1,4 @@
-"""Issue 14, classes 5 to 7 in process: the run folder (lock, hidden sibling, swap) never damages an earlier run,
+"""The output folder (docs/errors.md), in process: the run folder (lock, hidden sibling, swap) never damages an earlier run,
 atomic files leave nothing half-written, and a seed gives byte-identical files on any day.
 """
 

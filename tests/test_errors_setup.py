@@ -1,4 +1,4 @@
-"""Issue 14, class 3: physically impossible or useless set-ups are refused naming the key, or run with a
+"""Set-ups (docs/errors.md): physically impossible or useless set-ups are refused naming the key, or run with a
 warning naming it (docs/errors.md says which), and a pass too large for the machine is refused from an
 estimate made before anything pass-sized is allocated.
 """

@@ -1,4 +1,4 @@
-"""Issue 14, class 1: scene files that are not text, not YAML, not a mapping, nested too deep, aliased without
+"""Scene files (docs/errors.md): scene files that are not text, not YAML, not a mapping, nested too deep, aliased without
 bound, tagged, keyed by non-text or twice, are refused fast, in bounded memory, with one line naming the file.
 
 The property tests feed the loader whatever Hypothesis makes of bytes, of YAML documents and of a valid scene

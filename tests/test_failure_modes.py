@@ -1,4 +1,4 @@
-"""The places where the methods fail, each built from the scene format: a test per failure of issue 12, named
+"""The places where the methods fail, each built from the scene format: a test per failure, named
 after it, with its root cause in the docstring (docs/fidelity.md tables their sizes)."""
 
 import numpy as np

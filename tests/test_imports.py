@@ -41,7 +41,7 @@ def test_an_upward_lazy_import_breaks_the_layers(tmp_path):
 
 
 def test_the_physics_never_imports_the_mission():
-    graph = grimp.build_graph("muls", "scanner_sim")
+    graph = grimp.build_graph("muls", "scanner_sim", cache_dir=None)
     physics = graph.find_children("muls") | {m for c in graph.find_children("muls") for m in graph.find_descendants(c)}
     reached = {t for m in physics for t in graph.find_modules_directly_imported_by(m)}
     assert len(physics) > 50 and not {t for t in reached if t.startswith("scanner_sim")}

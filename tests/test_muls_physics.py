@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from muls import Digitizer, ParameterError, PulseShape, Transmitter, Water, mul2023, water_preset
+from muls import Digitiser, ParameterError, PulseShape, Transmitter, Water, mul2023, water_preset
 from muls.optics.optical_model import OpticalModel
 from muls.optics.radiometry import (
     background_power_w,
@@ -293,10 +293,10 @@ def test_background_terms_eqs_8_to_10():
     # linear in L_b (1 W/(m^2 sr nm) too), the shape of the ranges kept when dark, and any attenuation rule
     assert float(background_power_w(ins, water, 1.0, z, rho)[()]) == pytest.approx(1e3 * expected, rel=1e-9, abs=0)
     assert background_power_w(ins, water, 0.0, np.array([5.0, 6.0]), np.array([0.1, 0.1])).shape == (2,)
-    from muls.optics.radiometry import attenuation_per_m
+    from muls.optics.radiometry import lidar_attenuation_per_m
 
     small = water.with_models(attenuation_model="small_angle")
-    k5 = float(attenuation_per_m(ins, small, 5.0))
+    k5 = float(lidar_attenuation_per_m(ins, small, 5.0))
     assert float(background_power_w(ins, small, lb, z, rho)[()]) == pytest.approx(
         expected * math.exp(-2 * (k5 - water.k_lidar_per_m) * z), rel=1e-9, abs=0)
 
@@ -304,7 +304,7 @@ def test_background_terms_eqs_8_to_10():
 @pytest.mark.parametrize("build, key", [
     (lambda: Water("bad", -0.1, 0.2), "absorption_per_m"),
     (lambda: Water.from_attenuation("bad", 0.1, 0.2), "absorption_per_m"),
-    (lambda: Digitizer(bits=0), "digitizer.bits"),
+    (lambda: Digitiser(bits=0), "digitizer.bits"),
     (lambda: Transmitter(pulse_energy_j=0.0), "transmitter.pulse_energy_j"),
     (lambda: water_preset("muddy"), "water"),
 ])
@@ -323,11 +323,11 @@ def test_reflectance_over_one_is_rejected():
 # --- the small_angle attenuation rule (muls.water.smallangle) ---------------------------------------------------------
 
 def _small_angle(water, fov_full_rad=0.1, ranges=(5.0, 10.0, 20.0)):
-    from muls.optics.radiometry import attenuation_per_m
+    from muls.optics.radiometry import lidar_attenuation_per_m
 
     ins = mul2023()
     ins = replace(ins, receiver=replace(ins.receiver, fov_full_rad=fov_full_rad))
-    return attenuation_per_m(ins, water.with_models(attenuation_model="small_angle"), np.asarray(ranges))
+    return lidar_attenuation_per_m(ins, water.with_models(attenuation_model="small_angle"), np.asarray(ranges))
 
 
 def test_small_angle_rule_of_an_absorbing_water_is_its_absorption():
@@ -369,13 +369,13 @@ def test_small_angle_rule_keeps_more_through_a_wider_aperture():
     """The footprint is the aperture plus the field's spread (Eq. 11's r2 = d_r/2 + z tan(theta_r/2)): a wider
     aperture with the same field keeps more forward scattering, so k falls, most where the aperture is a large
     part of the footprint (close in: at 1 m it is 43 % of r2 for the 75 mm lens, 3 % at 20 m)."""
-    from muls.optics.radiometry import attenuation_per_m
+    from muls.optics.radiometry import lidar_attenuation_per_m
 
     pond = water_preset("pond").with_models(attenuation_model="small_angle")
     ins = mul2023()
     wide = replace(ins, receiver=replace(ins.receiver, area_m2=4.0 * ins.receiver.area_m2))  # twice the diameter
     ranges = np.array([1.0, 3.0, 20.0])
-    k, k_wide = attenuation_per_m(ins, pond, ranges), attenuation_per_m(wide, pond, ranges)
+    k, k_wide = lidar_attenuation_per_m(ins, pond, ranges), lidar_attenuation_per_m(wide, pond, ranges)
     assert np.all(k_wide < k)
     gain = k - k_wide
     assert gain[0] > gain[2] > 0.0

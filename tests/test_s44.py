@@ -1,5 +1,5 @@
-"""IHO S-44 orders (scanner_sim/metrics/s44.py), the planned swath and the honest figures of issue 32, checked on
-hand-counted cases and on real passes."""
+"""IHO S-44 orders (scanner_sim/metrics/s44.py), the planned swath and the figures that say what a pass did not
+measure, checked on hand-counted cases and on real passes."""
 
 import math
 

@@ -11,7 +11,7 @@ import pytest
 from muls import Water, mul2023, water_preset
 from muls.montecarlo.tables import build_tables, farthest_range_m, find_tables, scattering_tables
 from muls.optics.optical_model import OpticalModel, PulseBatch
-from muls.optics.radiometry import attenuation_per_m
+from muls.optics.radiometry import lidar_attenuation_per_m
 from muls.optics.scattering import SHIPPED_DIR, ScatteringTables, tables_key
 from muls.presets import WATER_PRESETS, coaxial
 
@@ -39,7 +39,7 @@ def test_the_key_names_every_input_of_the_run_and_nothing_else():
 def test_a_water_that_does_not_scatter_attenuates_by_its_absorption_alone():
     """Beer's law, without a Monte Carlo run: k = a at every range."""
     clear = Water("clear", 0.07, 0.0)
-    k = attenuation_per_m(mul2023(), clear, np.array([0.5, 3.0, 40.0]))
+    k = lidar_attenuation_per_m(mul2023(), clear, np.array([0.5, 3.0, 40.0]))
     np.testing.assert_allclose(k, 0.07)
 
 

@@ -105,7 +105,7 @@ def test_the_reference_has_converged_on_the_cable_survey():
 
 
 def test_points_on_a_plate_hidden_from_the_receiver_count_as_hidden():
-    """The hidden-plate failure scene without shadow rays (fast before issue 12): a point per pulse, every one on
+    """The hidden-plate failure scene without shadow rays (the fast level before shadow rays): a point per pulse, every one on
     the plate the visor hides from the receiver; the eight-surface staircase's returns behind edges are not."""
     from scanner_sim.studies.tradeoff import hidden_from_receiver
 

@@ -157,7 +157,7 @@ def test_missing_or_unreadable_file_is_one_line(tmp_path, capsys):
 
 
 def test_bad_colour_is_an_argparse_error(survey_dir, capsys):
-    assert _view(survey_dir / "points.las", "--color", "depth") == 2  # argparse's error, one line (issue 14)
+    assert _view(survey_dir / "points.las", "--color", "depth") == 2  # argparse's error, one line
     err = capsys.readouterr().err
     assert "--color" in err and "'depth'" in err and "range_error" in err
 

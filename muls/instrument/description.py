@@ -125,7 +125,7 @@ class Reference:
 
 
 @dataclass(frozen=True)
-class Digitizer:
+class Digitiser:
     """ADC of MULS Eq. 13: bits, sample rate [Hz], reference voltage V_d [V], analog bandwidth [Hz]."""
 
     bits: int = 10  # Table 1
@@ -191,7 +191,7 @@ class Instrument:
     channels: tuple[Channel, ...]
     transmitter: Transmitter = field(default_factory=Transmitter)
     receiver: Receiver = field(default_factory=Receiver)
-    digitizer: Digitizer = field(default_factory=Digitizer)
+    digitizer: Digitiser = field(default_factory=Digitiser)
     reference: Reference = field(default_factory=Reference)
     processing: Processing = field(default_factory=Processing)
 

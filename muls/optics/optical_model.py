@@ -59,7 +59,8 @@ class ColumnTables:
     def build(cls, instrument: Instrument, water: Water, step_s: float = COLUMN_TABLE_STEP_S,
               scattering: ScatteringTables | None = None, tables: ScatteringTables | None = None) -> ColumnTables:
         """``scattering``: the Monte Carlo's tables whose column replaces Eq. 4's (None: Eq. 4); ``tables``: the
-        tables of the water's attenuation rule if the caller holds them (:func:`muls.optics.radiometry.attenuation_per_m`)."""
+        tables of the water's attenuation rule if the caller holds them
+        (:func:`muls.optics.radiometry.lidar_attenuation_per_m`)."""
         a, b, _, _, _ = instrument.pulse.basis()
         dig = instrument.digitizer
         n = int(math.ceil((dig.record_length_s + 4.0 * instrument.pulse.duration_s) / step_s)) + 2

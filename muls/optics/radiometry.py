@@ -18,7 +18,7 @@ from ..water.properties import RANGE_DEPENDENT_MODELS, Water
 from .scattering import ScatteringTables
 
 
-def attenuation_per_m(instrument: Instrument, water: Water, range_m, tables: ScatteringTables | None = None):
+def lidar_attenuation_per_m(instrument: Instrument, water: Water, range_m, tables: ScatteringTables | None = None):
     """The k of exp(-2 k z) in Eqs. 4, 7, 9, 10 for light scattered back at ``range_m`` [m] (any shape) [1/m].
 
     The water's ``attenuation_model`` decides: Eq. 6's k_lidar, c or K_d are constants; ``monte_carlo`` is the
@@ -36,8 +36,8 @@ def attenuation_per_m(instrument: Instrument, water: Water, range_m, tables: Sca
             from ..montecarlo.tables import scattering_tables  # the Monte Carlo sits above the model: lazily
 
             tables = scattering_tables(g, water)
-        return tables.attenuation_per_m(r)
-    return smallangle.attenuation_per_m(water.attenuation_per_m, water.scattering_per_m, 0.5 * g.receiver_diameter_m,
+        return tables.lidar_attenuation_per_m(r)
+    return smallangle.lidar_attenuation_per_m(water.attenuation_per_m, water.scattering_per_m, 0.5 * g.receiver_diameter_m,
                                         math.tan(0.5 * g.fov_full_rad), r)
 
 
@@ -52,10 +52,10 @@ def target_factor(instrument: Instrument, water: Water, range_m, weight_per_sr, 
 
     weight_per_sr = sum over the footprint of w_j (rho_j / pi) cos(theta_j) times the receiver weight,
     which for a flat Lambertian plate at normal incidence is (rho / pi) O(Z), giving exactly Eq. 7.
-    ``tables``: as :func:`attenuation_per_m`.
+    ``tables``: as :func:`lidar_attenuation_per_m`.
     """
     r = np.asarray(range_m, dtype=float)
-    k = attenuation_per_m(instrument, water, r, tables)
+    k = lidar_attenuation_per_m(instrument, water, r, tables)
     with np.errstate(divide="ignore", invalid="ignore"):
         f = (instrument.receiver.area_m2 * np.asarray(weight_per_sr, float) * two_way_transmission(instrument)
              * np.exp(-2.0 * k * r) / r**2)  # MULS Eq. 7
@@ -73,11 +73,11 @@ def column_density_per_m(instrument: Instrument, water: Water, z_m, tables: Scat
 
     The column power is P_C(t) = E_t integral of this (z) w(t - 2 z / c_w) dz. The receiver's field-stop
     limit (``TransceiverGeometry.collection_limit``) keeps A_r O(z) / z^2 finite near the window. ``tables``: as
-    :func:`attenuation_per_m`.
+    :func:`lidar_attenuation_per_m`.
     """
     z = np.asarray(z_m, dtype=float)
     geometry = instrument.geometry
-    k = attenuation_per_m(instrument, water, z, tables)
+    k = lidar_attenuation_per_m(instrument, water, z, tables)
     with np.errstate(divide="ignore", invalid="ignore"):
         density = (instrument.receiver.area_m2 * geometry.overlap(z) * geometry.collection_limit(z)
                    * water.beta_pi_per_m_sr * two_way_transmission(instrument) * np.exp(-2.0 * k * z) / z**2)  # MULS Eq. 4
@@ -101,7 +101,7 @@ def background_power_w(instrument: Instrument, water: Water, spectral_radiance_w
 
     spectral_radiance_w_m2_sr_nm: L_b of the artificial light [W/(m^2 sr nm)]; 0 in deep, dark water.
     A pulse that meets nothing has no target term; its scattered term uses the record's far end. ``tables``: as
-    :func:`attenuation_per_m`.
+    :func:`lidar_attenuation_per_m`.
     """
     if spectral_radiance_w_m2_sr_nm == 0.0:
         return np.zeros(np.shape(range_m))
@@ -112,7 +112,7 @@ def background_power_w(instrument: Instrument, water: Water, spectral_radiance_w
     far = water.speed_m_s * instrument.digitizer.record_length_s / 2.0
     r = np.where(np.isfinite(r), r, far)
     rho = np.where(np.isfinite(np.asarray(range_m, float)), reflectance, 0.0)
-    attenuation = np.exp(-2.0 * attenuation_per_m(instrument, water, r, tables) * r)
+    attenuation = np.exp(-2.0 * lidar_attenuation_per_m(instrument, water, r, tables) * r)
     common = spectral_radiance_w_m2_sr_nm * rx.area_m2 * rx.efficiency * band_nm * attenuation
     p_target = common * rho * theta_r**2 / 4.0  # MULS Eq. 9
     p_scatter = common * water.beta_pi_per_m_sr * np.pi * theta_r**2 / 4.0  # MULS Eq. 10

@@ -65,7 +65,7 @@ class ScatteringTables:
     phase_value_at_pi_per_sr: float
     source: str
 
-    def attenuation_per_m(self, range_m) -> np.ndarray:
+    def lidar_attenuation_per_m(self, range_m) -> np.ndarray:
         """k [1/m] at ``range_m`` [m] (any shape): interpolated linearly in ln R, held outside the grid."""
         r = np.maximum(np.asarray(range_m, float), 1e-6)
         return np.interp(np.log(r), np.log(self.ranges_m), self.attenuation_per_m_table)

@@ -27,7 +27,7 @@ from ..infra.lookup import bracket, interp_at, on_geometric_grid, on_log_grid, s
 from ..infra.runtime import kernel
 from ..instrument.channels import processor_sigma_lsb
 from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, baseline_values, pulse_value
-from ..receiver.digitiser import WINDOW_BLOCK, Records, sample_times
+from ..receiver.digitiser import WINDOW_BLOCK, Waveforms, sample_times
 from .peak_echoes import dominant_echo
 
 #: Most peaks kept per window and channel (more means noise, not echoes).
@@ -102,7 +102,7 @@ class PeakSlots(NamedTuple):
                    np.empty(cap, np.bool_), np.zeros(n_slots, np.int64))
 
 
-def find_peaks(model: OpticalModel, batch: PulseBatch, records: Records, echoes: Echoes) -> tuple[Peaks, np.ndarray]:
+def find_peaks(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoes: Echoes) -> tuple[Peaks, np.ndarray]:
     """All peaks of all signal channels, with Eq. 14 ranges and the echo behind each, and the CH0 reference
     times (n_pulses,) [s]."""
     ins = model.instrument
@@ -310,7 +310,7 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                             if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
                                 continue
                             # A plateau that runs on into samples the backscatter alone clips ends there only in the
-                            # residual: its width, so its amplitude and time, are unknown (issue 12, blind-zone edge).
+                            # residual: its width, so its amplitude and time, are unknown (the blind-zone edge).
                             if blind[clipped_last + 1] and codes[w, c, clipped_last + 1] >= max_code:
                                 continue
                         if blind[top - 1]:

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..infra.runtime import kernel
 from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, column_value, uncut_column_value
-from ..receiver.digitiser import Records
+from ..receiver.digitiser import Waveforms
 from .peaks import Peaks, find_peaks
 
 DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
@@ -97,7 +97,7 @@ def best_of_clusters(new, saturated, score):
 def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped, echoes: Echoes,
                    phase_s) -> np.ndarray:
     """Cause of each pulse without a return (index into DROPOUT_CAUSES), NO_DROPOUT otherwise; ``phase_s`` (n,) the
-    pulses' sampling phases [s] (:attr:`Records.phase_s`).
+    pulses' sampling phases [s] (:attr:`Waveforms.phase_s`).
 
     One rule per cause, the first that holds (docs/outputs.md tables them): ``no_hit`` no echo begins within the
     record; ``blind_zone`` none that does carries light; ``saturated`` a clipped return was dropped; then, over the
@@ -248,7 +248,7 @@ def _cut_column(t, p, col, cuts):
     return power
 
 
-def range_batch(model: OpticalModel, batch: PulseBatch, records: Records, echoes: Echoes | None = None) -> Ranging:
+def range_batch(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoes: Echoes | None = None) -> Ranging:
     """Peaks, chosen returns and dropout causes of a digitised batch (``echoes``: ``model.echoes(batch)``)."""
     echoes = echoes if echoes is not None else model.echoes(batch)
     peaks, ref_time = find_peaks(model, batch, records, echoes)

@@ -48,7 +48,7 @@ WINDOW_NEED_S = 56e-9
 
 
 @dataclass(frozen=True)
-class Records:
+class Waveforms:
     """Digitised records of a batch (struct of arrays).
 
     reference: (n_pulses, n_ref) uint16 CH0 record from sample 0 (the whole record in ``full`` mode; under
@@ -164,13 +164,13 @@ class Sampling(NamedTuple):
 
 def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
              keep_noise_free: bool = False, noise: bool = True, echoes: Echoes | None = None,
-             deciding_only: bool = False, ranging_only: bool = False) -> Records:
+             deciding_only: bool = False, ranging_only: bool = False) -> Waveforms:
     """Digitised records of every channel for a batch of pulses (MULS Eqs. 1, 12, 13).
 
     ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
     ``echoes``: ``model.echoes(batch)`` if already computed. ``deciding_only``: in each window, synthesise only the
     channels that can decide a return (:mod:`muls.receiver.deciding_channels`); the others' codes are 0 and
-    ``Records.synthesised`` says which. ``ranging_only``: only the samples the ranging may read get their codes,
+    ``Waveforms.synthesised`` says which. ``ranging_only``: only the samples the ranging may read get their codes,
     the others 0: of each CH0 record the samples around its peak (:func:`_reference`), and of ``full`` records
     the samples where a run of the peak search may start or go on or a code may clip, and those beside them
     (:func:`muls.receiver.channel_codes.ranging_codes`; windows are mostly echo, and draw faster whole). The same peaks and
@@ -198,7 +198,7 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     _reference(reference, ref_clean, sampling, model.basis, pulse.duration_s,
                ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
                chans.dark_std_lsb[0], settings.max_code, settings.noise_scale, ranging_only)
-    return Records(reference, codes, window_pulse, window_start, phase, mode,
+    return Waveforms(reference, codes, window_pulse, window_start, phase, mode,
                    clean if keep_noise_free else None, ref_clean if keep_noise_free else None,
                    synthesised if deciding_only else None)
 
@@ -407,7 +407,7 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
 @kernel(inline="always")
 def sample_times(out, first, end, t0_s, dt_s, first_index, phase_s):
     """out[k] = t0_s + (first_index + k) dt_s + phase_s [s] for first <= k < end: the times of samples of a window
-    whose sample 0 is sample ``first_index`` of its record (:class:`Sampling`; :meth:`Records.sample_times_s`)."""
+    whose sample 0 is sample ``first_index`` of its record (:class:`Sampling`; :meth:`Waveforms.sample_times_s`)."""
     for k in range(first, end):
         out[k] = t0_s + (first_index + k) * dt_s + phase_s
 

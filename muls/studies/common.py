@@ -17,7 +17,7 @@ from ..water.properties import Water
 #: lies within this many range bins (c_w x sample interval / 2) of the truth, or when its peak is clipped
 #: and the target's echo explains it.
 DETECTION_TOLERANCE_BINS = 3
-#: Share of seeded pulses that must detect the target for a range to count as detectable (issue 2).
+#: Share of seeded pulses that must detect the target for a range to count as detectable.
 DETECTION_FRACTION = 0.9
 #: The three Petzold waters of the paper's Table 3.
 MAXRANGE_WATERS = ("clean_ocean", "coastal_ocean", "turbid_harbor")

@@ -37,7 +37,7 @@ MAX_ATTENUATION_EXPONENT = 40.0
 #: forward scattering kept by the receiver's field of view, from the small-angle approximation (muls.water.smallangle);
 #: both depend on the range and the receiver. ``k_lidar``: MULS Eq. 6; ``c``: beam attenuation; ``kd``: diffuse.
 ATTENUATION_MODELS = ("monte_carlo", "k_lidar", "c", "kd", "small_angle")
-#: The rules that depend on the range and the receiver (muls.optics.radiometry.attenuation_per_m evaluates them).
+#: The rules that depend on the range and the receiver (muls.optics.radiometry.lidar_attenuation_per_m evaluates them).
 RANGE_DEPENDENT_MODELS = ("monte_carlo", "small_angle")
 
 #: The particle phase function of every water's scattering in the model: the Monte Carlo's tables
@@ -135,7 +135,7 @@ class Water:
         """The k used in exp(-2 k z) of Eqs. 4, 7, 9, 10, per ``attenuation_model`` [1/m].
 
         The ``monte_carlo`` and ``small_angle`` rules depend on the range and the receiver
-        (:func:`muls.optics.radiometry.attenuation_per_m` gives them); here they give K_d, about their value for a
+        (:func:`muls.optics.radiometry.lidar_attenuation_per_m` gives them); here they give K_d, about their value for a
         footprint many free paths wide.
         """
         if self.attenuation_model == "k_lidar":

@@ -102,7 +102,7 @@ def _table(attenuation_per_m: float, scattering_per_m: float, footprint_radius0_
     return np.log(z), k
 
 
-def attenuation_per_m(attenuation_per_m: float, scattering_per_m: float, footprint_radius0_m: float,
+def lidar_attenuation_per_m(attenuation_per_m: float, scattering_per_m: float, footprint_radius0_m: float,
                       footprint_slope: float, range_m):
     """k [1/m] of the ``small_angle`` rule at ``range_m`` [m] (any shape) for a receiver whose footprint
     radius is r2(Z) = footprint_radius0_m + footprint_slope Z (Eq. 11's r2: aperture radius and

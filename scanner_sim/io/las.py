@@ -5,10 +5,6 @@ The layout comes from the field declarations of :class:`~scanner_sim.records.poi
 (:data:`_TO_LAS`, :data:`_FROM_LAS`), a :class:`~scanner_sim.records.point_records.LasExtra` field is an extra
 dimension (:data:`EXTRA_DIMENSIONS`). Header, VLRs and time mapping: ``docs/outputs.md``. Writer and reader stay in
 one module because both are built from the same field tables.
-
-It is longer than the other io modules on purpose: it is one format, written (streamed, with the LAS 1.4 range
-checks of point format 6) and read back, and both directions share the one field mapping above; split, the
-writer and the reader would each need a copy of it.
 """
 
 from __future__ import annotations

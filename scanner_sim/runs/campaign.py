@@ -1,4 +1,4 @@
-"""Campaigns (issue 16, docs/campaigns.md): a base scene and the axes to sweep; every combination of the
+"""Campaigns (docs/campaigns.md): a base scene and the axes to sweep; every combination of the
 axes' values (their cartesian product) is one survey pass, run as a Dask task (:mod:`.pass_runner`).
 
 The flow: :func:`load_campaign` reads and checks the file (a strict model, the scene files' one-line errors)

@@ -1,4 +1,4 @@
-"""The coverage study (issue 5, docs/coverage.md): one survey pass per water type x altitude x instrument
+"""The coverage study (docs/coverage.md): one survey pass per water type x altitude x instrument
 over the same scene, measured against the truth meshes, with its table, charts, maps and report.
 
 Decisions a planner would make (written down in docs/coverage.md):
