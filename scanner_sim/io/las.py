@@ -178,7 +178,7 @@ def _set_extra_bytes_ranges(header: laspy.LasHeader, ranges: Mapping[str, tuple[
     (``ExtraBytesParams`` takes no range, ``ExtraBytesStruct.min``/``max`` are read-only), so this
     writes the descriptor's ctypes fields ``_min``/``_max``: the 8-byte type of the field's kind
     (uint64, int64 or double, LAS 1.4 R15 Table 24). A dimension without points gets its min/max bits
-    cleared. ``tests/test_io_las.py::test_laspy_extra_bytes_range_bug_still_present`` fails once laspy
+    cleared. ``tests/scanner_sim/io/test_io_las.py::test_laspy_extra_bytes_range_bug_still_present`` fails once laspy
     fixes ``grow``; then drop this function.
     """
     for struct_ in header.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs:

@@ -12,7 +12,7 @@ a_{n-1} and a_n with a_n^2 = (1 + 3 n (n + 1)) / (1 + 3 N (N + 1)) (the centre p
 and its points sit on the radius that halves that annulus' area. Each ring is turned by a small stagger
 (:data:`RING_STAGGER_RAD`) so that no two rings line up: a straight edge crossing the spot (the receiver footprint's edge, in
 the overlap test) then uncovers points one at a time instead of whole rows at once, which is what makes the
-ray-cast overlap converge to Eq. 11 (tests/test_beams.py, test_geometry_overlap.py).
+ray-cast overlap converge to Eq. 11 (tests/scanner_sim/rays/test_beams.py, test_geometry_overlap.py).
 
 Weights sum to 1. ``top_hat``: each point gets its cell's share of a uniform disc (equal weights, the profile
 Eq. 11 assumes). ``gaussian``: each point gets its cell's integral of exp(-2 rho^2 / w^2) over the unit disc,

@@ -16,7 +16,7 @@ from scanner_sim.studies.accuracy import vs_reference
 from scanner_sim.studies.tradeoff import CONVERGENCE_SUBRAYS
 from scanner_sim.survey.setup import PassOptions, PassSetup
 
-FAILURES = Path(__file__).resolve().parent.parent / "scenes" / "failures"
+FAILURES = Path(__file__).resolve().parents[3] / "scenes" / "failures"
 
 
 @pytest.fixture(scope="module")

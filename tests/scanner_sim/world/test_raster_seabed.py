@@ -17,7 +17,7 @@ from scanner_sim.config import ConfigError, parse_scene
 from scanner_sim.config.raster_seabed import RasterGrid
 from scanner_sim.world.scene import build_scene
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 X0, Y0, CELL = 500_000.0, 5_600_000.0, 1.0  # UTM zone 31N: a real place in the North Sea
 
 

@@ -330,7 +330,7 @@ def test_the_documented_reading_example_gives_the_las_points(enu_pass):
     from pathlib import Path
 
     out, _, las = enu_pass
-    page = (Path(__file__).resolve().parent.parent / "docs" / "outputs.md").read_text()
+    page = (Path(__file__).resolve().parents[3] / "docs" / "outputs.md").read_text()
     code = re.search(r"### Reading it back\n\n```python\n(.*?)```", page, re.S).group(1)
     names = {}
     exec(code.replace('"out/cable_survey/rosbag"', repr(str(out / "rosbag"))), names)  # noqa: S102 - our own docs
@@ -343,7 +343,7 @@ def test_the_documented_point_fields_are_the_bag_fields(enu_pass):
     from pathlib import Path
 
     _, topics, _ = enu_pass
-    page = (Path(__file__).resolve().parent.parent / "docs" / "outputs.md").read_text()
+    page = (Path(__file__).resolve().parents[3] / "docs" / "outputs.md").read_text()
     table = page[page.index("### PointCloud2 fields"):page.index("The coordinates are float32")]
     documented = []
     for names, kind in re.findall(r"^\| ([a-z_, ]+) \| ([A-Z0-9]+) \|", table, re.M):

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 LONG_PASS = ["pool_panel", "--fidelity", "fast", "--max-pulses", "5000000", "--chunk-pulses", "5000", "--no-render",
              "--quiet"]
 #: How long a subprocess may take to import, load its kernels and start writing chunks [s].

@@ -21,7 +21,7 @@ from scanner_sim import io
 from scanner_sim.records.point_records import PointRecords
 from scanner_sim.render import point_cloud
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 #: The address space of each subprocess [bytes]: a command starts in well under this.
 CAP_BYTES = 6 * 2**30
 #: What a refusal ends with: the limit on this machine, in the option's own terms.

@@ -23,7 +23,7 @@ from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import LABELS, Part, Scene, panel_mesh, tube
 from scanner_sim.world.terrain import HeightField
 
-FAILURES = Path(__file__).resolve().parent.parent / "scenes" / "failures"
+FAILURES = Path(__file__).resolve().parents[3] / "scenes" / "failures"
 M = 7
 
 

@@ -2,7 +2,7 @@
 
 The instrument's processing is tested on echoes of known strength: the waters here use the paper's Eq. 6 with single
 scattering (:func:`paper_water`), whose echoes and columns the cases were built around; the product's physics (the
-Monte Carlo's attenuation, spread and column) has tests of its own (tests/test_scattering.py)."""
+Monte Carlo's attenuation, spread and column) has tests of its own (tests/muls/optics/test_scattering.py)."""
 
 import numpy as np
 import pytest

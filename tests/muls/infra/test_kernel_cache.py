@@ -11,7 +11,7 @@ import pytest
 
 from muls.infra.runtime import source_key
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _tree(tmp_path):

@@ -273,7 +273,7 @@ def test_shipped_step_edges_as_one_mesh_reads_as_its_five_panels():
     """scenes/failures/step_edges_one_mesh.yaml is step_edges' five panels in one mesh object. Before the truth was
     judged by surface, 29 of its 2,001 points took the first panel of the mesh along their line, up to 2 m off
     (202 to 276 of 20,000 at the four levels); every point now has the truth it has in step_edges."""
-    failures = Path(__file__).resolve().parent.parent / "scenes" / "failures"
+    failures = Path(__file__).resolve().parents[3] / "scenes" / "failures"
     points = []
     for name in ("step_edges", "step_edges_one_mesh"):
         setup = PassSetup.build(load_scene(failures / f"{name}.yaml"), PassOptions(progress=False))

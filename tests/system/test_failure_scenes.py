@@ -16,7 +16,7 @@ from scanner_sim.studies.tradeoff import FAILURE_ROW
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import build_scene
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 FAILURES = ROOT / "scenes" / "failures"
 SCENES = sorted(p.stem for p in FAILURES.glob("*.yaml"))
 

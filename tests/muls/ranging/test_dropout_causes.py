@@ -19,7 +19,7 @@ from muls.simulate import simulate
 from scanner_sim.config.loading import load_scene
 from scanner_sim.survey.setup import PassOptions, PassSetup
 
-SCENES = Path(__file__).resolve().parents[1] / "scenes" / "failures"
+SCENES = Path(__file__).resolve().parents[3] / "scenes" / "failures"
 #: The scene file's water of scenes/failures/turbid_water.yaml: c 5 per m, a 0.5 per m.
 TURBID = load_scene(SCENES / "turbid_water.yaml").water_model()
 #: Relative margin within which a term is too close to its threshold to say on which side the float32 records lie.

@@ -275,7 +275,7 @@ def test_docs_example_validates():
     """The complete commented example in docs/scene-format.md is a valid scene."""
     from pathlib import Path
 
-    text = (Path(__file__).resolve().parent.parent / "docs" / "scene-format.md").read_text()
+    text = (Path(__file__).resolve().parents[3] / "docs" / "scene-format.md").read_text()
     block = text.split("```yaml\n", 1)[1].split("```", 1)[0]
     cfg = parse_scene(yaml.safe_load(block), base_dir=SCENES_DIR)
     assert cfg.name == "example_cable_survey" and cfg.platform.navigation_noise.seed == 11

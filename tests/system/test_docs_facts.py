@@ -12,7 +12,7 @@ from scanner_sim.config import load_scene
 from scanner_sim.survey.budget import estimate_pass
 from scanner_sim.world.scene import build_scene
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAGES = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "README.md"]
 
 

@@ -19,7 +19,7 @@ import pytest
 from scanner_sim.cli import main
 from scanner_sim.io.run_dir import OutputBusyError, OutputLock, RunDirectory, hold_output
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 #: A process that takes the lock of the folder argv[1] the way ``run`` does, prints "held" and waits.
 HOLDER = ("import sys, time; from scanner_sim.io.run_dir import RunDirectory\n"
           "RunDirectory(sys.argv[1]).open(); print('held', flush=True); time.sleep(600)")

@@ -19,7 +19,7 @@ from scanner_sim.survey.pipeline import run_pass
 from scanner_sim.survey.setup import PassOptions
 from scanner_sim.world.scene import load_mesh_file
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _env():
