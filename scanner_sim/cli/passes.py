@@ -165,7 +165,7 @@ def kernels_cached() -> bool:
 
     from muls.infra.runtime import kernel_cache_dir
 
-    for package, pattern in (("muls", "detection._digitise*.nbi"), ("scanner_sim", "kernels.hit_block*.nbi")):
+    for package, pattern in (("muls", "digitiser._digitise*.nbi"), ("scanner_sim", "kernels.hit_block*.nbi")):
         module = sys.modules.get(package) or __import__(package)
         cache = kernel_cache_dir(package) or Path(module.__file__).parent / "__pycache__"
         if not any(cache.rglob(pattern)):
