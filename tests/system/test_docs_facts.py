@@ -36,6 +36,14 @@ def test_the_module_map_lists_every_module_and_nothing_else():
     assert not listed - modules, f"the module map names modules that do not exist: {sorted(listed - modules)}"
 
 
+def test_every_test_file_the_docs_name_exists():
+    """A page of docs/, the README or a stage's test README that names tests/.../test_x.py names a file that is there."""
+    pages = PAGES + sorted((ROOT / "tests").rglob("README.md"))
+    named = {(page.name, ref) for page in pages for ref in re.findall(r"tests/[\w/]*test_\w+\.py", page.read_text())}
+    assert len(named) > 20
+    assert not {(page, ref) for page, ref in named if not (ROOT / ref).exists()}
+
+
 def _resolves(ref: str) -> bool:
     """Whether a file path (``scanner_sim/rays/cast.py``) or a dotted name (``scanner_sim.rays.cast.cast_beams``) of
     the packages exists."""

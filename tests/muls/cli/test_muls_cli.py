@@ -3,14 +3,9 @@
 import json
 
 import pytest
+from conftest import run_muls as _run
 
 from muls.cli import main
-
-
-def _run(capsys, *argv):
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_waveform_json_and_picture(capsys, tmp_path):

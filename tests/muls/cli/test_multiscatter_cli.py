@@ -4,16 +4,10 @@ import json
 
 import numpy as np
 import pytest
+from conftest import run_muls as _run
 
 from muls import water_preset
-from muls.cli import main
 from muls.montecarlo.check import worst_errors
-
-
-def _run(capsys, *argv):
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_multiscatter_json_has_exactly_the_issue_keys_and_a_picture(capsys, tmp_path):

@@ -8,11 +8,11 @@ import math
 import numba
 import numpy as np
 import pytest
+from conftest import run_muls as _run
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import simpson
 
-from muls.cli import main
 from muls.montecarlo import run_slab
 from muls.montecarlo.mobley1993 import ALBEDOS, OPTICAL_DEPTHS, QUANTITIES, codes_range, paper_rows, parse_printed
 from muls.montecarlo.slab import ENERGY_KEYS, TALLIES, fresnel_reflectance
@@ -31,12 +31,6 @@ MU_SUN = math.cos(math.radians(60.0))  # the sun at 60 deg (Section 3)
 MU_W = math.sqrt(1.0 - (1.0 - MU_SUN**2) / N_WATER**2)  # Snell
 #: Irradiance the refracted sun carries across a horizontal plane just below the surface, per E_perp.
 E_IN = MU_SUN * (1.0 - fresnel_reflectance(MU_SUN, N_WATER))
-
-
-def _run(capsys, *argv):
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 # ----------------------------------------------------------------------------------------------------------

@@ -13,7 +13,7 @@ from scanner_sim.metrics.coverage import CoverageAccumulator, CoverageSettings, 
 from scanner_sim.survey.pipeline import simulate_pass
 from scanner_sim.survey.setup import PassOptions
 from scanner_sim.survey.sinks import PassStats
-from tests.test_coverage import CELL, _centre, _dropouts, _flat_scene, _points
+from tests.scanner_sim.metrics.test_coverage import CELL, _centre, _dropouts, _flat_scene, _points
 
 
 def test_orders_table_is_the_published_table_1():

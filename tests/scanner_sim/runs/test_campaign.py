@@ -4,8 +4,6 @@ run_pass; a killed worker costs only its task; a re-run skips complete passes; t
 The cluster is a real LocalCluster of 2 worker processes (1 thread each) on loopback, shared by the module.
 """
 
-import contextlib
-import io as stdio
 import json
 import os
 import threading
@@ -15,6 +13,7 @@ from signal import SIGKILL
 
 import pytest
 import yaml
+from conftest import run_cli
 
 from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, load_scene
@@ -50,13 +49,6 @@ def assert_same_pass(folder: Path, reference: Path) -> None:
             assert (folder / name).read_bytes() == (reference / name).read_bytes(), (folder.name, name)
     assert untimed(json.loads((folder / "summary.json").read_text())) == \
         untimed(json.loads((reference / "summary.json").read_text()))
-
-
-def run_cli(argv) -> tuple[int, str]:
-    printed = stdio.StringIO()
-    with contextlib.redirect_stdout(printed):
-        code = main(argv)
-    return code, printed.getvalue()
 
 
 @pytest.fixture(scope="module")

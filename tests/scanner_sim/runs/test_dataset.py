@@ -16,6 +16,7 @@ import laspy
 import numpy as np
 import pytest
 import yaml
+from conftest import run_cli
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -47,13 +48,6 @@ def small_spec(scenes: int = 20, **changes) -> dict:
                     {"type": "cable", "count": 1, "set": {"diameter_m": 0.1}}],
     }
     return spec | changes
-
-
-def run_cli(argv) -> tuple[int, str]:
-    printed = stdio.StringIO()
-    with contextlib.redirect_stdout(printed):
-        code = main(argv)
-    return code, printed.getvalue()
 
 
 # -- drawing and splits -----------------------------------------------------------------------------------------

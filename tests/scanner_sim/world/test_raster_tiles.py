@@ -11,8 +11,8 @@ from scanner_sim.survey.pipeline import simulate_pass
 from scanner_sim.survey.setup import PassOptions
 from scanner_sim.world.scene import Scene, build_scene
 from scanner_sim.world.site import TILED_ABOVE_TRIANGLES, SiteScene
-from tests.test_raster_seabed import CELL, X0, Y0, bathymetry, scene, write_raster
-from tests.test_site_tiles import assert_same_pass
+from tests.scanner_sim.world.test_raster_seabed import CELL, X0, Y0, bathymetry, scene, write_raster
+from tests.scanner_sim.world.test_site_tiles import assert_same_pass
 
 #: [m] How far on a window reaches in these tests (a 60 m raster: a new window every few metres of the line).
 AHEAD_M = 4.0
