@@ -1,6 +1,6 @@
 """The ``muls`` subcommands: per subcommand a builder that adds its options (:data:`BUILDERS`) and a thin function
 that runs its study and prints the result (each returns the result dict, its table as text and a plot function or
-None). The studies themselves live in :mod:`muls.studies`, :mod:`muls.budget`, :mod:`muls.experiments` and
+None). The studies themselves live in :mod:`muls.studies`, :mod:`muls.photon_budget`, :mod:`muls.experiments` and
 :mod:`muls.montecarlo`."""
 
 from __future__ import annotations

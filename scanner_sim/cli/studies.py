@@ -212,7 +212,7 @@ def _check_cell_memory(args, config) -> None:
     import math
 
     from muls.infra.memory import check_memory
-    from scanner_sim.survey.budget import COVERAGE_BYTES_PER_CELL
+    from scanner_sim.survey.sizing import COVERAGE_BYTES_PER_CELL
     from scanner_sim.world.raster import seabed_plan_size_m
 
     size = seabed_plan_size_m(config.seabed)

@@ -194,7 +194,7 @@ def check_tradeoff_memory(config: SceneConfig, levels, knobs, pulses: int, wavef
     runs would keep more than a command may plan on (:func:`muls.infra.memory.check_memory`): each run keeps
     :data:`KEPT_BYTES_PER_PULSE` a pulse the pass fires and :data:`RECORD_BYTES_PER_PULSE` a waveform pulse."""
     from muls.infra.memory import check_memory
-    from scanner_sim.survey.budget import estimate_pass
+    from scanner_sim.survey.sizing import estimate_pass
 
     runs = len(run_plan(levels, knobs, convergence))
     fired = estimate_pass(config.with_overrides({"survey.max_pulses": pulses})).pulses

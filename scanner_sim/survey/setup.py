@@ -35,12 +35,12 @@ from scanner_sim.rays.cast import BeamCast, CastScene
 from scanner_sim.rays.hits import Hits
 from scanner_sim.rays.tiles import TiledCast, TiledTarget
 from scanner_sim.records.point_records import DropoutRecords, PointRecords
-from scanner_sim.survey.budget import check_pass_budget
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.georeference import LinesOfSight, georeference
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.ranging_precision import measure_ranging_precision, panel_ranges_m
+from scanner_sim.survey.sizing import check_pass_budget
 from scanner_sim.survey.tpu_calibration import CheckedErrors, checked_errors
 from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel, with_uncertainty
 from scanner_sim.world.scene import Scene, build_scene
@@ -263,7 +263,7 @@ def tpu_model(config: SceneConfig, model: OpticalModel, physics: Physics, span) 
 
 def checked_trajectory(config: SceneConfig, scene: Scene | None) -> Trajectory:
     """The trajectory of ``config`` over its built ``scene``, after the set-up checks: the pass's size, estimated
-    before anything pass-sized is allocated (:func:`~scanner_sim.survey.budget.check_pass_budget`), and the built
+    before anything pass-sized is allocated (:func:`~scanner_sim.survey.sizing.check_pass_budget`), and the built
     track against the water surface, the seabed and the objects
     (:func:`~scanner_sim.motion.track_checks.build_trajectory`); values likely in another unit are warned about
     (:func:`~scanner_sim.config.unit_slips.warn_unit_slips`)."""

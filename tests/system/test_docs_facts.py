@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from scanner_sim.config import load_scene
-from scanner_sim.survey.budget import estimate_pass
+from scanner_sim.survey.sizing import estimate_pass
 from scanner_sim.world.scene import build_scene
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -14,8 +14,8 @@ import yaml
 from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, load_scene, parse_scene
 from scanner_sim.config.errors import SetupWarning
-from scanner_sim.survey.budget import MAX_LEGS, MAX_PASS_PULSES, check_pass_budget, estimate_pass
 from scanner_sim.survey.setup import checked_trajectory
+from scanner_sim.survey.sizing import MAX_LEGS, MAX_PASS_PULSES, check_pass_budget, estimate_pass
 from scanner_sim.world.scene import build_scene
 
 MINE_FIELD = yaml.safe_load((SCENES_DIR / "mine_field.yaml").read_text())

@@ -409,7 +409,7 @@ def test_eq4_inside_the_first_metre_and_at_zero_range(model):
     r_ap - z tan(theta_r / 2) of the axis (z <= 0.5 m) or every aperture point sees all of it (z >= 0.9 m); in
     between its own integral gives less. At zero and negative range there is no column."""
     ins, water = with_overlap(coaxial(), model), paper("pool")
-    k = 0.050923  # Eq. 6 for the pool, worked by hand in tests/muls/test_budget_chain.py
+    k = 0.050923  # Eq. 6 for the pool, worked by hand in tests/muls/test_photon_budget.py
     optics = 0.9 * 0.6 * (1 - 0.0039) ** 2
     for z in (0.3, 0.5, 0.9, 1.2):
         collected = min(math.pi * math.tan(0.05) ** 2, 4.4e-3 / z**2)
@@ -423,7 +423,7 @@ def test_eq7_inside_the_first_metre_and_at_zero_range():
     """Where Eq. 11's overlap is 1 from the window on (the coaxial receiver), Eq. 7 holds at 0.5 m as at any
     range; at zero and negative range there is no echo (0, never inf or NaN)."""
     ins, water = with_overlap(coaxial(), "eq11"), paper("pool")
-    k = 0.050923  # Eq. 6 for the pool, worked by hand in tests/muls/test_budget_chain.py
+    k = 0.050923  # Eq. 6 for the pool, worked by hand in tests/muls/test_photon_budget.py
     optics = 0.9 * 0.6 * (1 - 0.0039) ** 2
     for z in (0.3, 0.5, 0.7, 0.9):
         assert float(target_factor(ins, water, z, 0.01)) == pytest.approx(

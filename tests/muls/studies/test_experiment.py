@@ -14,7 +14,7 @@ from muls.simulate import simulate
 from muls.studies import experiment_study
 
 STAT_KEYS = {"detected_fraction", "precision_m", "mean_abs_deviation_m", "bias_m", "clipped_fraction"}
-#: CH1's shot-noise variance per LSB of signal at PMT gain 2000, xi_v 0.9 (tests/muls/test_budget_chain.py, by
+#: CH1's shot-noise variance per LSB of signal at PMT gain 2000, xi_v 0.9 (tests/muls/test_photon_budget.py, by
 #: hand); 2 e B_n F M xi_v R_L x 1024 scales with the gain M and the voltage ratio xi_v.
 CH1_SHOT_LSB2_PER_LSB = 0.0111330
 

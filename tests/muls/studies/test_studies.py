@@ -228,7 +228,7 @@ def test_bench_study_keys_small():
 def test_maxrange_gains_as_a_designer_sets_them():
     """The single channel and PMT1 (through CH2) get the highest gain that keeps the water column unclipped,
     CH1 is CH2's tube (nine times CH2 by the 9:1 split), PMT2 runs at 20,000; each group names its limit."""
-    from muls.budget import LIMITS
+    from muls.photon_budget import LIMITS
     from muls.presets import designed_mul, single_channel, study_water
 
     r = studies.maxrange_study(["turbid_harbor"], shots=20, seed=0, attenuation_model="k_lidar")

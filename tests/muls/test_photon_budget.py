@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from muls import Channel, mul2023, water_preset
-from muls.budget import channel_budget, quantum_efficiency
 from muls.instrument.channels import ChannelArrays, noise_bandwidth_hz, shot_noise_lsb2_per_w
 from muls.optics.optical_model import OpticalModel, PulseBatch
+from muls.photon_budget import channel_budget, quantum_efficiency
 from muls.simulate import simulate
 
 # --- by hand -----------------------------------------------------------------------------------------------
