@@ -25,7 +25,24 @@ def lidar_attenuation_per_m(instrument: Instrument, water: Water, range_m, table
     Monte Carlo reference's transmission for this water and receiver, range by range (:mod:`muls.optics.scattering`;
     ``tables``: those tables if the caller holds them, else they are found or built); ``small_angle`` keeps the
     forward scattering that stays inside the receiver's footprint r2(z) of Eq. 11 (:mod:`muls.water.smallangle`).
-    docs/design.md#attenuation compares them.
+    docs/design.md#attenuation compares them. k is the lidar attenuation; the beam attenuation c is
+    ``water.attenuation_per_m``.
+
+    Parameters
+    ----------
+    instrument : Instrument
+        Its receiver geometry sets the footprint of the ``small_angle`` and ``monte_carlo`` rules.
+    water : Water
+        The water and its ``attenuation_model``.
+    range_m : float or array_like, any shape
+        One-way ranges [m].
+    tables : ScatteringTables, optional
+        The Monte Carlo's tables of this water and receiver, if the caller holds them.
+
+    Returns
+    -------
+    numpy.ndarray, the shape of ``range_m``
+        k [1/m].
     """
     r = np.asarray(range_m, dtype=float)
     if water.attenuation_model not in RANGE_DEPENDENT_MODELS:

@@ -249,7 +249,25 @@ def _cut_column(t, p, col, cuts):
 
 
 def range_batch(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoes: Echoes | None = None) -> Ranging:
-    """Peaks, chosen returns and dropout causes of a digitised batch (``echoes``: ``model.echoes(batch)``)."""
+    """Peaks, chosen returns and dropout causes of a digitised batch.
+
+    Parameters
+    ----------
+    model : OpticalModel
+        The model that made the records.
+    batch : PulseBatch
+        The batch's n_pulses pulses.
+    records : Waveforms
+        Their digitised records (:func:`muls.receiver.digitiser.digitise`).
+    echoes : Echoes, optional
+        ``model.echoes(batch)``, if the caller has it.
+
+    Returns
+    -------
+    Ranging
+        The returns, every peak, each pulse's dropout cause (n_pulses,) int8 and its CH0 reference time
+        (n_pulses,) [s].
+    """
     echoes = echoes if echoes is not None else model.echoes(batch)
     peaks, ref_time = find_peaks(model, batch, records, echoes)
     chosen, return_number, number_of_returns, dropped = choose_returns(model, peaks)
