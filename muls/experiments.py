@@ -16,8 +16,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .errors import ParameterError
-from .instrument import Instrument, Processing
+from .infra.errors import ParameterError
+from .instrument.description import Instrument, Processing
+from .optics.optical_model import OpticalModel
 from .presets import (
     MAX_PMT_GAIN,
     POND_GAIN_PMT1,
@@ -29,8 +30,7 @@ from .presets import (
     mul2023,
     water_preset,
 )
-from .water import Water
-from .waveform import OpticalModel
+from .water.properties import Water
 
 #: How the instrument finds each peak (``Processing.peak_fit``): the prototype's plain peak detection on
 #: the 1 GS/s record (section 4.2: peak detection between the CH0 reference and each channel, Eq. 14), or
@@ -80,7 +80,7 @@ class Experiment:
 def channel_peak_w(model: OpticalModel, range_m: float, reflectance: float, channel: str) -> float:
     """Highest noise-free optical power [W] a channel sees around the echo of a flat panel at ``range_m``:
     the column cut at the panel plus the Eq. 7 echo, on a 0.05 ns grid, within the channel's open gate."""
-    from .radiometry import lambertian_weight, target_factor
+    from .optics.radiometry import lambertian_weight, target_factor
 
     ins = model.instrument
     delay = 2.0 * range_m / model.water.speed_m_s

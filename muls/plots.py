@@ -134,7 +134,7 @@ def plot_coaxial(results: dict, path):
 def plot_multiscatter(result: dict, path):
     """Monte Carlo and MULS power [W] vs time [ns] on a log axis (column and target apart), and their ratio.
 
-    result: the dict of :func:`muls.montecarlo.multiscatter_study` (with its ``details``).
+    result: the dict of :func:`muls.studies.multiscatter_study` (with its ``details``).
     """
     import numpy as np
 
@@ -174,7 +174,7 @@ def plot_multiscatter(result: dict, path):
 
 def plot_multiscatter_study(result: dict, path):
     """The study's chart: MC / MULS echo energy vs range per water for each attenuation rule, the effective
-    attenuation vs range, and the column peak ratios (result: :func:`muls.montecarlo.multiscatter_waters_study`).
+    attenuation vs range, and the column peak ratios (result: :func:`muls.studies.multiscatter_waters_study`).
     """
     import numpy as np
 

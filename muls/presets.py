@@ -14,12 +14,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from .channels import shot_noise_lsb2_per_w
-from .errors import ParameterError
-from .instrument import Channel, Instrument
-from .phase import PETZOLD_VALUES_PER_SR
-from .water import GROUP_INDEX_FRESHWATER, GROUP_INDEX_SEAWATER, Water
-from .waveform import OpticalModel
+from .infra.errors import ParameterError
+from .instrument.channels import shot_noise_lsb2_per_w
+from .instrument.description import Channel, Instrument
+from .optics.optical_model import OpticalModel
+from .water.phase import PETZOLD_VALUES_PER_SR
+from .water.properties import GROUP_INDEX_FRESHWATER, GROUP_INDEX_SEAWATER, Water
 
 # --- Waters ------------------------------------------------------------------------------------------------
 

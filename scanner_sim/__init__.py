@@ -9,8 +9,8 @@ The Python API (``docs/python-api.md``)::
 """
 
 from scanner_sim.config import ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes
+from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.pipeline import PassResult, run_pass, simulate_pass
-from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.version import __version__
 from scanner_sim.world.scene import Scene, build_scene

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 
 #: Where the water column stops: ``"pulse"`` once per pulse, at the energy-weighted mean hit range for the share
 #: of the beam that hits; ``"subray"`` where each sub-ray stops (:func:`scanner_sim.survey.handoff.column_cuts`).
@@ -24,13 +24,13 @@ class FidelityLevel:
     subrays: beam sub-rays per pulse (one of ``rays.beams.SUBRAY_COUNTS``). shadow_rays: cast a visibility ray
     from each hit to the receiver aperture (parallax shadows); without them only the FOV cone is checked.
     record_mode: ``"windowed"`` (samples around the echoes) or ``"full"`` (every sample of every channel),
-    ``muls.detection.RECORD_MODES``. column_cut: where the water column stops, one of :data:`COLUMN_CUTS`
+    ``muls.receiver.digitiser.RECORD_MODES``. column_cut: where the water column stops, one of :data:`COLUMN_CUTS`
     (:func:`scanner_sim.survey.handoff.column_cuts`). adaptive: decide per pulse (:mod:`scanner_sim.rays.auto`):
     where all ``subrays`` hit one surface within 5 cm of range, two echoes with their delays' energy, mean,
     variance and skewness, else one per sub-ray. deciding_only: synthesise and search in each record window only the
-    channels that can decide a return (:mod:`muls.deciding_channels`). multiple_scattering: ``"table"`` (the Monte
-    Carlo's water column and each echo's spread in time, :mod:`muls.scattering`) or ``"none"`` (single scattering),
-    ``muls.waveform.MULTIPLE_SCATTERING``.
+    channels that can decide a return (:mod:`muls.receiver.deciding_channels`). multiple_scattering: ``"table"`` (the Monte
+    Carlo's water column and each echo's spread in time, :mod:`muls.optics.scattering`) or ``"none"`` (single scattering),
+    ``muls.optics.optical_model.MULTIPLE_SCATTERING``.
     """
 
     name: str

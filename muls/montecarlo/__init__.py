@@ -14,7 +14,6 @@ equation holds and by how much it misses (docs/multiple-scattering.md).
 - :mod:`.run`: :class:`TargetPlanes`, :func:`run_monte_carlo`, :class:`MonteCarloResult`;
 - :mod:`.power`: tallies as received power through the pulse and optics, beside MULS's;
 - :mod:`.correction`: :class:`MultipleScatteringCorrection`, the tabulated correction;
-- :mod:`.study`: ``muls multiscatter`` (one plate) and ``muls multiscatter-study`` (waters and ranges);
 - :mod:`.check`: the acceptance check of ``muls multiscatter --json`` (``python3 -m muls.montecarlo.check``);
 - :mod:`.slab`: the same transport in a plane-parallel water under a level surface, lit by the sun (compiled);
 - :mod:`.mobley1993`: problems 1 and 2 of Mobley et al. (1993) against that transport (``muls mobley1993``).
@@ -34,22 +33,10 @@ from .power import (
 )
 from .run import BATCHES, ENERGY_KEYS, TAIL_S, TIME_STEP_S, MonteCarloResult, TargetPlanes, run_monte_carlo
 from .slab import SlabResult, run_slab
-from .study import (
-    ATTENUATION_RULES,
-    CHECK_RANGES_M,
-    DEFAULT_PACKETS,
-    DETECTION_FACTORS,
-    STUDY_PACKETS,
-    STUDY_RANGES_M,
-    STUDY_WATERS,
-    multiscatter_study,
-    multiscatter_waters_study,
-)
 
 __all__ = [
-    "ATTENUATION_RULES", "BATCHES", "CHECK_RANGES_M", "DEFAULT_PACKETS", "DETECTION_FACTORS", "ENERGY_KEYS",
-    "MOBLEY1993_PHOTONS", "STUDY_PACKETS", "STUDY_RANGES_M", "STUDY_WATERS", "TAIL_S", "TIME_STEP_S",
-    "MonteCarloResult", "MultipleScatteringCorrection", "SlabResult", "TargetPlanes", "effective_attenuation_per_m",
-    "geometry_factor", "mc_power_w", "mobley1993_benchmark", "multiscatter_study", "multiscatter_waters_study",
-    "muls_power_w", "pulse_kernel", "run_monte_carlo", "run_slab", "to_power_w", "two_way_transmission",
+    "BATCHES", "ENERGY_KEYS", "MOBLEY1993_PHOTONS", "TAIL_S", "TIME_STEP_S", "MonteCarloResult",
+    "MultipleScatteringCorrection", "SlabResult", "TargetPlanes", "effective_attenuation_per_m", "geometry_factor",
+    "mc_power_w", "mobley1993_benchmark", "muls_power_w", "pulse_kernel", "run_monte_carlo", "run_slab", "to_power_w",
+    "two_way_transmission",
 ]

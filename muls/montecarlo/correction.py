@@ -11,12 +11,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import ParameterError
-from ..instrument import Instrument
-from ..phase import PhaseFunction, check_phase
-from ..radiometry import lambertian_weight, target_factor
-from ..water import Water
-from ..waveform import OpticalModel
+from ..infra.errors import ParameterError
+from ..instrument.description import Instrument
+from ..optics.optical_model import OpticalModel
+from ..optics.radiometry import lambertian_weight, target_factor
+from ..water.phase import PhaseFunction, check_phase
+from ..water.properties import Water
 from .power import mc_power_w, two_way_transmission
 from .run import MonteCarloResult, TargetPlanes, run_monte_carlo
 

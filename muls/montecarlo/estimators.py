@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import math
 
-from ..phase import cumulative_at, sample_angle, value_at
-from ..runtime import kernel
+from ..infra.runtime import kernel
+from ..water.phase import cumulative_at, sample_angle, value_at
 from .layout import (
     APERTURE_RADIUS,
     APERTURE_X,

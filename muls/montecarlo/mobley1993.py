@@ -10,7 +10,7 @@ canonical problems. Its Section 3 and Table 3 define them; problems 1 and 2 are 
   just above the surface (Ed(air) = 0.5 W m^-2 nm^-1);
 - no inelastic scattering; single-scattering albedo 0.9 (highly scattering) or 0.2 (highly absorbing);
 - problem 1: the Rayleigh phase function 3/(16 pi) (1 + cos^2 psi) (Eq. 3); problem 2: the particle phase
-  function of its Table 2 (Petzold's average, :func:`muls.phase.mobley1993_particle`).
+  function of its Table 2 (Petzold's average, :func:`muls.water.phase.mobley1993_particle`).
 
 Depths are optical depths tau = c z; here c = 1 per m, so z [m] = tau.
 
@@ -30,7 +30,7 @@ import math
 import re
 import time
 
-from ..errors import ParameterError
+from ..infra.errors import ParameterError
 from .slab import STREAM, run_slab
 
 SOURCE = ("Mobley, Gentili, Gordon, Jin, Kattawar, Morel, Reinersman, Stamnes and Stavn (1993), Comparison of "

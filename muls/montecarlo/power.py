@@ -12,11 +12,11 @@ import math
 import numpy as np
 from scipy.signal import fftconvolve
 
-from .. import radiometry
-from ..instrument import Instrument
-from ..radiometry import lambertian_weight, target_factor
-from ..water import Water
-from ..waveform import OpticalModel
+from ..instrument.description import Instrument
+from ..optics import radiometry
+from ..optics.optical_model import OpticalModel
+from ..optics.radiometry import lambertian_weight, target_factor
+from ..water.properties import Water
 from .run import BATCHES, MonteCarloResult, TargetPlanes, run_monte_carlo, var_of_mean
 
 

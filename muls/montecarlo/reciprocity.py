@@ -18,7 +18,7 @@ import math
 import numba
 import numpy as np
 
-from ..runtime import kernel
+from ..infra.runtime import kernel
 from .layout import APERTURE_RADIUS, APERTURE_X, FOV_TAN
 from .sampling import batch_packets, flight, packet_stream, turn, uniform
 

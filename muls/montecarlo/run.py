@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ParameterError, check_fraction, check_positive
-from ..instrument import Instrument
-from ..phase import PhaseFunction, check_phase
-from ..water import Water
+from ..infra.errors import ParameterError, check_fraction, check_positive
+from ..instrument.description import Instrument
+from ..water.phase import PhaseFunction, check_phase
+from ..water.properties import Water
 from . import transport
 from .layout import geo_vector
 from .reciprocity import GRID_TIME_STEP_S, TILTED_SECTORS, ring_edges, scattered_return, trace_receiver
@@ -202,7 +202,7 @@ def run_monte_carlo(instrument: Instrument, water: Water, targets: TargetPlanes 
     """Trace ``packets`` beam packets (and ``receiver_packets``, default a quarter as many, from the receiver).
 
     instrument: its beam diameter and divergence, aperture area, offset and field of view are used;
-    water: a, b and its group velocity; phase: a :class:`muls.phase.PhaseFunction` or its name;
+    water: a, b and its group velocity; phase: a :class:`muls.water.phase.PhaseFunction` or its name;
     end_s: end of the simulated time [s] (default: the farthest target's echo plus ``tail_s``; required
     without targets); devices: changes to the variance-reduction settings
     :data:`muls.montecarlo.transport.DEVICES` (e.g. ``{"ghosts": False}``, for tests of the estimators).

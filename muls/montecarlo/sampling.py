@@ -2,7 +2,7 @@
 aperture points.
 
 Every packet draws from its own counter-based stream (SplitMix64 of the seed, the stream and the packet
-number, with :mod:`muls.noise`'s finaliser and Weyl constant), so a seed fixes the result whatever the
+number, with :mod:`muls.infra.noise`'s finaliser and Weyl constant), so a seed fixes the result whatever the
 number of threads.
 """
 
@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 
-from ..noise import GAMMA, splitmix64
-from ..phase import sample_angle
-from ..runtime import kernel
+from ..infra.noise import GAMMA, splitmix64
+from ..infra.runtime import kernel
+from ..water.phase import sample_angle
 
 #: Odd 64-bit constant separating the streams (0 beam, 1 receiver) and the streams of split copies.
 STREAM_KEY = np.uint64(0xD1B54A32D192ED03)

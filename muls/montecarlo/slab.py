@@ -46,9 +46,9 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from ..errors import ParameterError, check_fraction, check_non_negative, check_positive
-from ..phase import PhaseFunction, check_phase, cumulative_at, value_at
-from ..runtime import kernel
+from ..infra.errors import ParameterError, check_fraction, check_non_negative, check_positive
+from ..infra.runtime import kernel
+from ..water.phase import PhaseFunction, check_phase, cumulative_at, value_at
 from .run import BATCHES, check_packets, in_parts, seed_key, var_of_mean
 from .sampling import angle, batch_packets, free_path, packet_stream, turn, uniform
 
@@ -212,7 +212,7 @@ def run_slab(phase: str | PhaseFunction, albedo: float, depths_m, attenuation_pe
              roulette: float = ROULETTE_THRESHOLD, max_orders: int | None = None) -> SlabResult:
     """Trace ``packets`` packets of the sun through a homogeneous water of single-scattering albedo ``albedo``
     (a = (1 - albedo) c, b = albedo c, c = ``attenuation_per_m``) under a level surface, and tally the light
-    field at ``depths_m`` (ascending, > 0 [m]). phase: a :class:`muls.phase.PhaseFunction` or its name;
+    field at ``depths_m`` (ascending, > 0 [m]). phase: a :class:`muls.water.phase.PhaseFunction` or its name;
     bottom_m: the black bottom [m] (default :data:`BOTTOM_MARGIN_TAU` / c below the deepest depth); stream: the
     random stream (runs on different streams are independent); max_orders: count only light scattered at
     most that many times (None: all orders). Packets are rounded up to a multiple of ``batches``."""

@@ -1,5 +1,5 @@
-"""The Monte Carlo run behind :class:`muls.scattering.ScatteringTables`: flat 0.1 plates at a grid of ranges in one
-run (the farthest plate's scene gives the water column), tabulated as the model applies them (muls/scattering.py);
+"""The Monte Carlo run behind :class:`muls.optics.scattering.ScatteringTables`: flat 0.1 plates at a grid of ranges in one
+run (the farthest plate's scene gives the water column), tabulated as the model applies them (muls/optics/scattering.py);
 and where a water's tables are found: in memory, shipped with the package, in the user cache, or built by that run.
 """
 
@@ -13,10 +13,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..overlap import TransceiverGeometry
-from ..phase import check_phase
-from ..scattering import SHIPPED_DIR, SPREAD_NODES, ScatteringTables, clear_water_tables, tables_key
-from ..water import PHASE_FUNCTION, Water
+from ..instrument.overlap import TransceiverGeometry
+from ..optics.scattering import SHIPPED_DIR, SPREAD_NODES, ScatteringTables, clear_water_tables, tables_key
+from ..water.phase import check_phase
+from ..water.properties import PHASE_FUNCTION, Water
 from .run import TargetPlanes, run_monte_carlo
 
 #: Plate ranges of a table's run [m]: every 0.25 m through the near field, where the finite aperture starts to see
@@ -64,7 +64,7 @@ def farthest_range_m(water: Water) -> float:
 def build_tables(geometry: TransceiverGeometry, water: Water, packets: int = TABLE_PACKETS, seed: int = TABLE_SEED
                  ) -> ScatteringTables:
     """Run the Monte Carlo for ``water`` and the receiver of ``geometry`` and tabulate it (module doc of
-    :mod:`muls.scattering`)."""
+    :mod:`muls.optics.scattering`)."""
     far = farthest_range_m(water)
     ranges = tuple(r for r in TABLE_RANGES_M if r <= far)
     phase = check_phase(TABLE_PHASE)

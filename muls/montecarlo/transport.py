@@ -43,10 +43,10 @@ import math
 import numba
 import numpy as np
 
-from ..errors import ParameterError, check_fraction, check_non_negative, check_positive
-from ..noise import splitmix64
-from ..phase import sample_angle, value_at
-from ..runtime import kernel
+from ..infra.errors import ParameterError, check_fraction, check_non_negative, check_positive
+from ..infra.noise import splitmix64
+from ..infra.runtime import kernel
+from ..water.phase import sample_angle, value_at
 from .estimators import column_estimate, cones, target_hit
 from .layout import (
     APERTURE_RADIUS,

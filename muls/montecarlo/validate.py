@@ -1,7 +1,7 @@
 """``muls validate-pass``: the waveform model every pass uses, against a Monte Carlo run of its own.
 
 A pass models each echo with the ``monte_carlo`` attenuation rule, the finite-aperture overlap and multiple
-scattering from the tables (:mod:`muls.scattering`), which one Monte Carlo run per water and receiver built. Here a
+scattering from the tables (:mod:`muls.optics.scattering`), which one Monte Carlo run per water and receiver built. Here a
 fresh Monte Carlo run (another seed, flat 0.1 plates at :data:`VALIDATION_RANGES_M`, none of which the tables'
 interpolation was asked for) is the reference, for the MUL in each water of :data:`VALIDATION_WATERS`:
 
@@ -21,9 +21,9 @@ import time
 
 import numpy as np
 
+from ..optics.optical_model import OpticalModel, PulseBatch
+from ..optics.radiometry import two_way_transmission
 from ..presets import mul2023, water_preset
-from ..radiometry import two_way_transmission
-from ..waveform import OpticalModel, PulseBatch
 from .power import mc_power_w
 from .run import TargetPlanes, run_monte_carlo
 

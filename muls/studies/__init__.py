@@ -9,7 +9,9 @@
   Figures 7, 8, 10 and 11);
 - :func:`budget_study`: the photon budget of every study point, and where a reported range exceeds it;
 - :func:`edge_bias_study`: the range bias of a plate at the blind-zone edge in every water, and its cause;
-- :func:`bench_study`: pulses per second of :func:`muls.simulate.simulate` on this machine.
+- :func:`bench_study`: pulses per second of :func:`muls.simulate.simulate` on this machine;
+- :func:`multiscatter_study` and :func:`multiscatter_waters_study`: the Monte Carlo (:mod:`muls.montecarlo`) beside
+  MULS, one plate (``muls multiscatter``) and per water and range (``muls multiscatter-study``).
 
 Every study goes through the instrument's own digitiser and ranging (:func:`muls.simulate.simulate`);
 randomness comes only from the ``seed`` given to it, and each shot has its own pulse id. Units are SI
@@ -35,6 +37,17 @@ from .common import (
 from .edge import EDGE_RANGES_M, edge_bias_study
 from .experiment import experiment_study
 from .maxrange import maxrange_study
+from .multiscatter import (
+    ATTENUATION_RULES,
+    CHECK_RANGES_M,
+    DEFAULT_PACKETS,
+    DETECTION_FACTORS,
+    STUDY_PACKETS,
+    STUDY_RANGES_M,
+    STUDY_WATERS,
+    multiscatter_study,
+    multiscatter_waters_study,
+)
 from .precision import precision_study
 from .waveform import waveform_study
 
@@ -58,4 +71,13 @@ __all__ = [
     "bench_study",
     "budget_study",
     "edge_bias_study",
+    "ATTENUATION_RULES",
+    "CHECK_RANGES_M",
+    "DEFAULT_PACKETS",
+    "DETECTION_FACTORS",
+    "STUDY_PACKETS",
+    "STUDY_RANGES_M",
+    "STUDY_WATERS",
+    "multiscatter_study",
+    "multiscatter_waters_study",
 ]

@@ -8,12 +8,12 @@ import time
 
 import numpy as np
 
-from ..detection import digitise
+from ..optics.optical_model import OpticalModel, PulseBatch
 from ..presets import mul2023
-from ..ranging import range_batch
+from ..ranging.returns import range_batch
+from ..receiver.digitiser import digitise
 from ..simulate import simulate
-from ..water import Water
-from ..waveform import OpticalModel, PulseBatch
+from ..water.properties import Water
 from .common import (
     _shots,
     _water,

@@ -1,14 +1,14 @@
 """The photon budget of every study point: the pond and pool tests and the three Petzold waters from 5 to
-110 m (:mod:`muls.budget`), and where a range the paper reports needs more photons than a pulse delivers."""
+110 m (:mod:`muls.photon_budget`), and where a range the paper reports needs more photons than a pulse delivers."""
 
 from __future__ import annotations
 
 import math
 
-from ..budget import channel_budget
 from ..experiments import experiment_preset
+from ..optics.optical_model import OpticalModel
+from ..photon_budget import channel_budget
 from ..presets import STUDY_ATTENUATION_MODEL, designed_mul, single_channel, study_water
-from ..waveform import OpticalModel
 from .common import FAR_GATE_WIDTH_S, MAXRANGE_WATERS, far_gate_delay_s
 
 #: Ranges of the Petzold waters in the budget [m] (the maximum-range study's span).
@@ -54,7 +54,7 @@ def budget_study(attenuation_model: str = STUDY_ATTENUATION_MODEL, waters=MAXRAN
     Cases: the pond and pool experiments (:mod:`muls.experiments`: their gains and gates) at their
     distances; each of ``waters`` at ``ranges_m`` with the designed MUL of the maximum-range study (CH3 gated
     for the range) and the single channel (key ``single``). Each case: ``photons_at_aperture`` of the panel's
-    echo and, per channel, :func:`muls.budget.channel_budget`. ``beyond_the_budget`` lists every channel and
+    echo and, per channel, :func:`muls.photon_budget.channel_budget`. ``beyond_the_budget`` lists every channel and
     distance the paper reports ranging where the echo would need more photons than the pulse delivers even at
     unlimited gain; ``not_detectable`` every one the model cannot detect at the experiment's gains, with why.
     """

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import check_positive
+from ..infra.errors import check_positive
+from ..optics.optical_model import OpticalModel, PulseBatch
+from ..optics.radiometry import lidar_attenuation_per_m
 from ..presets import coaxial, mul2023, study_water
-from ..radiometry import attenuation_per_m
-from ..water import Water
-from ..waveform import OpticalModel, PulseBatch
+from ..water.properties import Water
 from .common import (
     _list,
     _water,
@@ -56,6 +56,7 @@ def coaxial_study(water: str | Water = "turbid_harbor", t_max_ns: float = 200.0,
             "t_max_ns": float(t_max_ns), "step_ns": float(step_ns),
             "non_coaxial_offset_m": non_model.instrument.receiver.offset_m,
             "blind_zone_m": geometry.blind_zone_m, "full_overlap_m": geometry.full_overlap_m,
-            "k_per_m_at_10_m": float(attenuation_per_m(non_model.instrument, w, 10.0)), "beta_pi_per_m_sr": w.beta_pi_per_m_sr,
+            "k_per_m_at_10_m": float(lidar_attenuation_per_m(non_model.instrument, w, 10.0)),
+            "beta_pi_per_m_sr": w.beta_pi_per_m_sr,
         },
     }

@@ -6,18 +6,18 @@ import math
 
 import numpy as np
 
-from ..errors import ParameterError, check_positive
-from ..memory import check_memory
-from ..peaks import Peaks
+from ..infra.errors import ParameterError, check_positive
+from ..infra.memory import check_memory
+from ..optics.optical_model import OpticalModel, PulseBatch
 from ..presets import POND_GATE_S, POOL_GATE_S, water_preset
-from ..water import Water
-from ..waveform import OpticalModel, PulseBatch
+from ..ranging.peaks import Peaks
+from ..water.properties import Water
 
 #: Detection criterion of the studies (:func:`detections`): a measured range counts as the target when it
 #: lies within this many range bins (c_w x sample interval / 2) of the truth, or when its peak is clipped
 #: and the target's echo explains it.
 DETECTION_TOLERANCE_BINS = 3
-#: Share of seeded pulses that must detect the target for a range to count as detectable (issue 2).
+#: Share of seeded pulses that must detect the target for a range to count as detectable.
 DETECTION_FRACTION = 0.9
 #: The three Petzold waters of the paper's Table 3.
 MAXRANGE_WATERS = ("clean_ocean", "coastal_ocean", "turbid_harbor")
@@ -73,7 +73,7 @@ def detections(peaks: Peaks, truth_m: np.ndarray, tolerance_m: float, channels=N
     first sample, which the pulse's rise can put several range bins ahead of the echo's peak. Of several
     detecting peaks, the one nearest the truth.
 
-    peaks: any :class:`muls.ranging.Peaks` (``Ranging.peaks`` or ``Ranging.returns``); truth_m: (n_pulses,)
+    peaks: any :class:`muls.ranging.returns.Peaks` (``Ranging.peaks`` or ``Ranging.returns``); truth_m: (n_pulses,)
     true ranges [m]; channels: 1-based channel indices to keep, or None for all. Returns (n_pulses,) float
     errors (NaN where no peak on those channels detects the target) and (n_pulses,) bool clipped flags.
     """
@@ -116,7 +116,7 @@ def check_pulse_memory(key: str, value: int, per_value: int, what: str, unit: st
                        available_bytes: int | None = None) -> None:
     """Refuse, before allocating, ``key`` = ``value`` ``unit`` (shots, pulses) when one simulate call of ``value``
     x ``per_value`` pulses (``what``, e.g. "3 distances x 1,000 shots") would need more memory than a command
-    may plan on (:func:`muls.memory.check_memory`, :data:`PULSE_BYTES`)."""
+    may plan on (:func:`muls.infra.memory.check_memory`, :data:`PULSE_BYTES`)."""
     per = per_value * PULSE_BYTES[mode]
     check_memory(key, value, value * per, what, lambda budget: f"at most {int(budget // per):,} {unit} on this machine",
                  available_bytes)

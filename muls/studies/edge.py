@@ -15,10 +15,10 @@ import dataclasses
 
 import numpy as np
 
-from ..errors import ParameterError, check_fraction
+from ..infra.errors import ParameterError, check_fraction
+from ..optics.optical_model import OpticalModel
 from ..presets import WATER_PRESETS, mul2023, study_water
 from ..simulate import simulate
-from ..waveform import OpticalModel
 from .common import _num, _ranges, _shots, detections, range_tolerance_m, truth_batch
 from .precision import _stats
 

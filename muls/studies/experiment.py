@@ -8,9 +8,9 @@ import time
 import numpy as np
 
 from ..experiments import EXPERIMENT_SHOTS, RANGING, Experiment, experiment_preset
-from ..ranging import DROPOUT_CAUSES
+from ..optics.optical_model import OpticalModel, PulseBatch
+from ..ranging.returns import DROPOUT_CAUSES
 from ..simulate import simulate
-from ..waveform import OpticalModel, PulseBatch
 from .common import DETECTION_TOLERANCE_BINS, _list, _num, _shots, detections, range_tolerance_m, truth_batch
 
 

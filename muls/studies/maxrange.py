@@ -6,12 +6,12 @@ import time
 
 import numpy as np
 
-from ..budget import LIMITS, channel_budget, limiting_cause
-from ..errors import check_fraction, check_positive
+from ..infra.errors import check_fraction, check_positive
+from ..optics.optical_model import OpticalModel
+from ..photon_budget import LIMITS, channel_budget, limiting_cause
 from ..presets import designed_mul, single_channel, study_water
 from ..simulate import simulate
-from ..water import Water
-from ..waveform import OpticalModel
+from ..water.properties import Water
 from .common import (
     COARSE_CHUNK,
     COARSE_START_M,
@@ -79,7 +79,7 @@ MAX_BATCH_RANGES = max(COARSE_CHUNK, len(GROUP_CHANNELS) * (round(COARSE_STEP_M 
 
 
 def _limit(water: Water, single: OpticalModel, group: str, edge_m, reflectance: float) -> dict | None:
-    """What stops a group one fine step beyond its maximum range: :func:`muls.budget.limiting_cause` of its
+    """What stops a group one fine step beyond its maximum range: :func:`muls.photon_budget.limiting_cause` of its
     channel with the best SNR there (the gate, the column, too few photons, or the largest noise term), with
     that channel's SNR and the terms behind it."""
     if edge_m is None:

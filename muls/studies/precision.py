@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import check_fraction
+from ..infra.errors import check_fraction
+from ..optics.optical_model import OpticalModel
 from ..presets import mul2023, study_water
 from ..simulate import simulate
-from ..water import Water
-from ..waveform import OpticalModel
+from ..water.properties import Water
 from .common import (
     DETECTION_TOLERANCE_BINS,
     _gate,

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import check_fraction
+from ..infra.errors import check_fraction
+from ..optics.optical_model import OpticalModel, PulseBatch
 from ..presets import mul2023, study_water
-from ..ranging import DROPOUT_CAUSES
+from ..ranging.returns import DROPOUT_CAUSES
 from ..simulate import simulate
-from ..water import Water
-from ..waveform import OpticalModel, PulseBatch
+from ..water.properties import Water
 from .common import (
     _gate,
     _list,

@@ -6,7 +6,7 @@ group of them (:mod:`~scanner_sim.cli.passes`, :mod:`~scanner_sim.cli.clouds`, :
 parser and sets ``func``, and decorate it with ``@subcommand("name")``. They hold only the parsers and the thin
 functions that call the package; the work itself lives in the modules they call. A ``ValueError`` (bad scene
 file, bad parameter) becomes one line on stderr and exit code 2, without a traceback; every option is
-range-checked by argparse through the typed helpers of :mod:`muls.command`, and any other ending is one line too
+range-checked by argparse through the typed helpers of :mod:`muls.infra.command`, and any other ending is one line too
 (a full disk 1, Ctrl-C 130, SIGTERM 143; ``docs/errors.md``).
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 
-from muls.command import OneLineParser, checked_types, package_version, parse_guarded, run_guarded
+from muls.infra.command import OneLineParser, checked_types, package_version, parse_guarded, run_guarded
 from scanner_sim.cli import clouds, datasets, features, passes, perf, studies, uncertainty  # noqa: F401  each registers its subcommands
 from scanner_sim.cli.registry import SUBCOMMANDS
 
@@ -36,9 +36,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Entry point of ``scanner-sim``; returns the exit code: 0, 1 (a failure such as a full disk), 2 (bad
     input), 130 (Ctrl-C) or 143 (SIGTERM), with one line on stderr for anything but 0 (``docs/errors.md``)."""
-    from muls.runtime import configure_process
+    from muls.infra.runtime import configure_process
 
-    configure_process()  # threads, memory and the kernel cache, before any kernel runs (muls/runtime.py)
+    configure_process()  # threads, memory and the kernel cache, before any kernel runs (muls/infra/runtime.py)
     args, code = parse_guarded(build_parser(), argv)
     if args is None:  # --help, --version (0) or a bad argument (2, one line printed)
         return code

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from muls.command import (
+from muls.infra.command import (
     nonempty,
     output_file,
     positive_float,
@@ -143,7 +143,7 @@ def _cmd_swath(args) -> int:
 
     from scanner_sim.io import read_las
     from scanner_sim.metrics.swath import swath_consistency
-    from scanner_sim.survey.point_records import PointRecords
+    from scanner_sim.records.point_records import PointRecords
 
     path = Path(args.path)
     if path.is_file():

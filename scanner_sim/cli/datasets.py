@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from muls.command import nonempty, output_dir
+from muls.infra.command import nonempty, output_dir
 from scanner_sim.cli.registry import subcommand
 from scanner_sim.cli.studies import _add_dask_arguments, _workers
 

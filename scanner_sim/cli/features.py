@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from muls.command import nonempty, output_dir, positive_float, positive_int, seed
+from muls.infra.command import nonempty, output_dir, positive_float, positive_int, seed
 from scanner_sim.cli.registry import subcommand
 from scanner_sim.fidelity import FIDELITY_LEVELS
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 
-from muls.command import (
+from muls.infra.command import (
     non_negative_float,
     non_negative_int,
     nonempty,
@@ -180,12 +180,12 @@ def scene_overrides(args, config) -> dict:
 
 def kernels_cached() -> bool:
     """Whether numba's caches hold compiled kernels of both packages for the installed sources (their digitiser and
-    hit kernels); False on a fresh machine, and after the sources change (``muls/runtime.py``)."""
+    hit kernels); False on a fresh machine, and after the sources change (``muls/infra/runtime.py``)."""
     from pathlib import Path
 
-    from muls.runtime import kernel_cache_dir
+    from muls.infra.runtime import kernel_cache_dir
 
-    for package, pattern in (("muls", "detection._digitise*.nbi"), ("scanner_sim", "kernels.hit_block*.nbi")):
+    for package, pattern in (("muls", "digitiser._digitise*.nbi"), ("scanner_sim", "kernels.hit_block*.nbi")):
         module = sys.modules.get(package) or __import__(package)
         cache = kernel_cache_dir(package) or Path(module.__file__).parent / "__pycache__"
         if not any(cache.rglob(pattern)):

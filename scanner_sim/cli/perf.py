@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from muls.command import (
+from muls.infra.command import (
     nonempty,
     positive_int,
 )
@@ -81,9 +81,9 @@ def _add_bench_rays(sub):
 
 
 def _cmd_bench_rays(args) -> int:
-    from muls.memory import check_memory
+    from muls.infra.memory import check_memory
     from scanner_sim.perf.raybench import bench_rays
-    from scanner_sim.survey.budget import CHUNK_BYTES_PER_SUBRAY
+    from scanner_sim.survey.sizing import CHUNK_BYTES_PER_SUBRAY
 
     per = args.subrays * CHUNK_BYTES_PER_SUBRAY  # one chunk of --pulses pulses, as a pass holds it (195 B measured)
     check_memory("--pulses", args.pulses, args.pulses * per, f"a chunk of {args.pulses:,} pulses x {args.subrays} sub-rays",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 
-from muls.command import (
+from muls.infra.command import (
     non_negative_int,
     nonempty,
     output_dir,
@@ -37,7 +37,7 @@ def _add_overlap(sub):
 def _cmd_overlap(args) -> int:
     import numpy as np
 
-    from muls.errors import ParameterError
+    from muls.infra.errors import ParameterError
     from muls.presets import instrument_preset, water_preset
     from scanner_sim.studies.raycast_overlap import raycast_overlap
 
@@ -215,8 +215,8 @@ def _check_cell_memory(args, config) -> None:
     memory than the study may plan on (budget.COVERAGE_BYTES_PER_CELL a cell, its map rendered included)."""
     import math
 
-    from muls.memory import check_memory
-    from scanner_sim.survey.budget import COVERAGE_BYTES_PER_CELL
+    from muls.infra.memory import check_memory
+    from scanner_sim.survey.sizing import COVERAGE_BYTES_PER_CELL
     from scanner_sim.world.raster import seabed_plan_size_m
 
     size = seabed_plan_size_m(config)

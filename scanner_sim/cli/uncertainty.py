@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from muls.command import nonempty, output_file, positive_int, seed
+from muls.infra.command import nonempty, output_file, positive_int, seed
 from scanner_sim.cli.registry import subcommand
 from scanner_sim.fidelity import FIDELITY_LEVELS
 
@@ -39,7 +39,7 @@ def _cmd_uncertainty(args) -> int:
     options = PassOptions(water=args.water, seed=args.seed, fidelity=args.fidelity, max_pulses=args.max_pulses,
                           progress=False, render=False)
     if args.seeds > 1:
-        from scanner_sim.metrics.tpu_ensemble import ensemble_calibration
+        from scanner_sim.studies.tpu_ensemble import ensemble_calibration
 
         summary = ensemble_calibration(config, options, args.seeds)
         figures = {k: v for k, v in summary.items() if k not in ("scene", "water", "seed", "pulses", "points")}

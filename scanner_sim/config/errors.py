@@ -12,7 +12,7 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 from pydantic_core import PydanticCustomError
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 
 
 class ConfigError(ParameterError):

@@ -1,7 +1,7 @@
 """What the rays see: the procedural seabed and the objects (a discriminated union on ``type``).
 
 Every surface has a material (or a reflectance at 532 nm, which wins) and a class label, from
-:mod:`scanner_sim.world.materials`; :func:`surface` makes the base model that carries them with a kind's defaults.
+:mod:`scanner_sim.config.materials`; :func:`surface` makes the base model that carries them with a kind's defaults.
 Objects placed by [x, y] rest on the seabed; [x, y, z] gives the ground level z directly.
 """
 
@@ -34,8 +34,8 @@ from scanner_sim.config.base import (
     choice_check,
 )
 from scanner_sim.config.errors import checked_at, invalid
+from scanner_sim.config.materials import LABELS, MATERIALS
 from scanner_sim.config.sections import MAX_SEED, check_depth_m
-from scanner_sim.world.materials import LABELS, MATERIALS
 
 #: A seabed above 2,000,000 triangles is tiled (scanner_sim.world.site): the pass holds its heights (8 bytes a node,
 #: about 4 a triangle) and meshes only windows of it; generating the relief takes about five times the heights.

@@ -5,6 +5,7 @@ a rotated grid, smaller than 2 x 2 or without the band, in one line naming the k
 the scene is built (:mod:`scanner_sim.world.raster`), which refuses a window of nodata alone.
 """
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -16,7 +17,21 @@ from scanner_sim.config.crs import not_metric, to_crs
 from scanner_sim.config.errors import ConfigError, invalid
 from scanner_sim.config.geometry import ReliefConfig, surface
 from scanner_sim.config.sections import MAX_SEED
-from scanner_sim.world.terrain import RasterGrid
+
+
+@dataclass(frozen=True)
+class RasterGrid:
+    """A bathymetry grid in memory, as a raster file would give it: heights (rows, cols) float [m], its affine
+    ``transform`` (rasterio's ``Affine``: map x, y of a pixel's corner from (col, row)), CRS (anything pyproj
+    reads), nodata value (or None; NaN cells are nodata too) and vertical sign ('elevation_up' or 'depth_down').
+    A raster seabed section takes one in place of a file name (:mod:`scanner_sim.world.raster` reads both)."""
+
+    heights: np.ndarray
+    transform: object
+    crs: object
+    nodata: float | None = None
+    vertical: str = "elevation_up"
+    source: str = "in memory"
 
 
 def check_grid(transform, width: int, height: int, crs) -> str | None:
@@ -79,7 +94,7 @@ def _path_or_grid(value: Any) -> Any:
         value = RasterGrid(**value)  # a grid dumped by with_overrides, back to itself
     if not isinstance(value, (str, RasterGrid)):
         raise invalid("must be a path to a raster file (relative to the scene file) or, from Python, a "
-                      "scanner_sim.world.terrain.RasterGrid", value=value)
+                      "scanner_sim.config.raster_seabed.RasterGrid", value=value)
     return value
 
 

@@ -128,11 +128,11 @@ class SceneConfig(StrictModel):
         return self.output.dir or f"out/{self.name}"
 
     def water_model(self):
-        """The :class:`muls.water.Water` of this scene."""
+        """The :class:`muls.water.properties.Water` of this scene."""
         return self.water.to_water(f"{self.name}_water")
 
     def instrument_model(self):
-        """The :class:`muls.instrument.Instrument` of this scene (gate and other overrides applied)."""
+        """The :class:`muls.instrument.description.Instrument` of this scene (gate and other overrides applied)."""
         return self.instrument.to_instrument(self.water_model())
 
     def with_overrides(self, overrides: Mapping[str, object], *, given: bool = True) -> "SceneConfig":

@@ -10,13 +10,13 @@ from typing import Annotated, Any
 from pydantic import BeforeValidator, model_validator
 
 from muls import WATER_PRESETS, instrument_preset, water_preset
-from muls.water import (
+from muls.optics.optical_model import MULTIPLE_SCATTERING
+from muls.water.properties import (
     ATTENUATION_MODELS,
     BACKSCATTER_MODELS,
     GROUP_INDEX_SEAWATER,
     Water,
 )
-from muls.waveform import MULTIPLE_SCATTERING
 from scanner_sim.config.base import (
     Choice,
     Integer,
@@ -30,12 +30,15 @@ from scanner_sim.config.base import (
 )
 from scanner_sim.config.errors import invalid
 from scanner_sim.fidelity import FIDELITY_LEVELS, FidelityLevel
-from scanner_sim.rays.beams import PROFILES, SUBRAY_COUNTS
 
 WaterPreset = Choice(*sorted(WATER_PRESETS))
 
 #: Largest seed: numpy's generators and muls's noise keys take 0 .. 2**63 - 1 without wrapping.
 MAX_SEED = 2**63 - 1
+#: Sub-ray counts the beam's ring layout allows (:func:`scanner_sim.rays.beams.beam_pattern`): 1 + 3 N (N + 1).
+SUBRAY_COUNTS = tuple(1 + 3 * n * (n + 1) for n in range(0, 9))  # 1, 7, 19, 37, 61, 91, 127, 169, 217
+#: Energy profiles across the beam.
+PROFILES = ("top_hat", "gaussian")
 #: Deeper than any ocean (the Challenger Deep is about 10,935 m) [m]: a larger depth is a unit slip.
 MAX_DEPTH_M = 11_000.0
 
@@ -63,9 +66,9 @@ class WaterConfig(StrictModel):
     beta_pi_per_m_sr: NonNegative | None = None
     """Measured volume scattering function at 180 degrees [1/(m sr)]."""
     attenuation_model: Choice(*ATTENUATION_MODELS) | None = None
-    """Attenuation the echo sees (muls.water)."""
+    """Attenuation the echo sees (muls.water.properties)."""
     backscatter_model: Choice(*BACKSCATTER_MODELS) | None = None
-    """Water-column backscatter model (muls.water)."""
+    """Water-column backscatter model (muls.water.properties)."""
     background_radiance_w_m2_sr_nm: NonNegative = 0.0
     """Spectral radiance L_b of artificial light in the water [W/(m^2 sr nm)] (MULS Eqs. 8-10), allowed beside a
     preset; 0 (the default) is deep, dark water."""
@@ -88,7 +91,7 @@ class WaterConfig(StrictModel):
         return self
 
     def to_water(self, name: str = "custom") -> Water:
-        """The :class:`muls.water.Water` this section describes."""
+        """The :class:`muls.water.properties.Water` this section describes."""
         if self.preset is not None:
             water = water_preset(self.preset)
         else:
@@ -141,7 +144,7 @@ class InstrumentConfig(StrictModel):
         return self
 
     def to_instrument(self, water: Water | None = None):
-        """The :class:`muls.instrument.Instrument` with the overrides applied."""
+        """The :class:`muls.instrument.description.Instrument` with the overrides applied."""
         inst = instrument_preset(self.preset, water)
         tx = {k: v for k, v in (("pulse_energy_j", self.pulse_energy_j), ("beam_diameter_m", self.beam_diameter_m),
                                 ("beam_divergence_full_rad", self.beam_divergence_full_rad)) if v is not None}
@@ -299,7 +302,7 @@ class SurveyConfig(StrictModel):
     """Visibility rays from each hit to the receiver, overriding the fidelity level's choice."""
     multiple_scattering: Choice(*MULTIPLE_SCATTERING) | None = None
     """The echo's spread in time and the Monte Carlo's column (``table``) or neither (``none``), overriding the
-    fidelity level's choice (muls.waveform.MULTIPLE_SCATTERING)."""
+    fidelity level's choice (muls.optics.optical_model.MULTIPLE_SCATTERING)."""
     start_s: NonNegative = 0.0
     """Start of the pass on the trajectory [s]."""
     duration_s: Positive | None = None

@@ -2,7 +2,7 @@
 
 - :mod:`~scanner_sim.io.atomic`: :func:`atomic_path`, the atomic write every writer uses.
 - :mod:`~scanner_sim.io.las`: ``points.las``, LAS 1.4 format 6 with extra dimensions, streamed by
-  :class:`LasWriter`; the layout follows the :class:`~scanner_sim.survey.point_records.PointRecords` declarations.
+  :class:`LasWriter`; the layout follows the :class:`~scanner_sim.records.point_records.PointRecords` declarations.
 - :mod:`~scanner_sim.io.dropouts`: ``dropouts.npz``, streamed by :class:`DropoutWriter`.
 - :mod:`~scanner_sim.io.ply`: ``scene.ply``, the labelled truth meshes.
 - :mod:`~scanner_sim.io.summary`: ``summary.json``.

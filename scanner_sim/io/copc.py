@@ -24,7 +24,7 @@ import numpy as np
 
 from scanner_sim.io.atomic import atomic_path
 from scanner_sim.io.las import LasWriter, _set_extra_bytes_ranges
-from scanner_sim.survey.point_records import PointRecords
+from scanner_sim.records.point_records import PointRecords
 
 __all__ = ["GRID_CELLS", "MAX_NODE_POINTS", "CopcWriter", "octree_levels", "write_copc"]
 

@@ -1,14 +1,10 @@
 """points.las: :class:`PointRecords` as LAS 1.4, point data record format 6 plus extra dimensions, streamed.
 
-The layout comes from the field declarations of :class:`~scanner_sim.survey.point_records.PointRecords`: a
-:class:`~scanner_sim.survey.point_records.LasStandard` field fills standard dimensions through its conversion
-(:data:`_TO_LAS`, :data:`_FROM_LAS`), a :class:`~scanner_sim.survey.point_records.LasExtra` field is an extra
+The layout comes from the field declarations of :class:`~scanner_sim.records.point_records.PointRecords`: a
+:class:`~scanner_sim.records.point_records.LasStandard` field fills standard dimensions through its conversion
+(:data:`_TO_LAS`, :data:`_FROM_LAS`), a :class:`~scanner_sim.records.point_records.LasExtra` field is an extra
 dimension (:data:`EXTRA_DIMENSIONS`). Header, VLRs and time mapping: ``docs/outputs.md``. Writer and reader stay in
 one module because both are built from the same field tables.
-
-It is longer than the other io modules on purpose: it is one format, written (streamed, with the LAS 1.4 range
-checks of point format 6) and read back, and both directions share the one field mapping above; split, the
-writer and the reader would each need a copy of it.
 """
 
 from __future__ import annotations
@@ -27,7 +23,7 @@ import numpy as np
 
 from scanner_sim.io.atomic import PathLike, StreamingWriter, atomic_path
 from scanner_sim.io.summary import jsonable
-from scanner_sim.survey.point_records import LasExtra, LasStandard, PointRecords
+from scanner_sim.records.point_records import LasExtra, LasStandard, PointRecords
 
 __all__ = [
     "EXTRA_DIMENSIONS",
@@ -182,7 +178,7 @@ def _set_extra_bytes_ranges(header: laspy.LasHeader, ranges: Mapping[str, tuple[
     (``ExtraBytesParams`` takes no range, ``ExtraBytesStruct.min``/``max`` are read-only), so this
     writes the descriptor's ctypes fields ``_min``/``_max``: the 8-byte type of the field's kind
     (uint64, int64 or double, LAS 1.4 R15 Table 24). A dimension without points gets its min/max bits
-    cleared. ``tests/test_io_las.py::test_laspy_extra_bytes_range_bug_still_present`` fails once laspy
+    cleared. ``tests/scanner_sim/io/test_io_las.py::test_laspy_extra_bytes_range_bug_still_present`` fails once laspy
     fixes ``grow``; then drop this function.
     """
     for struct_ in header.vlrs.get("ExtraBytesVlr")[0].extra_bytes_structs:

@@ -29,7 +29,7 @@ from scanner_sim.io.atomic import PathLike, StreamingWriter
 from scanner_sim.io.las import LAS_SCALE_M
 from scanner_sim.io.run_dir import RunDirectory
 from scanner_sim.io.summary import jsonable
-from scanner_sim.survey.point_records import PointRecords
+from scanner_sim.records.point_records import PointRecords
 
 __all__ = ["BAG_FRAMES", "BAG_STORAGES", "PASS_START_UNIX_NS", "POINT_FIELDS", "ROSBAG_NAME", "BagFrame",
            "RosbagWriter", "bag_files", "stamp_ns", "typestore"]

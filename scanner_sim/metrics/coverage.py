@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.errors import ParameterError
-from muls.ranging import DROPOUT_CAUSES
+from muls.infra.errors import ParameterError
+from muls.ranging.returns import DROPOUT_CAUSES
 from scanner_sim.metrics import s44
 
 #: Why a pulse reaching a bin gave no valid point (index = failure code).

@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 
 #: Share of a cell's soundings that must meet an order (S-44's uncertainties are at 95 % confidence).
 CONFIDENCE = 0.95  # assumption: 95 % of a cell's soundings (docs/assumptions.md)

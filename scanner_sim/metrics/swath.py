@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from scanner_sim.survey.point_records import PointRecords
+from scanner_sim.records.point_records import PointRecords
 
 #: Largest nearest-neighbour distance [m] for a point to count as in the overlap of two lines.
 OVERLAP_M = 0.5

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 
 
 @dataclass(frozen=True)

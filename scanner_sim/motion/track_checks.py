@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 
-from muls.water import MAX_ATTENUATION_EXPONENT
+from muls.water.properties import MAX_ATTENUATION_EXPONENT
 from scanner_sim.config.errors import ConfigError, SetupWarning, config_value
 from scanner_sim.motion.trajectory import PATH_STEP_M, Trajectory, trajectory_of
 from scanner_sim.world.raster import lawnmower_area
@@ -20,7 +20,7 @@ def build_trajectory(config, scene=None) -> Trajectory:
     """The :class:`Trajectory` of a :class:`scanner_sim.config.SceneConfig` over its built ``scene``, its track
     checked against the water surface, the seabed and the objects (:func:`check_track`). Raises
     :class:`ConfigError` naming the key; warns (:class:`SetupWarning`) about set-ups that run but likely not as
-    meant. The pass's size is checked before, by :func:`scanner_sim.survey.budget.check_pass_budget`."""
+    meant. The pass's size is checked before, by :func:`scanner_sim.survey.sizing.check_pass_budget`."""
     trajectory = trajectory_of(config, scene)
     check_track(config, scene, trajectory)
     return trajectory

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from muls.errors import ParameterError
-from muls.filters import first_order_filter
+from muls.infra.errors import ParameterError
+from muls.infra.filters import first_order_filter
 from scanner_sim.world.raster import lawnmower_area
 from scanner_sim.world.scene import compass_to_yaw_rad
 

@@ -31,7 +31,7 @@ def _peak_rss_mb() -> float:
 def _level_figures(scene_name: str, fidelity: str, pulses: int, repeat: int, overrides: dict) -> dict:
     """In a fresh process: best and median pulses/s of ``repeat`` passes, cores used (of the best), set-up seconds
     and peak RSS."""
-    from muls.runtime import configure_process
+    from muls.infra.runtime import configure_process
     from scanner_sim.config import load_scene
     from scanner_sim.survey.pipeline import run_pass
     from scanner_sim.survey.setup import PassOptions

@@ -18,9 +18,9 @@ def stages() -> dict[str, tuple]:
     """Stage -> the functions whose cumulative times make it up; "ray stage" (``balanced``'s cast or the ``auto``
     level's) minus "rays (Embree)" is the sub-ray set-up, hit attributes and receiver check. The functions
     themselves, not their names: one that moves or is renamed fails here, loudly."""
-    from muls.detection import digitise
-    from muls.ranging import range_batch
-    from muls.waveform import OpticalModel
+    from muls.optics.optical_model import OpticalModel
+    from muls.ranging.returns import range_batch
+    from muls.receiver.digitiser import digitise
     from scanner_sim.rays.auto import cast_auto
     from scanner_sim.rays.cast import cast_beams
     from scanner_sim.rays.caster import EmbreeCaster

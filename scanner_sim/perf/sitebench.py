@@ -128,7 +128,7 @@ def _pass_figures(size_m, spacing_m: float, fidelity: str, duration_s: float, rs
     and first tables: the raster read and refined, or the relief generated), pulses/s of the chunks (kernels
     compiled before, :func:`scanner_sim.survey.pipeline.warm_up`), peak RSS [MB] and the resident memory as the pass
     reached ``rss_minutes``."""
-    from muls.runtime import configure_process
+    from muls.infra.runtime import configure_process
     from scanner_sim.config import parse_scene
     from scanner_sim.survey.pipeline import pass_chunks, stream_pass, warm_up
     from scanner_sim.survey.setup import PassOptions, PassSetup

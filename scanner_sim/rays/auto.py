@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.runtime import kernel
+from muls.infra.runtime import kernel
 from scanner_sim.rays.cast import BeamCast, CastScene, cast_beams, kernel_inputs
 from scanner_sim.rays.collapse import collapse_simple, emit_rows, pulse_figures
 from scanner_sim.rays.hits import Hits, empty_columns, head

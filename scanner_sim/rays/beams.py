@@ -12,7 +12,7 @@ a_{n-1} and a_n with a_n^2 = (1 + 3 n (n + 1)) / (1 + 3 N (N + 1)) (the centre p
 and its points sit on the radius that halves that annulus' area. Each ring is turned by a small stagger
 (:data:`RING_STAGGER_RAD`) so that no two rings line up: a straight edge crossing the spot (the receiver footprint's edge, in
 the overlap test) then uncovers points one at a time instead of whole rows at once, which is what makes the
-ray-cast overlap converge to Eq. 11 (tests/test_beams.py, test_geometry_overlap.py).
+ray-cast overlap converge to Eq. 11 (tests/scanner_sim/rays/test_beams.py, test_geometry_overlap.py).
 
 Weights sum to 1. ``top_hat``: each point gets its cell's share of a uniform disc (equal weights, the profile
 Eq. 11 assumes). ``gaussian``: each point gets its cell's integral of exp(-2 rho^2 / w^2) over the unit disc,
@@ -26,11 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
+from scanner_sim.config.sections import PROFILES, SUBRAY_COUNTS
 
-#: Sub-ray counts the ring layout allows: 1 + 3 N (N + 1).
-SUBRAY_COUNTS = tuple(1 + 3 * n * (n + 1) for n in range(0, 9))  # 1, 7, 19, 37, 61, 91, 127, 169, 217
-PROFILES = ("top_hat", "gaussian")
 #: Rotation of ring n relative to ring n - 1 [rad]. Chosen by minimising the worst ray-cast overlap error against
 #: Eq. 11 over 1-8 m for the mul2023 geometry (edge of the footprint across the shaft direction u): 1.5 degrees
 #: gives 0.021 at 61 sub-rays and 0.014 at 91; the golden angle gives 0.032 and 0.018, no stagger 0.08.

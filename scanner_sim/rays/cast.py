@@ -54,7 +54,7 @@ def cast_beams(target: CastScene, beam_origin: np.ndarray, beam_dir: np.ndarray,
 
     beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir: (n_pulses, 3) float64 world frame (from
     :meth:`scanner_sim.motion.scanner.Scanner.world_rays`); pattern: sub-ray layout; geometry: the instrument's
-    :class:`muls.overlap.TransceiverGeometry` (beam radius, divergence, receiver aperture and FOV);
+    :class:`muls.instrument.overlap.TransceiverGeometry` (beam radius, divergence, receiver aperture and FOV);
     shadow_rays: cast a visibility ray from each hit the receiver sees to its aperture (else only its field);
     prove_shadows: over a seabed height field, leave out the shadow rays of each pulse whose hits all lie on the
     seabed with nothing that can stand between them and the aperture (proven on the seabed's coarse grid,

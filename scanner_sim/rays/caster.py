@@ -14,7 +14,7 @@ import warnings
 
 import numpy as np
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 
 BACKENDS = ("auto", "embree", "numpy")
 

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from muls.runtime import kernel
+from muls.infra.runtime import kernel
 from scanner_sim.rays.echoes import ECHO_BIN_M, echo_energy, echo_range_m
 from scanner_sim.rays.hits import Hits, empty_columns, head
 

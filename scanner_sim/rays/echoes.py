@@ -7,7 +7,7 @@ The functions are compiled and take scalars (inside kernels) or arrays (from num
 
 from __future__ import annotations
 
-from muls.runtime import kernel
+from muls.infra.runtime import kernel
 
 #: [m] Sub-ray echoes closer than this in range count as one place: they share one water-column cut
 #: (survey.handoff.column_cuts), and a footprint whose echoes all lie within it is simple, its echoes collapsed to

@@ -30,7 +30,7 @@ HIT_FIELDS: tuple[HitField, ...] = (
     HitField("normal", np.float32, 3, "unit surface normal facing the incoming ray"),
     HitField("incidence_rad", np.float64, 1, "[rad] angle between the ray and the normal, in [0, pi/2]"),
     HitField("reflectance", np.float64, 1, "Lambertian reflectance at 532 nm"),
-    HitField("label", np.int16, 1, "class code (world.materials.LABELS)"),
+    HitField("label", np.int16, 1, "class code (config.materials.LABELS)"),
     HitField("object_id", np.int32, 1, "index into Scene.objects"),
     HitField("surface_id", np.int32, 1, "the smooth surface of the triangle hit (Scene.face_surface): the "
                                         "surface a return's truth is judged on (survey.georeference)"),

@@ -13,8 +13,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from muls.overlap import aperture_share
-from muls.runtime import kernel
+from muls.infra.runtime import kernel
+from muls.instrument.overlap import aperture_share
 from scanner_sim.rays.echoes import echo_range_m
 
 
@@ -55,7 +55,7 @@ class SceneFaces(NamedTuple):
 
 class ReceiverView(NamedTuple):
     """How the receiver sees a hit: ``finite`` (each aperture point sees its own field of view: the share of the
-    aperture, :func:`muls.overlap.aperture_share`, of radius ``aperture_radius`` [m] and field ``tan_half_fov``) or,
+    aperture, :func:`muls.instrument.overlap.aperture_share`, of radius ``aperture_radius`` [m] and field ``tan_half_fov``) or,
     for MULS Eq. 11, the cone around the union of the fields, its virtual apex ``apex_behind`` [m] behind the
     aperture and its half-angle cosine ``cos_half_fov``."""
 
@@ -67,7 +67,7 @@ class ReceiverView(NamedTuple):
 
     @classmethod
     def of(cls, geometry) -> ReceiverView:
-        """From a :class:`muls.overlap.TransceiverGeometry` (its ``overlap_model`` decides)."""
+        """From a :class:`muls.instrument.overlap.TransceiverGeometry` (its ``overlap_model`` decides)."""
         half = 0.5 * geometry.fov_full_rad
         return cls(geometry.overlap_model != "eq11", geometry.aperture_radius_m, math.tan(half),
                    geometry.aperture_radius_m / math.tan(half), math.cos(half))

@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from muls.runtime import kernel
+from muls.infra.runtime import kernel
 
 
 class SeabedGrid(NamedTuple):

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.runtime import kernel, release_free_heap
+from muls.infra.runtime import kernel, release_free_heap
 from scanner_sim.rays.auto import cast_auto
 from scanner_sim.rays.cast import BeamCast, CastScene, cast_beams
 from scanner_sim.rays.caster import RayCaster
@@ -34,7 +34,7 @@ from scanner_sim.rays.seabed_grid import seabed_grid
 KEPT_WINDOWS = 1
 #: Chunks that give the free heap back to the system as they finish, after a window is let go (one per worker: the
 #: window is freed when the last chunk casting into it is done). glibc otherwise keeps up to 512 MB of freed memory
-#: for reuse (muls.runtime), which the windows' arrays, freed as the pass moves on, would fill.
+#: for reuse (muls.infra.runtime), which the windows' arrays, freed as the pass moves on, would fill.
 TRIMS_AFTER_RELEASE = 2
 #: Tiles a window reaches past what it is built for, on every side (:meth:`TiledTarget.window_for`).
 WINDOW_PAD_TILES = 1

@@ -8,6 +8,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from scanner_sim.config.materials import LABELS
 from scanner_sim.io import atomic_path
 from scanner_sim.render.point_colours import (
     HEIGHT_COLOUR_MAP,
@@ -15,7 +16,6 @@ from scanner_sim.render.point_colours import (
     categorical_rgb,
     shaded_height_rgb,
 )
-from scanner_sim.world.materials import LABELS
 
 #: Largest side of a point-cloud picture or window [px]: the largest framebuffer side GPU OpenGL drivers commonly
 #: render (GL_MAX_RENDERBUFFER_SIZE and the viewport are 16384 on most; Mesa's llvmpipe renders more).
@@ -27,9 +27,9 @@ WINDOW_BYTES_PER_PIXEL = 100
 
 def check_window_size(key: str, window_size: Sequence[int], available_bytes: int | None = None) -> None:
     """Refuse, before VTK allocates it, a (width, height) [px] with a side beyond :data:`MAX_WINDOW_SIDE_PX` or a
-    picture needing more memory than a command may plan on (:func:`muls.memory.check_memory`): a ValueError
+    picture needing more memory than a command may plan on (:func:`muls.infra.memory.check_memory`): a ValueError
     naming ``key``."""
-    from muls.memory import check_memory
+    from muls.infra.memory import check_memory
 
     w, h = (int(v) for v in window_size)
     shown = f"{w} {h}"
@@ -73,7 +73,7 @@ def _prefer_headless_vtk() -> None:
 
 
 def points_polydata(points):
-    """A pyvista ``PolyData`` of :class:`scanner_sim.survey.point_records.PointRecords`: one vertex per point, every other
+    """A pyvista ``PolyData`` of :class:`scanner_sim.records.point_records.PointRecords`: one vertex per point, every other
     field as point data (by its field name)."""
     import pyvista as pv
 

@@ -1,7 +1,7 @@
 """Colours of points: by class, by detection channel, or by a scalar field through its colour map.
 
 Class colours (:data:`CLASS_COLOURS`) are keyed by the scene's label *names*; the codes come from
-the class table (``scanner_sim.world.materials.CLASS_NAMES``: the scene labels of ``docs/scene-format.md``, and
+the class table (``scanner_sim.config.materials.CLASS_NAMES``: the scene labels of ``docs/scene-format.md``, and
 noise):
 
 =================  =========================  ==========
@@ -34,7 +34,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from scanner_sim.world.materials import CLASS_NAMES
+from scanner_sim.config.materials import CLASS_NAMES
 
 #: Label name -> RGB colour (0..255).
 CLASS_COLOURS: dict[str, tuple[int, int, int]] = {
@@ -88,7 +88,7 @@ CHANNEL_COLOURS: tuple[tuple[int, int, int], ...] = ((31, 119, 180), (255, 127, 
 
 def class_table(class_names: Mapping[int, str] | None = None) -> dict[int, str]:
     """Class code -> name: ``class_names`` when given, else the scene labels and noise
-    (:data:`scanner_sim.world.materials.CLASS_NAMES`)."""
+    (:data:`scanner_sim.config.materials.CLASS_NAMES`)."""
     if class_names is not None:
         return {int(k): str(v) for k, v in class_names.items()}
     return dict(CLASS_NAMES)

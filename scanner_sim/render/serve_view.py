@@ -32,7 +32,7 @@ def serve(files: PassFiles, *, port: int = DEFAULT_PORT, max_points: int = DEFAU
     """Serve the points of ``files`` (coloured by ``color``, switchable), the faded scene mesh and the trajectory at
     http://127.0.0.1:PORT until interrupted; ``announce`` gets the address line once the server listens."""
     from scanner_sim.io import read_las, read_scene_ply, read_trajectory_csv
-    from scanner_sim.survey.point_records import PointRecords
+    from scanner_sim.records.point_records import PointRecords
 
     viser = _viser()
     points = PointRecords.concatenate([read_las(f) for f in files.clouds])

@@ -42,7 +42,7 @@ COLOURINGS: dict[str, tuple[str, str | None, bool]] = {
     "tvu": ("TVU 95 % [m]", "plasma", False),
     "snr": ("SNR", "magma", False),
 }
-#: Colour of each dropout cause (muls.ranging.DROPOUT_CAUSES order), as the coverage map's gap colours.
+#: Colour of each dropout cause (muls.ranging.returns.DROPOUT_CAUSES order), as the coverage map's gap colours.
 DROPOUT_COLOURS = ((120, 120, 120), (255, 127, 14), (214, 39, 40), (255, 255, 255), (148, 103, 189), (23, 190, 207))
 BACKGROUND = "#0b1a2a"  # the deep-water navy of the PNG renders
 WEB = "web"  # package data folder of the viewer and three.js
@@ -169,10 +169,10 @@ def page_data(files: PassFiles, *, max_points: int = DEFAULT_MAX_POINTS, color: 
               point_size_px: float = 2.0) -> dict:
     """The JSON the viewer reads, from the files of one pass; ``color``: the colouring shown first (default
     depth over a seabed, class otherwise)."""
-    from muls.ranging import DROPOUT_CAUSES
+    from muls.ranging.returns import DROPOUT_CAUSES
+    from scanner_sim.config.materials import LABELS
     from scanner_sim.io import read_dropouts_npz, read_las, read_scene_ply, read_trajectory_csv
-    from scanner_sim.survey.point_records import PointRecords
-    from scanner_sim.world.materials import LABELS
+    from scanner_sim.records.point_records import PointRecords
 
     points = PointRecords.concatenate([read_las(f) for f in files.clouds])
     n = len(points)

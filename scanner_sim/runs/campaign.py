@@ -1,4 +1,4 @@
-"""Campaigns (issue 16, docs/campaigns.md): a base scene and the axes to sweep; every combination of the
+"""Campaigns (docs/campaigns.md): a base scene and the axes to sweep; every combination of the
 axes' values (their cartesian product) is one survey pass, run as a Dask task (:mod:`.pass_runner`).
 
 The flow: :func:`load_campaign` reads and checks the file (a strict model, the scene files' one-line errors)
@@ -24,7 +24,7 @@ from typing import Annotated, Any
 
 from pydantic import BeforeValidator, model_validator
 
-from muls.command import NAME_MAX_BYTES
+from muls.infra.command import NAME_MAX_BYTES
 from scanner_sim import io
 from scanner_sim.config import ConfigError, SceneConfig, build, load_scene
 from scanner_sim.config.base import Choice, Integer, Positive, StrictModel
@@ -183,7 +183,7 @@ class Campaign:
     jobs: list[PassJob]
     source_path: Path | None = None
     cubes: list[dict] = dataclasses.field(default_factory=list)
-    """The cubes placed for feature detection (:func:`scanner_sim.studies.features.cube_positions`)."""
+    """The cubes placed for feature detection (:func:`scanner_sim.survey.feature_placement.cube_positions`)."""
 
     @property
     def axes(self) -> list[str]:
@@ -200,11 +200,12 @@ def parse_campaign(data: Any, base_dir: Path | None = None, name: str = "campaig
     fixed = {key: getattr(opts, option) for option, key in OPTION_KEYS.items() if getattr(opts, option) is not None}
     cubes = []
     if opts.cubes_m:
-        from scanner_sim.studies import features
+        from scanner_sim.metrics.feature_cubes import with_cubes
+        from scanner_sim.survey.feature_placement import cube_positions
 
-        cubes = features.cube_positions(base.with_overrides(fixed), opts.cubes_m, opts.cube_count, opts.cube_seed,
-                                        opts.max_pulses, "options.cube_count")
-        base = features.with_cubes(base, cubes)
+        cubes = cube_positions(base.with_overrides(fixed), opts.cubes_m, opts.cube_count, opts.cube_seed,
+                               opts.max_pulses, "options.cube_count")
+        base = with_cubes(base, cubes)
     options = PassOptions(progress=False, render=opts.render, waveforms=opts.waveforms,
                           coverage=CoverageSettings(opts.cell_m, opts.min_points, opts.tolerance_m))
     axes = list(config.sweep)
@@ -330,7 +331,7 @@ def table_row(values: Mapping[str, Any], outcome: PassOutcome, cubes: list[dict]
         row["points_per_pulse"] = summary["points"] / summary["pulses"] if summary.get("pulses") else None
         row |= _flatten(summary)
         if cubes and summary.get("coverage"):
-            from scanner_sim.studies.features import detection_table
+            from scanner_sim.metrics.feature_cubes import detection_table
 
             table = detection_table(summary["coverage"]["objects"], cubes)
             row |= _flatten({"features": {size: {k: v for k, v in c.items() if k != "valid_soundings"}

@@ -22,6 +22,7 @@ import numpy as np
 
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
+from scanner_sim.config.materials import CLASS_NAMES
 from scanner_sim.io.run_dir import hold_output
 from scanner_sim.runs.campaign import load_base_scene
 from scanner_sim.runs.dataset_draw import SPLITS, DrawnScene, draw_scene, scene_folder
@@ -29,7 +30,6 @@ from scanner_sim.runs.dataset_spec import DatasetSpec, parse_dataset_spec, read_
 from scanner_sim.runs.jobs import check_jobs, run_jobs
 from scanner_sim.runs.tasks import DEFAULT_RETRIES, PassJob
 from scanner_sim.survey.setup import PassOptions
-from scanner_sim.world.materials import CLASS_NAMES
 
 __all__ = ["MANIFEST", "SCENES_DIR", "SPEC_RECORD", "Dataset", "class_counts", "load_dataset", "parse_dataset",
            "run_dataset"]

@@ -21,8 +21,8 @@ from scanner_sim.config.base import Choice, Fraction, Integer, NonNegative, Posi
 from scanner_sim.config.errors import invalid
 from scanner_sim.config.geometry import OBJECT_TYPES
 from scanner_sim.config.loading import parse_yaml_text, read_scene_text
+from scanner_sim.config.materials import LABELS
 from scanner_sim.config.sections import MAX_SEED
-from scanner_sim.world.materials import LABELS
 
 __all__ = ["OWN_KEYS", "PLACED_TYPES", "DatasetSpec", "Distribution", "ObjectTemplate", "parse_dataset_spec",
            "read_spec_data"]

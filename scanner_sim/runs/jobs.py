@@ -90,7 +90,7 @@ def completed_summary(folder: Path, job: PassJob) -> dict | None:
 
 def check_jobs(jobs: Sequence[PassJob]) -> None:
     """Run every job's set-up checks here, before any pass runs: the pass's size and memory, its start within the
-    track (:func:`~scanner_sim.survey.budget.check_pass_budget`), and its built track against the water surface, the
+    track (:func:`~scanner_sim.survey.sizing.check_pass_budget`), and its built track against the water surface, the
     seabed and the objects (:func:`~scanner_sim.survey.setup.checked_trajectory`). Raises the first refusal as a
     ConfigError naming the pass; a set-up error is then never met in a task, where it would be retried and
     reported only when its pass started. Passes that would all write one bag folder (``output.rosbag.dir``) are

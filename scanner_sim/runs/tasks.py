@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
-from muls.runtime import configure_process
+from muls.infra.runtime import configure_process
 from scanner_sim.config import SceneConfig
 from scanner_sim.survey.pipeline import kept_slots, pass_chunk, run_pass, stream_to_files
 from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.detection import Records
+from muls.receiver.digitiser import Waveforms
+from scanner_sim.records.point_records import PointRecords
 from scanner_sim.survey.georeference import NO_OBJECT
-from scanner_sim.survey.point_records import PointRecords
 
 #: [m] Largest distance at which a return is the same return as the reference's in the same pulse: under half the
 #: range length of the 10 ns pulse in water (1.1 m, the nearest two returns of one pulse the ranging resolves), and
@@ -115,7 +115,7 @@ class WaveformFit:
     sum_residual_sq: float = 0.0
 
     @classmethod
-    def of(cls, records: Records, reference: Records) -> WaveformFit:
+    def of(cls, records: Waveforms, reference: Waveforms) -> WaveformFit:
         """The sums over every signal sample ``records`` holds (of its synthesised channels), against the same
         sample of ``reference``, a ``full`` record of the same pulses (same order) and seed: the window of pulse p
         starting at sample s is compared with samples s.. of the reference's record of pulse p, channel by

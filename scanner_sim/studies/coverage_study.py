@@ -1,4 +1,4 @@
-"""The coverage study (issue 5, docs/coverage.md): one survey pass per water type x altitude x instrument
+"""The coverage study (docs/coverage.md): one survey pass per water type x altitude x instrument
 over the same scene, measured against the truth meshes, with its table, charts, maps and report.
 
 Decisions a planner would make (written down in docs/coverage.md):
@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from muls.presets import instrument_preset, water_preset
 from scanner_sim.config import SceneConfig
 from scanner_sim.io.run_dir import hold_output
@@ -139,12 +139,13 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     out = Path(out_dir)
     placed: list[dict] = []
     if cubes is not None:
-        from scanner_sim.studies import features
+        from scanner_sim.metrics.feature_cubes import with_cubes
+        from scanner_sim.survey.feature_placement import cube_positions
 
         lowest = min(a for _, a, _ in plan.combinations(config))
         narrowest = combination_config(config, SCENE_WATER, lowest, plan.instruments[0], plan.gate)
-        placed = features.cube_positions(narrowest, cubes.sizes_m, cubes.count, cubes.seed, max_pulses, "cube_count")
-        config = features.with_cubes(config, placed)
+        placed = cube_positions(narrowest, cubes.sizes_m, cubes.count, cubes.seed, max_pulses, "cube_count")
+        config = with_cubes(config, placed)
     combos = list(plan.combinations(config))
     # every combination is built (and so checked) before any pass runs
     jobs = [PassJob(combination_name(water, altitude, instrument),
@@ -170,7 +171,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
         records = [study_record(job.config, o.summary, water, altitude, instrument, job.name)
                    for (water, altitude, instrument), job, o in zip(combos, jobs, outcomes)]
         if placed:
-            from scanner_sim.studies.features import detection_table
+            from scanner_sim.metrics.feature_cubes import detection_table
 
             for record in records:
                 record["features"] = detection_table(record["objects"], placed)

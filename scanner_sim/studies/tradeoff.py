@@ -22,10 +22,10 @@ from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.fidelity import FIDELITY_LEVELS, FidelityLevel
 from scanner_sim.io.run_dir import hold_output
+from scanner_sim.records.point_records import PointRecords
 from scanner_sim.studies import accuracy
 from scanner_sim.survey import sinks
 from scanner_sim.survey.pipeline import pass_chunks, stream_pass
-from scanner_sim.survey.point_records import PointRecords
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import build_scene
 
@@ -191,10 +191,10 @@ def run_plan(levels, knobs, convergence: bool) -> list[tuple[str, FidelityLevel]
 def check_tradeoff_memory(config: SceneConfig, levels, knobs, pulses: int, waveform_pulses: int, convergence: bool,
                           keys=("pulses", "waveform_pulses"), available_bytes: int | None = None) -> None:
     """Refuse, before any run, ``pulses`` or ``waveform_pulses`` (named by ``keys``, the larger share's) when the
-    runs would keep more than a command may plan on (:func:`muls.memory.check_memory`): each run keeps
+    runs would keep more than a command may plan on (:func:`muls.infra.memory.check_memory`): each run keeps
     :data:`KEPT_BYTES_PER_PULSE` a pulse the pass fires and :data:`RECORD_BYTES_PER_PULSE` a waveform pulse."""
-    from muls.memory import check_memory
-    from scanner_sim.survey.budget import estimate_pass
+    from muls.infra.memory import check_memory
+    from scanner_sim.survey.sizing import estimate_pass
 
     runs = len(run_plan(levels, knobs, convergence))
     fired = estimate_pass(config.with_overrides({"survey.max_pulses": pulses})).pulses

@@ -1,7 +1,7 @@
 """Georeferencing: the instrument's ranged returns to world points with their ground truth attached.
 
 :func:`georeference` is a pure function of what the stages before it produced: the ranging of a chunk (each
-return carries the index of the echo that dominates it, :attr:`muls.ranging.Peaks.echo_index`), the hits that
+return carries the index of the echo that dominates it, :attr:`muls.ranging.returns.Peaks.echo_index`), the hits that
 made those echoes, and each pulse's line of sight as navigation estimates it, with the truth along it.
 """
 
@@ -11,10 +11,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from muls.ranging import Ranging
+from muls.ranging.returns import Ranging
+from scanner_sim.config.materials import NOISE_CLASS
 from scanner_sim.rays.hits import Hits
-from scanner_sim.survey.point_records import PointRecords
-from scanner_sim.world.materials import NOISE_CLASS
+from scanner_sim.records.point_records import PointRecords
 
 #: Intensity scale: log10 of the echo's peak optical power [W] from 1 nW (0) to 1 W (65535).
 INTENSITY_LOG10_RANGE_W = (-9.0, 0.0)
@@ -33,7 +33,7 @@ class LinesOfSight(NamedTuple):
     leg (n,) uint16: the survey leg, 1-based; platform_m (n, 3) and attitude_rad (n, 3) roll, pitch, yaw: the
     vehicle's pose as navigation estimates it (what the uncertainty's Jacobians are evaluated at); true_origin_m
     (n, 3), true_direction (n, 3) and axis_range_m (n,): the true beam axis and the range to its first hit (nan where
-    it meets nothing), where each point truly belongs (:mod:`scanner_sim.metrics.tpu_calibration`).
+    it meets nothing), where each point truly belongs (:mod:`scanner_sim.survey.tpu_calibration`).
     """
 
     origin_m: np.ndarray

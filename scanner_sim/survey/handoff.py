@@ -1,5 +1,5 @@
 """The hand-off from the geometry to the physics: a chunk's hits become the MULS input of its pulses
-(:class:`muls.waveform.PulseBatch`), one echo per hit at the range and weight :mod:`scanner_sim.rays.echoes` gives
+(:class:`muls.optics.optical_model.PulseBatch`), one echo per hit at the range and weight :mod:`scanner_sim.rays.echoes` gives
 it, the water column cut where the beam's energy stops, and the background light.
 """
 
@@ -9,10 +9,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.errors import ParameterError
-from muls.radiometry import background_power_w
-from muls.runtime import kernel
-from muls.waveform import OpticalModel, PulseBatch
+from muls.infra.errors import ParameterError
+from muls.infra.runtime import kernel
+from muls.optics.optical_model import OpticalModel, PulseBatch
+from muls.optics.radiometry import background_power_w
 from scanner_sim.fidelity import COLUMN_CUTS
 from scanner_sim.rays.echoes import ECHO_BIN_M, echo_energy
 from scanner_sim.rays.hits import Hits

@@ -27,12 +27,12 @@ from scanner_sim.config.crs import crs_label
 from scanner_sim.io.rosbag import ROSBAG_NAME
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.metrics.planned_swath import planned_swath
-from scanner_sim.metrics.tpu_calibration import UncertaintySink, single_pass_note
+from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.render import point_cloud
 from scanner_sim.survey import provenance, sinks
 from scanner_sim.survey.gis_products import write_gis_products
-from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup, check_pass_arguments
+from scanner_sim.survey.tpu_calibration import UncertaintySink, single_pass_note
 from scanner_sim.world.scene import Scene
 
 
@@ -99,7 +99,7 @@ def simulate_pass(config: SceneConfig, options: PassOptions = PassOptions(), sce
     setup = PassSetup.build(config, options, scene)
     setup_s = time.perf_counter() - t_setup - setup.ranging_s
     compile_s = setup.ranging_s + warm_up(setup, options)
-    memory, uncertainty = sinks.MemorySink(), UncertaintySink(setup)
+    memory, uncertainty = sinks.MemorySink(), UncertaintySink(setup.tpu)
     stats, coverage, wall_s = stream_pass(setup, pass_chunks(setup, options), [memory, uncertainty], options)
     dropouts = memory.dropouts()
     summary = sinks.pass_summary(pass_facts(setup, options), stats, stats.points, dropouts.counts_by_cause(), wall_s,
@@ -232,7 +232,7 @@ def _finished(chunk: Future, bar) -> Chunk:
 
 def uncertainty_figures(setup: PassSetup, sink, pulses: int) -> dict:
     """The summary's ``uncertainty`` (the sink's figures), its calibration with a ``note`` on what one pass of
-    ``pulses`` can show (:func:`~scanner_sim.metrics.tpu_calibration.single_pass_note`)."""
+    ``pulses`` can show (:func:`~scanner_sim.survey.tpu_calibration.single_pass_note`)."""
     figures = sink.figures()
     flown_s = pulses / (setup.scanner.pulse_rate_hz * setup.scanner.active_fraction)
     figures["calibration"]["note"] = single_pass_note(flown_s, setup.config.platform.navigation_noise)
@@ -295,7 +295,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
         clouds += [stack.enter_context(sink) for sink in bag_sinks(setup, out, facts)]
         dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
         waveforms = sinks.WaveformSink(setup.model.instrument.digitizer, facts.channels)
-        sample, uncertainty = sinks.CloudSample(), UncertaintySink(setup)
+        sample, uncertainty = sinks.CloudSample(), UncertaintySink(setup.tpu)
         stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts, waveforms, uncertainty]
                                               + ([sample] if render else []), options)
     summary = sinks.pass_summary(facts, stats, stats.points, dropouts.counts_by_cause(), wall_s + earlier_wall_s,

@@ -13,7 +13,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from muls.water import PHASE_FUNCTION, RANGE_DEPENDENT_MODELS, Water
+from muls.water.properties import PHASE_FUNCTION, RANGE_DEPENDENT_MODELS, Water
 from scanner_sim.config import SceneConfig
 from scanner_sim.config.crs import crs_provenance
 from scanner_sim.config.geometry import MeshObject
@@ -56,7 +56,7 @@ def water_provenance(config: SceneConfig, water: Water) -> dict:
 
 def pass_provenance(config: SceneConfig, water: Water, instrument, level: FidelityLevel, fingerprint: str) -> dict:
     """The provenance block of a pass: ``config`` the scene as the pass ran it (every override applied),
-    ``water`` and ``instrument`` (a :class:`muls.instrument.Instrument`, its gate as the pass set it) as the model
+    ``water`` and ``instrument`` (a :class:`muls.instrument.description.Instrument`, its gate as the pass set it) as the model
     used them, ``level`` the fidelity level, ``fingerprint`` its :func:`inputs_fingerprint`."""
     return {
         "muls_scanner_version": __version__,

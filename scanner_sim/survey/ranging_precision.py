@@ -1,6 +1,6 @@
 """Ranging precision of the pass's instrument, measured from its own ranging: the table the uncertainty model reads.
 
-At set-up the pass ranges flat Lambertian panels at normal incidence (:meth:`muls.waveform.PulseBatch.flat_target`,
+At set-up the pass ranges flat Lambertian panels at normal incidence (:meth:`muls.optics.optical_model.PulseBatch.flat_target`,
 the beam filling them) through its own physics (the same instrument, gate, water, echo spread, record mode and
 processing as its pulses): :data:`SHOTS` shots at each of the ranges its survey gives (:data:`PANELS` spread over
 its sampled echo delays, :func:`scanner_sim.survey.gate.echo_span`) and each of :data:`REFLECTANCES`, so that the echoes span
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.waveform import PulseBatch
+from muls.optics.optical_model import PulseBatch
 from scanner_sim.rays.echoes import echo_range_m
 
 #: Panel reflectances ranged at each range: dark mud to a white panel, two decades of signal.

@@ -16,17 +16,16 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from muls.detection import Records
-from muls.ranging import Ranging
-from muls.runtime import configure_process
+from muls.infra.runtime import configure_process
+from muls.optics.optical_model import OpticalModel, PulseBatch
+from muls.ranging.returns import Ranging
+from muls.receiver.digitiser import Waveforms
 from muls.simulate import simulate
-from muls.waveform import OpticalModel, PulseBatch
 from scanner_sim.config import SceneConfig
 from scanner_sim.config.unit_slips import warn_unit_slips
 from scanner_sim.fidelity import FidelityLevel
 from scanner_sim.io.rosbag import ROSBAG_NAME, bag_files
 from scanner_sim.metrics.coverage import CoverageSettings, Footprint, nominal_footprint
-from scanner_sim.metrics.tpu_calibration import CheckedErrors, checked_errors
 from scanner_sim.motion.scanner import Scanner
 from scanner_sim.motion.track_checks import build_trajectory
 from scanner_sim.motion.trajectory import Poses, Trajectory
@@ -35,13 +34,14 @@ from scanner_sim.rays.beams import BeamPattern, beam_pattern
 from scanner_sim.rays.cast import BeamCast, CastScene
 from scanner_sim.rays.hits import Hits
 from scanner_sim.rays.tiles import TiledCast, TiledTarget
-from scanner_sim.survey.budget import check_pass_budget
+from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.georeference import LinesOfSight, georeference, ranged_normals
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
-from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.ranging_precision import measure_ranging_precision, panel_ranges_m
+from scanner_sim.survey.sizing import check_pass_budget
+from scanner_sim.survey.tpu_calibration import CheckedErrors, checked_errors
 from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel, with_uncertainty
 from scanner_sim.world.scene import Scene, build_scene
 from scanner_sim.world.site import SiteScene
@@ -167,14 +167,14 @@ class Chunk(NamedTuple):
     (``waveforms``; as far as the ranging read them, None once dropped), the nominal beam footprint (None unless
     the pass measures coverage), and the whole records of the pulses among its slots that the pass keeps
     (``kept_waveforms``: slots (k,) and records; None when none), and its points' true errors against their THU and
-    TVU (``errors``, :func:`~scanner_sim.metrics.tpu_calibration.checked_errors`)."""
+    TVU (``errors``, :func:`~scanner_sim.survey.tpu_calibration.checked_errors`)."""
 
     slots: np.ndarray
     points: PointRecords
     dropouts: DropoutRecords
-    waveforms: Records | None
+    waveforms: Waveforms | None
     footprint: Footprint | None
-    kept_waveforms: tuple[np.ndarray, Records] | None = None
+    kept_waveforms: tuple[np.ndarray, Waveforms] | None = None
     errors: CheckedErrors | None = None
 
 
@@ -189,10 +189,10 @@ class Physics:
     deciding_only: bool
 
     def __call__(self, batch: PulseBatch, record_mode: str | None = None, every_channel: bool = False,
-                 whole_records: bool = False) -> tuple[Records, Ranging]:
+                 whole_records: bool = False) -> tuple[Waveforms, Ranging]:
         """``record_mode`` and ``every_channel`` override the level's record mode and its ``deciding_only`` (for
         records kept whole, as waveforms.npz keeps them). Unless ``every_channel`` or ``whole_records``, only the
-        samples the ranging reads are synthesised (the same points, :func:`muls.detection.digitise`'s
+        samples the ranging reads are synthesised (the same points, :func:`muls.receiver.digitiser.digitise`'s
         ``ranging_only``): of each CH0 record the span of its peak, and of a full record the samples the peak
         search may read."""
         return simulate(self.model, batch, self.seed, record_mode or self.record_mode,
@@ -208,27 +208,38 @@ def ray_stage(level: FidelityLevel, target: CastScene, pattern: BeamPattern, geo
     return (AutoCast if level.adaptive else BeamCast)(target, pattern, geometry, level.shadow_rays)
 
 
-def _stages(config: SceneConfig, target: CastScene, model: OpticalModel, level: FidelityLevel):
-    """The model, the sub-ray pattern and the stages of a pass at ``level``: (model, pattern, rays, handoff,
-    physics); ``model`` is rebuilt when the level models multiple scattering otherwise."""
+class Stages(NamedTuple):
+    """What a fidelity level chooses for a pass, once: the optical model, the sub-ray pattern, and the stages the
+    chunk loop calls (``rays``: hits of a chunk's pulses; ``handoff``: their muls input; ``physics``: records and
+    ranging)."""
+
+    model: OpticalModel
+    pattern: BeamPattern
+    rays: BeamCast
+    handoff: Handoff
+    physics: Physics
+
+
+def _stages(config: SceneConfig, target: CastScene, model: OpticalModel, level: FidelityLevel) -> Stages:
+    """The stages of a pass at ``level``; ``model`` is rebuilt when the level models multiple scattering
+    otherwise."""
     if model.multiple_scattering != level.multiple_scattering:
         model = OpticalModel.build(model.instrument, model.water, level.multiple_scattering)
     pattern = beam_pattern(level.subrays, config.survey.beam_profile)
-    return (model, pattern, ray_stage(level, target, pattern, model.instrument.geometry),
-            Handoff(model, config.water.background_radiance_w_m2_sr_nm, level.column_cut),
-            Physics(model, config.survey.seed, level.record_mode, level.deciding_only))
+    return Stages(model, pattern, ray_stage(level, target, pattern, model.instrument.geometry),
+                  Handoff(model, config.water.background_radiance_w_m2_sr_nm, level.column_cut),
+                  Physics(model, config.survey.seed, level.record_mode, level.deciding_only))
 
 
-def gated(config: SceneConfig, water, target: CastScene, trajectory: Trajectory, scanner: Scanner,
-          first_slot: int, end_slot: int) -> SceneConfig:
+def gated(config: SceneConfig, water, span) -> SceneConfig:
     """``config`` with its far channel's gate set by the operator's rule where the scene gives none
-    (:mod:`scanner_sim.survey.gate`), and a warning where the scene's own gate shuts out the survey's echoes; as it
-    is when the instrument has no gated channel."""
+    (:mod:`scanner_sim.survey.gate`), and a warning where the scene's own gate shuts out the survey's echoes
+    (``span``: :func:`~scanner_sim.survey.gate.echo_span` of the pass); as it is when the instrument has no gated
+    channel."""
     instrument = config.instrument.to_instrument(water)
     far = [ch for ch in instrument.channels if ch.gated]
     if not far:
         return config
-    span = echo_span(target, trajectory, scanner, water.speed_m_s, first_slot, end_slot)
     duration_s = instrument.pulse.duration_s
     if config.instrument.gate_delay_ns is not None:
         warn_if_shut_out(span, far[0].gate_delay_s, far[0].gate_delay_s + far[0].gate_width_s, duration_s)
@@ -253,7 +264,7 @@ def tpu_model(config: SceneConfig, model: OpticalModel, physics: Physics, span) 
 
 def checked_trajectory(config: SceneConfig, scene: Scene | None) -> Trajectory:
     """The trajectory of ``config`` over its built ``scene``, after the set-up checks: the pass's size, estimated
-    before anything pass-sized is allocated (:func:`~scanner_sim.survey.budget.check_pass_budget`), and the built
+    before anything pass-sized is allocated (:func:`~scanner_sim.survey.sizing.check_pass_budget`), and the built
     track against the water surface, the seabed and the objects
     (:func:`~scanner_sim.motion.track_checks.build_trajectory`); values likely in another unit are warned about
     (:func:`~scanner_sim.config.unit_slips.warn_unit_slips`)."""
@@ -307,24 +318,24 @@ class PassSetup:
         rate = scanner.pulse_rate_hz
         duration = survey.duration_s if survey.duration_s is not None else trajectory.duration_s
         first_slot, end_slot = math.ceil(survey.start_s * rate - 1e-9), math.ceil((survey.start_s + duration) * rate - 1e-9)
-        config = gated(config, water, target, trajectory, scanner, first_slot, end_slot)
+        span = echo_span(target, trajectory, scanner, water.speed_m_s, first_slot, end_slot)
+        config = gated(config, water, span)
         plan = PassPlan.of(config, options, level)
         model = OpticalModel.build(config.instrument.to_instrument(water), water, plan.level.multiple_scattering)
         stages = _stages(config, target, model, plan.level)
-        span = echo_span(target, trajectory, scanner, water.speed_m_s, first_slot, end_slot)
         started = time.perf_counter()
-        tpu = tpu_model(config, stages[0], stages[4], span)
-        return cls(config, plan, target, trajectory, scanner, *stages, first_slot, end_slot,
-                   config.water.preset or water.name, given, tpu, time.perf_counter() - started)
+        tpu = tpu_model(config, stages.model, stages.physics, span)
+        return cls(config, plan, target, trajectory, scanner, **stages._asdict(), first_slot=first_slot,
+                   end_slot=end_slot, water_name=config.water.preset or water.name, given=given, tpu=tpu,
+                   ranging_s=time.perf_counter() - started)
 
     def at_level(self, level: FidelityLevel) -> PassSetup:
         """This pass at fidelity ``level``: its plan, sub-ray pattern and stages chosen again (the built scene,
         trajectory and tables kept), its ranging precision measured again through the new physics."""
-        model, pattern, rays, handoff, physics = _stages(self.config, self.target, self.model, level)
-        tpu = dataclasses.replace(self.tpu, ranging=measure_ranging_precision(physics, model.instrument,
+        stages = _stages(self.config, self.target, self.model, level)
+        tpu = dataclasses.replace(self.tpu, ranging=measure_ranging_precision(stages.physics, stages.model.instrument,
                                                                               self.tpu.ranging.ranges_m))
-        return dataclasses.replace(self, plan=dataclasses.replace(self.plan, level=level), model=model, pattern=pattern,
-                                   rays=rays, handoff=handoff, physics=physics, tpu=tpu)
+        return dataclasses.replace(self, plan=dataclasses.replace(self.plan, level=level), **stages._asdict(), tpu=tpu)
 
     def with_seeds(self, survey_seed: int, navigation_seed: int) -> PassSetup:
         """This pass with ``survey.seed`` and ``platform.navigation_noise.seed`` set, without building the BVH

@@ -18,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from muls.ranging import DROPOUT_CAUSES
+from muls.ranging.returns import DROPOUT_CAUSES
 from scanner_sim import io
 from scanner_sim.io.copc import CopcWriter
 from scanner_sim.io.rosbag import RosbagWriter
 from scanner_sim.metrics.coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
+from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.render.coverage_map import plot_coverage_map
 from scanner_sim.render.point_cloud import render_point_cloud
-from scanner_sim.survey.point_records import DropoutRecords, PointRecords
 from scanner_sim.survey.provenance import point_cloud_provenance
 from scanner_sim.version import __version__
 

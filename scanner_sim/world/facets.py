@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from muls.runtime import kernel
+from muls.infra.runtime import kernel
 
 
 @kernel(nogil=True)

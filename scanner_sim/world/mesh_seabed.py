@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from muls.errors import ParameterError
-from muls.runtime import kernel
+from muls.infra.errors import ParameterError
+from muls.infra.runtime import kernel
 from scanner_sim.config import ConfigError
 from scanner_sim.world.terrain import HeightField
 

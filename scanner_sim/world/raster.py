@@ -29,9 +29,9 @@ import numpy as np
 from scanner_sim.config import ConfigError, reflectance_of
 from scanner_sim.config.crs import horizontal_crs as horizontal_of
 from scanner_sim.config.geometry import MAX_SEABED_TRIANGLES
-from scanner_sim.config.raster_seabed import check_grid, open_raster, read_pixels
+from scanner_sim.config.raster_seabed import RasterGrid, check_grid, open_raster, read_pixels
 from scanner_sim.config.sections import MAX_DEPTH_M
-from scanner_sim.world.terrain import HeightField, RasterGrid, fractal_relief
+from scanner_sim.world.terrain import HeightField, fractal_relief
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from scanner_sim.config import (
     CableObject,
     ConeMineObject,
@@ -30,11 +30,11 @@ from scanner_sim.config import (
     reflectance_of,
 )
 from scanner_sim.config.crs import to_crs
+from scanner_sim.config.materials import LABELS
 from scanner_sim.config.raster_seabed import RasterSeabedConfig
-from scanner_sim.io.ply import ply_element_counts
 from scanner_sim.world.facets import face_geometry
-from scanner_sim.world.materials import LABELS
 from scanner_sim.world.mesh_seabed import seabed_of_meshes
+from scanner_sim.world.ply_header import ply_element_counts
 from scanner_sim.world.raster import load_raster_seabed, plan_bounds
 from scanner_sim.world.site import SiteScene, tiled
 from scanner_sim.world.terrain import HeightField, generate_heightfield, rock_meshes

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from muls.errors import ParameterError
+from muls.infra.errors import ParameterError
 from scanner_sim.rays.seabed_grid import COARSE_CELL_M, SUPER_CELL_M
 from scanner_sim.world.facets import face_geometry
 from scanner_sim.world.terrain import HeightField

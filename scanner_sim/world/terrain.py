@@ -14,21 +14,6 @@ import numpy as np
 
 
 @dataclass(frozen=True)
-class RasterGrid:
-    """A bathymetry grid in memory, as a raster file would give it: heights (rows, cols) float [m], its affine
-    ``transform`` (rasterio's ``Affine``: map x, y of a pixel's corner from (col, row)), CRS (anything pyproj
-    reads), nodata value (or None; NaN cells are nodata too) and vertical sign ('elevation_up' or 'depth_down').
-    A raster seabed section takes one in place of a file name (scanner_sim.world.raster reads both)."""
-
-    heights: np.ndarray
-    transform: object
-    crs: object
-    nodata: float | None = None
-    vertical: str = "elevation_up"
-    source: str = "in memory"
-
-
-@dataclass(frozen=True)
 class HeightField:
     """A regular grid of seabed heights and its triangulation.
 

@@ -4,7 +4,7 @@ The hull lies upright along y (bow at +y), its flat bottom at z = 0. Its topside
 half-width to the deck's, so the deck edge overhangs the seabed beside the bilge; an open hatch in the middle
 of the deck leads into a hold whose floor lies ``HOLD_DEPTH_M`` below the deck. Every face's winding gives an
 outward normal (out of the steel, into the water and into the open hold). Run from the repository's root:
-``python scenes/assets/wreck_cavity.py``; ``tests/test_failure_scenes.py`` checks the shipped file is what this
+``python scenes/assets/wreck_cavity.py``; ``tests/system/test_failure_scenes.py`` checks the shipped file is what this
 writes. Dimensions: a small steel fishing vessel (named assumptions in docs/assumptions.md).
 """
 

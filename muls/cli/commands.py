@@ -1,0 +1,593 @@
+"""The ``muls`` subcommands: per subcommand a builder that adds its options (:data:`BUILDERS`) and a thin function
+that runs its study and prints the result (each returns the result dict, its table as text and a plot function or
+None). The studies themselves live in :mod:`muls.studies`, :mod:`muls.photon_budget`, :mod:`muls.experiments` and
+:mod:`muls.montecarlo`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from pathlib import Path
+
+from .. import montecarlo, studies
+from ..infra.command import (
+    fraction,
+    non_negative_float,
+    nonempty,
+    output_dir,
+    output_file,
+    positive_float,
+    positive_int,
+    seed,
+    write_atomically,
+)
+from ..presets import WATER_PRESETS, water_preset
+from ..studies.common import check_pulse_memory
+
+
+def _water_name(name: str) -> str:
+    if name not in WATER_PRESETS:
+        raise ValueError(f"--water {name!r}: must be one of {', '.join(sorted(WATER_PRESETS))}")
+    return name
+
+
+def _positive(option: str, value: float) -> float:
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{option} {value!r}: must be a number > 0")
+    return value
+
+
+def _count(option: str, value: int) -> int:
+    if value < 1:
+        raise ValueError(f"{option} {value!r}: must be an integer >= 1")
+    return value
+
+
+def _shots(option: str, value: int, per_shot: int, what: str, unit: str = "shots", mode: str = "windowed") -> int:
+    """A count of pulses, ``per_shot`` of them in one simulate call each (``what`` they are, e.g. "3 distances"):
+    refused before allocating when that call needs more memory than the command may plan on."""
+    check_pulse_memory(option, _count(option, value), per_shot, f"{what}{value:,} {unit}", unit, mode)
+    return value
+
+
+def _packets(option: str, value: int, factor: int = 1) -> int:
+    """A count of Monte Carlo packets, a run tracing up to ``factor`` times it: at most what its 64-bit packet
+    numbers allow (:func:`muls.montecarlo.run.max_packets`)."""
+    from ..montecarlo.run import max_packets
+
+    limit = max_packets() // factor
+    if _count(option, value) > limit:
+        raise ValueError(f"{option} = {value}: at most {limit:,} (the Monte Carlo numbers its packets in 64 bits)")
+    return value
+
+
+def _gate_s(args) -> tuple[float | None, float | None]:
+    delay = None if args.gate_delay_ns is None else args.gate_delay_ns * 1e-9
+    width = None if args.gate_width_ns is None else _positive("--gate-width-ns", args.gate_width_ns) * 1e-9
+    if delay is not None and not (math.isfinite(delay) and delay >= 0.0):
+        raise ValueError(f"--gate-delay-ns {args.gate_delay_ns!r}: must be a number >= 0")
+    return delay, width
+
+
+def _fmt(v, digits: int = 3) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.{digits}f}"
+    return str(v)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Commands: each returns (result dict, human-readable text, plot function or None)
+
+
+def _cmd_waveform(args):
+    delay, width = _gate_s(args)
+    result = studies.waveform_study(_water_name(args.water), _positive("--range-m", args.range_m), seed=args.seed,
+                                    reflectance=args.reflectance, gate_delay_s=delay, gate_width_s=width,
+                                    attenuation_model=_attenuation(args.attenuation))
+    s = result["settings"]
+    lines = [f"waveform: {s['water']}, panel at {s['range_m']:g} m (reflectance {s['reflectance']:g}), "
+             f"CH3 gate {s['gate_delay_ns']:g}/{s['gate_width_ns']:g} ns, seed {s['seed']}, full record"]
+    lines.append(f"{'channel':8s} {'max LSB':>8s} {'noise-free max':>15s}")
+    for name, codes in result["channels"].items():
+        lines.append(f"{name:8s} {max(codes):8d} {max(result['noise_free'][name]):15.1f}")
+    if result["returns"]:
+        for r in result["returns"]:
+            lines.append(f"return: {r['channel']} at {r['range_m']:.3f} m (error {r['error_m']:+.3f} m, "
+                         f"SNR {r['snr']:.1f}{', clipped' if r['saturated'] else ''})")
+    else:
+        lines.append(f"no return: dropout cause {result['dropout_cause']}")
+    for p in result["peaks"]:
+        lines.append(f"peak: {p['channel']} at {p['range_m']:.3f} m{' (clipped)' if p['saturated'] else ''}")
+    from ..plots import plot_waveform
+
+    return result, "\n".join(lines), plot_waveform
+
+
+def _cmd_maxrange(args):
+    waters = [_water_name(w) for w in args.waters]
+    from ..studies.maxrange import MAX_BATCH_RANGES
+
+    shots = _shots("--shots", args.shots, MAX_BATCH_RANGES, f"up to {MAX_BATCH_RANGES} ranges at once x ")
+    result = studies.maxrange_study(waters, shots=shots, seed=args.seed,
+                                    reflectance=args.reflectance, attenuation_model=_attenuation(args.attenuation))
+    s = result["settings"]
+    lines = [f"maximum detectable range [m]: reflectance {s['reflectance']:g}, >= {s['detection_fraction']:.0%} "
+             f"of {s['shots']} pulses within {s['tolerance_bins']} range bins, {s['attenuation_model']} attenuation, "
+             f"seed {s['seed']} ({s['elapsed_s']:.1f} s)",
+             f"{'water':15s} {'single':>7s} {'near':>7s} {'far':>7s} {'total':>7s} {'improvement':>12s}  "
+             f"{'gains single/PMT1/PMT2':>22s}"]
+    for w in s["waters"]:
+        r = result[w]
+        g = r["gains"]
+        lines.append(f"{w:15s} {_fmt(r['single_channel_m'], 1):>7s} {_fmt(r['near_field_m'], 1):>7s} "
+                     f"{_fmt(r['far_field_m'], 1):>7s} {_fmt(r['total_m'], 1):>7s} {_fmt(r['improvement'], 2):>12s}  "
+                     f"{g['single']:>6.1f}/{g['pmt1']:>6.0f}/{g['pmt2']:>6.0f}")
+    lines.append("limited by (the best channel one step beyond each edge: its SNR, and the cause):")
+    for w in s["waters"]:
+        cells = []
+        for group, lim in result[w]["limits"].items():
+            cells.append(f"{group} -" if lim is None else
+                         f"{group} {lim['channel']} {lim['cause']} (SNR {_fmt(lim['snr'], 1)})")
+        lines.append(f"{w:15s} " + "; ".join(cells))
+    from ..plots import plot_maxrange
+
+    return result, "\n".join(lines), plot_maxrange
+
+
+def _cmd_precision(args):
+    delay, width = _gate_s(args)
+    ranges = [_positive("--ranges-m", r) for r in args.ranges_m]
+    shots = _shots("--shots", args.shots, len(ranges), f"{len(ranges)} ranges x ")
+    result = studies.precision_study(_water_name(args.water), ranges, shots=shots,
+                                     seed=args.seed, reflectance=args.reflectance, gate_delay_s=delay,
+                                     gate_width_s=width, attenuation_model=_attenuation(args.attenuation))
+    s = result["settings"]
+    lines = [f"range precision: {s['water']}, {s['shots']} shots per range, CH3 gate {s['gate_delay_ns']:g}/"
+             f"{s['gate_width_ns']:g} ns, detection within {s['tolerance_m']:.3f} m, seed {s['seed']}",
+             f"{'range m':>8s} {'channel':8s} {'std m':>8s} {'mean dev m':>11s} {'detected':>9s} {'clipped':>8s}"]
+    for key in (k for k in result if k != "settings"):
+        for ch, st in result[key].items():
+            lines.append(f"{key:>8s} {ch:8s} {_fmt(st['precision_m'], 4):>8s} {_fmt(st['mean_deviation_m'], 4):>11s} "
+                         f"{_fmt(st['detected_fraction'], 3):>9s} {_fmt(st['saturated_fraction'], 3):>8s}")
+    from ..plots import plot_precision
+
+    return result, "\n".join(lines), plot_precision
+
+
+def _cmd_edge_bias(args):
+    waters = [_water_name(w) for w in args.waters] if args.waters else None
+    ranges = [_positive("--ranges-m", r) for r in args.ranges_m]
+    shots = _shots("--shots", args.shots, len(ranges), f"{len(ranges)} ranges x ")
+    result = studies.edge_bias_study(waters, ranges, shots=shots, seed=args.seed, reflectance=args.reflectance,
+                                     attenuation_model=_attenuation(args.attenuation))
+    s = result["settings"]
+    lines = [f"range bias at the blind-zone edge: plate {s['reflectance']:g} at normal incidence, {s['shots']} shots "
+             f"per range, {s['attenuation_model']} attenuation, CH3 gate {s['gate_delay_ns']:g}/{s['gate_width_ns']:g} "
+             f"ns, seed {s['seed']}",
+             "mean error / std [cm] per channel (detected share); noise-free chosen return with the column cut at the "
+             "plate, with it not cut (echo alone), and their difference (the missing column's bias)",
+             f"{'water':14s} {'range':>5s} {'overlap':>7s} " + " ".join(f"{c:>18s}" for c in ("ch1", "ch2", "ch3",
+             "chosen")) + f" {'noise-free':>10s} {'echo alone':>10s} {'column':>7s}"]
+
+    def cm(v):
+        return "-" if v is None else f"{100.0 * v:.1f}"
+
+    for water in s["waters"]:
+        for key, row in result[water].items():
+            cells = [f"{cm(row[c]['mean_deviation_m'])} / {cm(row[c]['precision_m'])} ({row[c]['detected_fraction']:.2f})"
+                     for c in ("ch1", "ch2", "ch3", "chosen")]
+            lines.append(f"{water:14s} {key:>5s} {row['overlap']:7.4f} " + " ".join(f"{c:>18s}" for c in cells)
+                         + f" {cm(row['noise_free_m']):>10s} {cm(row['echo_alone_m']):>10s}"
+                         f" {cm(row['column_deficit_m']):>7s}")
+    return result, "\n".join(lines), None
+
+
+def _experiment_name(name: str) -> str:
+    from ..experiments import EXPERIMENTS
+
+    if name not in EXPERIMENTS:
+        raise ValueError(f"experiment {name!r}: must be one of {', '.join(EXPERIMENTS)}")
+    return name
+
+
+def _ranging(name: str) -> str:
+    from ..experiments import RANGING
+
+    if name not in RANGING:
+        raise ValueError(f"--ranging {name!r}: must be one of {', '.join(RANGING)}")
+    return name
+
+
+def _attenuation(name: str) -> str:
+    from ..water.properties import ATTENUATION_MODELS
+
+    if name not in ATTENUATION_MODELS:
+        raise ValueError(f"--attenuation {name!r}: must be one of {', '.join(ATTENUATION_MODELS)}")
+    return name
+
+
+#: The keys ``muls experiment --json`` prints (the study also returns the waveforms, for the picture).
+EXPERIMENT_KEYS = ("distances", "settings")
+
+
+def _cmd_experiment(args):
+    from ..experiments import experiment_preset
+
+    exp = experiment_preset(_experiment_name(args.experiment), _attenuation(args.attenuation))
+    shots = _shots("--shots", args.shots, len(exp.distances_m), f"{len(exp.distances_m)} distances x ")
+    full = studies.experiment_study(exp, shots=shots, seed=args.seed,
+                                    ranging=_ranging(args.ranging), waveforms=not args.no_plot)
+    s = full["settings"]
+    lines = [f"experiment {s['experiment']}: panel {s['reflectance']:g} at {', '.join(f'{d:g}' for d in s['distances_m'])} m"
+             f", {s['shots']} shots each, M1 {s['gain_pmt1']:.0f}, M2 {s['gain_pmt2']:.0f}, CH3 gate "
+             f"{s['gate_delay_ns']:g}/{s['gate_width_ns']:g} ns, {s['ranging']} ranging, {s['attenuation_model']} "
+             f"attenuation, seed {s['seed']} ({s['elapsed_s']:.1f} s)",
+             f"gains: {s['gain_rule']}",
+             f"{'dist m':>6s} {'ch':4s} {'detected':>8s} {'std m':>8s} {'mad m':>8s} {'bias m':>8s} {'clipped':>8s}"]
+    for key, chans in full["distances"].items():
+        for ch, st in chans.items():
+            lines.append(f"{key:>6s} {ch:4s} {_fmt(st['detected_fraction'], 3):>8s} {_fmt(st['precision_m'], 4):>8s} "
+                         f"{_fmt(st['mean_abs_deviation_m'], 4):>8s} {_fmt(st['bias_m'], 4):>8s} "
+                         f"{_fmt(st['clipped_fraction'], 3):>8s}")
+    from ..plots import plot_experiment
+
+    result = {k: full[k] for k in EXPERIMENT_KEYS}
+
+    def write(res, out_dir):  # the experiment's directory: its JSON and its picture
+        os.makedirs(out_dir, exist_ok=True)
+        write_atomically(lambda tmp: _dump_json(res, tmp), os.path.join(out_dir, "experiment.json"))
+        write_atomically(lambda tmp: plot_experiment(full, tmp), os.path.join(out_dir, "experiment.png"))
+        return out_dir
+
+    return result, "\n".join(lines), write
+
+
+def _dump_json(result, path):
+    with open(path, "w") as f:
+        json.dump(result, f, indent=1, allow_nan=False)
+    return path
+
+
+def _cmd_budget(args):
+    from ..studies.budget import budget_table
+
+    result = studies.budget_study(_attenuation(args.attenuation))
+    head = (f"photon budget, {result['settings']['attenuation_model']} attenuation, panel "
+            f"{result['settings']['reflectance']:g}: photoelectrons / echo peak LSB / SNR per channel")
+    return result, "\n".join([head] + budget_table(result)), None
+
+
+def _cmd_coaxial(args):
+    rule = _attenuation(args.attenuation)
+    result = studies.coaxial_study(_water_name(args.water), attenuation_model=rule)
+    s = result["settings"]
+    text = (f"coaxial vs non-coaxial water-column backscatter in {s['water']}:\n"
+            f"  peak coaxial {result['coaxial_peak_w']:.4g} W at {result['coaxial_peak_time_ns']:.1f} ns, "
+            f"peak non-coaxial {result['non_coaxial_peak_w']:.4g} W at {result['non_coaxial_peak_time_ns']:.1f} ns\n"
+            f"  peak_ratio = {result['peak_ratio']:.2f}")
+    from ..plots import plot_coaxial
+
+    def plot(res, path):
+        others = {w: studies.coaxial_study(w, attenuation_model=rule) for w in studies.MAXRANGE_WATERS if w != s["water"]}
+        return plot_coaxial({s["water"]: res, **others}, path)
+
+    return result, text, plot
+
+
+def _cmd_bench(args):
+    result = studies.bench_study(pulses=_shots("--pulses", args.pulses, 1, "", "windowed pulses"),
+                                 full_pulses=_shots("--full-pulses", args.full_pulses, 1, "", "full records", "full"),
+                                 repeats=_count("--repeats", args.repeats))
+    m = result["machine"]
+    lines = [f"simulate (waveform + digitise + ranging), {result['settings']['water']}, mul2023, "
+             f"{m['cpu_count']} CPUs, {m['numba_threads']} numba threads, load {m['loadavg_1_5_15']}"]
+    for key, name, target in (("windowed", "windowed", 100_000), ("full_record", "full record", 10_000)):
+        r = result[key]
+        lines.append(f"{name:12s} {r['pulses_per_s']:>10,.0f} pulses/s (target {target:,}; {r['pulses']:,} pulses, "
+                     f"digitise {r['digitise_s']:.3f} s, ranging {r['range_batch_s']:.3f} s)")
+    return result, "\n".join(lines), None
+
+
+def _geometry(name: str) -> str:
+    if name not in ("mul2023", "coaxial"):
+        raise ValueError(f"--geometry {name!r}: must be one of coaxial, mul2023")
+    return name
+
+
+#: The keys ``muls multiscatter --json`` prints (the study returns more, for the picture and the table).
+MULTISCATTER_KEYS = ("time_ns", "mc_w", "mc_rel_err", "muls_w", "mc_column_w", "mc_column_rel_err", "mc_target_w",
+                     "mc_target_rel_err", "target", "column_peak_ratio", "effective_attenuation_per_m", "packets",
+                     "seconds")
+
+
+def _cmd_multiscatter(args):
+    water = _water_name(args.water)
+    range_m = studies.multiscatter.check_range_m("--range-m", water_preset(water), args.range_m)
+    full = studies.multiscatter_study(water, range_m,
+                                         geometry=_geometry(args.geometry), packets=_packets("--packets", args.packets),
+                                         seed=args.seed, reflectance=args.reflectance,
+                                         attenuation_model=_attenuation(args.attenuation))
+    d = full["details"]
+    tg = full["target"]
+    rules = d["attenuation_rules_per_m"]
+    mc_err = (f"+-{d['mc_target_energy_err_j'] / tg['mc_energy_j']:.1%}" if tg["mc_energy_j"] > 0
+              else "no light seen")
+    lines = [f"multiple scattering: {d['water']}, {d['geometry']}, plate at {d['range_m']:g} m (reflectance "
+             f"{d['reflectance']:g}), {d['phase']} phase function, {full['packets']:,} packets, seed {d['seed']} "
+             f"({full['seconds']:.1f} s)",
+             f"target echo energy: Monte Carlo {tg['mc_energy_j']:.4g} J ({mc_err}), MULS {tg['muls_energy_j']:.4g} J, "
+             f"ratio {_fmt(tg['ratio'], 4)}",
+             f"effective attenuation of the echo: {_fmt(full['effective_attenuation_per_m'], 4)} /m (MULS k_lidar "
+             f"{rules['muls_k_lidar']:.4f}, c {rules['muls_c']:.4f}, kd {rules['muls_kd']:.4f}; the water uses "
+             f"{rules['muls_model']})",
+             f"column peak: Monte Carlo / MULS {_fmt(full['column_peak_ratio'], 3)} (at {d['mc_column_peak_time_ns']:.1f}"
+             f" vs {d['muls_column_peak_time_ns']:.1f} ns; first scattering alone {_fmt(d['column_first_peak_ratio'], 4)};"
+             f" beta_pi of the phase function / MULS's {_fmt(d['beta_pi_ratio'], 3)})",
+             f"{'time ns':>8s} {'MC W':>11s} {'rel err':>8s} {'MULS W':>11s} {'MC/MULS':>8s}"]
+    step = max(1, len(full["time_ns"]) // 24)
+    for t, mc, err, mu in list(zip(full["time_ns"], full["mc_w"], full["mc_rel_err"], full["muls_w"]))[::step]:
+        ratio = f"{mc / mu:8.3g}" if mu > 0 else "       -"
+        lines.append(f"{t:8.1f} {mc:11.4g} {_fmt(err, 3):>8s} {mu:11.4g} {ratio}")
+    from ..plots import plot_multiscatter
+
+    result = {k: full[k] for k in MULTISCATTER_KEYS}
+    return result, "\n".join(lines), lambda res, path: plot_multiscatter(full, path)
+
+
+def _cmd_multiscatter_study(args):
+    waters = [_water_name(w) for w in args.waters]
+    result = studies.multiscatter_waters_study(waters, packets=_packets("--packets", args.packets), seed=args.seed,
+                                                  geometry=_geometry(args.geometry),
+                                                  attenuation_model=_attenuation(args.attenuation))
+    s = result["settings"]
+    lines = [f"Monte Carlo / MULS, {s['geometry']}, flat 0.1 plate, {s['phase']} phase function, MULS's own rule "
+             f"{s['attenuation_model']} (its maximum range, the correction table), "
+             f"{s['packets']:,} packets per water, seed {s['seed']} ({s['seconds']:.0f} s)",
+             "target echo energy, MC / MULS with each attenuation rule, the share of it due to the transceiver "
+             "geometry alone (MC without scattering / Eq. 7), and the MC's effective attenuation:",
+             f"{'water':14s} {'range m':>7s} {'k_lidar':>9s} {'c':>9s} {'kd':>9s} {'small_ang':>9s} {'closest':>11s} "
+             f"{'geometry':>8s} {'k_eff /m':>8s} {'err':>6s}"]
+    for w in s["waters"]:
+        for row in result[w]["ranges"]:
+            r = row["ratio"]
+            lines.append(f"{w:14s} {row['range_m']:7.2f} {r['k_lidar']:9.3g} {r['c']:9.3g} {r['kd']:9.3g} "
+                         f"{r['small_angle']:9.3g} {row['closest_rule']:>11s} {_fmt(row['geometry'], 3):>8s} "
+                         f"{row['effective_attenuation_per_m']:8.3f} {row['mc_rel_err']:6.1%}")
+    lines.append("water column peak, MC / MULS (MULS's beta_pi; with the phase function's beta_pi), first-order "
+                 "share, and the detection range MULS needs vs the MC implies:")
+    lines.append(f"{'water':14s} {'k_lidar':>15s} {'c':>17s} {'kd':>15s} {'small_angle':>15s} {'1st order':>9s} "
+                 f"{'err':>6s} {'R_det MULS':>10s} {'R_det MC':>9s} {'interp err':>10s}")
+    for w in s["waters"]:
+        c, det = result[w]["column"], result[w]["detection"]
+        rules = " ".join(f"{c['rules'][q]['peak_ratio']:7.3g} ({c['rules'][q]['peak_ratio_same_beta_pi']:6.3g})"
+                         for q in studies.ATTENUATION_RULES)
+        worst = max(abs(q["error"]) for q in result[w]["correction_check"])
+        r_mc = "-" if det is None or det["mc_implied_m"] is None else f"{det['mc_implied_m']:.1f}"
+        r_mu = "-" if det is None else f"{det['muls_m']:.1f}"
+        lines.append(f"{w:14s} {rules} {c['mc_first_order_peak_w'] / c['mc_peak_w']:9.3g} {c['mc_peak_rel_err']:6.1%} "
+                     f"{r_mu:>10s} {r_mc:>9s} {worst:10.1%}")
+    from ..plots import plot_multiscatter_study
+
+    def write(res, out_dir):  # the study's directory: its chart and its JSON, each written whole
+        os.makedirs(out_dir, exist_ok=True)
+        write_atomically(lambda tmp: Path(tmp).write_text(json.dumps(res, indent=1, allow_nan=False)),
+                         os.path.join(out_dir, "multiscatter_study.json"))
+        write_atomically(lambda tmp: plot_multiscatter_study(res, tmp), os.path.join(out_dir, "multiscatter_study.png"))
+
+    return result, "\n".join(lines), write
+
+
+def _cmd_mobley1993(args):
+    photons = _packets("--photons", args.photons, max(montecarlo.mobley1993.PHOTON_FACTOR.values()))
+    result = montecarlo.mobley1993_benchmark(photons=photons, seed=args.seed)
+    records = result["problems"]
+    lines = [f"Mobley et al. (1993) problems 1 and 2 (sun at 60 deg in a black sky, level surface, n 1.34, infinitely "
+             f"deep): Monte Carlo beside Table 5, {result['photons']:,} photons per run at albedo 0.9 "
+             f"({montecarlo.mobley1993.PHOTON_FACTOR[0.2]} times as many at 0.2), seed {result['seed']} "
+             f"({result['seconds']:.1f} s)",
+             "paper: the codes' mean and s/x as printed, N codes, and the range that holds every code's value "
+             "(mean +- s (N-1)/sqrt(N), rounding included)",
+             f"{'problem':>7s} {'albedo':>6s} {'quantity':>8s} {'tau':>4s} {'Monte Carlo':>11s} {'2 sigma':>8s} "
+             f"{'paper mean':>10s} {'s/x':>6s} {'N':>2s} {'paper min':>10s} {'paper max':>10s} {'within':>6s}"]
+    for r in records:
+        lines.append(f"{r['problem']:7d} {r['albedo']:6.1f} {r['quantity']:>8s} {r['optical_depth']:4.0f} "
+                     f"{r['value']:11.4g} {2 * r['mc_sigma'] / r['value']:8.2%} {r['paper_mean']:10.3g} "
+                     f"{r['paper_rel_sd']:6.3f} {r['paper_models']:2d} {r['paper_min']:10.4g} {r['paper_max']:10.4g} "
+                     f"{'yes' if r['within'] else 'NO':>6s}")
+    inside = sum(r["within"] for r in records)
+    lines.append(f"{inside} of {len(records)} values within the paper's range widened by the Monte Carlo's 2 standard "
+                 "errors")
+    from ..plots import plot_mobley1993
+
+    return result, "\n".join(lines), plot_mobley1993
+
+
+def _cmd_validate_pass(args):
+    from ..montecarlo.validate import validate_pass, within_acceptance
+
+    full = validate_pass(tuple(_water_name(w) for w in args.waters), packets=_packets("--packets", args.packets),
+                         seed=args.seed)
+    lines = [f"the pass's waveform model (monte_carlo attenuation, finite aperture, multiple scattering from the tables) "
+             f"over a Monte Carlo run of its own ({full['packets']:,} packets, seed {full['seed']}, {full['seconds']:.0f} "
+             "s): flat 0.1 plate at normal incidence, the MUL",
+             f"{'water':14s} {'range m':>7s} {'echo energy':>11s} {'echo peak':>9s} {'column 0-50 ns':>14s} "
+             f"{'MC err':>7s} {'within':>6s}"]
+    for case in full["cases"]:
+        cells = [f"{case[k]:.3f}" if case[k] is not None else "-" for k in ("echo_energy_ratio", "echo_peak_ratio",
+                                                                           "column_ratio")]
+        lines.append(f"{case['water']:14s} {case['range_m']:7.1f} {cells[0]:>11s} {cells[1]:>9s} {cells[2]:>14s} "
+                     f"{case['mc_rel_err']:7.2%} {'yes' if within_acceptance(case) else 'NO':>6s}")
+    return {"cases": full["cases"]}, "\n".join(lines), None
+
+
+DEFAULT_OUT = {"waveform": "waveform.png", "maxrange": "maxrange.png", "precision": "precision.png",
+               "coaxial": "coaxial.png", "multiscatter": "multiscatter.png", "multiscatter-study": "multiscatter_study",
+               "experiment": "experiment_{experiment}", "mobley1993": "mobley1993.png"}
+#: Commands whose --out is a folder of files, each written whole by the command itself.
+FOLDER_OUTPUTS = ("multiscatter-study", "experiment")
+
+
+def _waters() -> str:
+    return ", ".join(sorted(WATER_PRESETS))
+
+
+def _common(p, plot=True, out_type=output_file):
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    if plot:
+        p.add_argument("--out", default=None, type=out_type(),
+                       help="picture file (PNG); default %(prog)s's own name")
+        p.add_argument("--no-plot", action="store_true", help="do not write the picture")
+
+
+def _add_waveform(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--water", default="pond", type=nonempty(), help=f"water preset ({_waters()})")
+    p.add_argument("--range-m", type=positive_float(), default=11.5, help="panel range [m]")
+    p.add_argument("--reflectance", type=fraction(), default=0.1)
+    p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--gate-delay-ns", type=non_negative_float(), default=None,
+                   help="CH3 gate delay [ns] (default: that water's experiment)")
+    p.add_argument("--gate-width-ns", type=positive_float(), default=None, help="CH3 gate width [ns]")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    _common(p)
+    p.set_defaults(run=_cmd_waveform)
+
+
+def _add_maxrange(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--shots", type=positive_int(), default=200, help="seeded pulses per range")
+    p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--reflectance", type=fraction(), default=0.1)
+    p.add_argument("--waters", nargs="+", type=nonempty(), default=list(studies.MAXRANGE_WATERS),
+                   help=f"water presets ({_waters()})")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    _common(p)
+    p.set_defaults(run=_cmd_maxrange)
+
+
+def _add_precision(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--water", default="pond", type=nonempty(), help=f"water preset ({_waters()})")
+    p.add_argument("--ranges-m", type=positive_float(), nargs="+", default=[8.5, 10.0, 11.5], help="panel ranges [m]")
+    p.add_argument("--shots", type=positive_int(), default=1000)
+    p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--reflectance", type=fraction(), default=0.1)
+    p.add_argument("--gate-delay-ns", type=non_negative_float(), default=None)
+    p.add_argument("--gate-width-ns", type=positive_float(), default=None)
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    _common(p)
+    p.set_defaults(run=_cmd_precision)
+
+
+def _add_edge_bias(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--waters", nargs="+", type=nonempty(), default=None, help=f"water presets (default all: {_waters()})")
+    p.add_argument("--ranges-m", type=positive_float(), nargs="+", default=list(studies.EDGE_RANGES_M),
+                   help="plate ranges [m] (default 1.60 to 2.20 m in 5 cm steps)")
+    p.add_argument("--shots", type=positive_int(), default=200, help="noisy pulses per range and water")
+    p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--reflectance", type=fraction(), default=0.1)
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    _common(p, plot=False)
+    p.set_defaults(run=_cmd_edge_bias, no_plot=True, out=None)
+
+
+def _add_experiment(p: argparse.ArgumentParser) -> None:
+    p.add_argument("experiment", type=nonempty(), help="pond or pool")
+    p.add_argument("--shots", type=positive_int(), default=1000, help="static shots at each distance")
+    p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--ranging", default="prototype", type=nonempty(),
+                   help="prototype (plain peak detection on the 1 GS/s record) or template (pulse-shape fit)")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    _common(p, out_type=output_dir)  # a folder: experiment.json and experiment.png
+    p.set_defaults(run=_cmd_experiment)
+
+
+def _add_budget(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    _common(p, plot=False)
+    p.set_defaults(run=_cmd_budget)
+
+
+def _add_coaxial(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--water", default="turbid_harbor", type=nonempty(), help=f"water preset ({_waters()})")
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    _common(p)
+    p.set_defaults(run=_cmd_coaxial)
+
+
+def _add_bench(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--pulses", type=positive_int(), default=100_000, help="windowed-mode pulses")
+    p.add_argument("--full-pulses", type=positive_int(), default=10_000, help="full-record pulses")
+    p.add_argument("--repeats", type=positive_int(), default=3)
+    _common(p, plot=False)
+    p.set_defaults(run=_cmd_bench)
+
+
+def _add_multiscatter(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--water", required=True, type=nonempty(), help=f"water preset ({_waters()})")
+    p.add_argument("--range-m", type=positive_float(), required=True, help="plate range [m]")
+    p.add_argument("--geometry", default="mul2023", type=nonempty(),
+                   help="mul2023 (receiver 130 mm beside the beam) or coaxial")
+    p.add_argument("--packets", type=positive_int(), default=studies.DEFAULT_PACKETS, help="beam packets")
+    p.add_argument("--reflectance", type=fraction(), default=0.1)
+    p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="MULS's attenuation rule (k_lidar, c, kd, small_angle)")
+    _common(p)
+    p.set_defaults(run=_cmd_multiscatter)
+
+
+def _add_multiscatter_study(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--waters", nargs="+", type=nonempty(), default=list(studies.STUDY_WATERS),
+                   help=f"water presets ({_waters()})")
+    p.add_argument("--geometry", default="mul2023", type=nonempty(), help="mul2023 or coaxial")
+    p.add_argument("--packets", type=positive_int(), default=studies.STUDY_PACKETS, help="beam packets per water")
+    p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--attenuation", default="small_angle", type=nonempty(),
+                   help="MULS's own rule for its maximum range and the correction table (k_lidar, c, kd, small_angle)")
+    _common(p, out_type=output_dir)  # a folder: the study's chart and its JSON
+    p.set_defaults(run=_cmd_multiscatter_study)
+
+
+def _add_mobley1993(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--photons", type=positive_int(), default=montecarlo.MOBLEY1993_PHOTONS,
+                   help="photons per run at albedo 0.9; the runs at albedo 0.2 trace 5 times as many")
+    p.add_argument("--seed", type=seed(), default=0)
+    _common(p)
+    p.set_defaults(run=_cmd_mobley1993)
+
+
+def _add_validate_pass(p: argparse.ArgumentParser) -> None:
+    from ..montecarlo.validate import VALIDATION_PACKETS, VALIDATION_SEED, VALIDATION_WATERS
+
+    p.add_argument("--waters", nargs="+", default=list(VALIDATION_WATERS), type=nonempty(), metavar="WATER",
+                   help="water presets (default: %(default)s)")
+    p.add_argument("--packets", type=positive_int(), default=VALIDATION_PACKETS, help="beam packets per water")
+    p.add_argument("--seed", type=seed(), default=VALIDATION_SEED)
+    p.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    p.set_defaults(run=_cmd_validate_pass, no_plot=True, out=None)
+
+
+#: What adds each subcommand's options and sets its ``run`` (:data:`muls.cli.registry.SUBCOMMANDS` names them).
+BUILDERS = {
+    "waveform": _add_waveform,
+    "maxrange": _add_maxrange,
+    "precision": _add_precision,
+    "edge-bias": _add_edge_bias,
+    "experiment": _add_experiment,
+    "budget": _add_budget,
+    "coaxial": _add_coaxial,
+    "bench": _add_bench,
+    "multiscatter": _add_multiscatter,
+    "multiscatter-study": _add_multiscatter_study,
+    "mobley1993": _add_mobley1993,
+    "validate-pass": _add_validate_pass,
+}

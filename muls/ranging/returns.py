@@ -1,0 +1,277 @@
+"""Ranging as the instrument does it (MULS Eq. 14): the peaks of every channel (:mod:`muls.ranging.peaks`) grouped into
+returns with one channel chosen per return, several returns per pulse, and a cause for every pulse left
+without one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..infra.runtime import kernel
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, column_value, uncut_column_value
+from ..receiver.digitiser import Waveforms
+from .peaks import Peaks, find_peaks
+
+DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
+NO_DROPOUT = -1
+
+
+@dataclass(frozen=True)
+class Ranging:
+    """Result of ranging a batch: chosen returns, all peaks, and each pulse's dropout cause.
+
+    returns: one row per return (channel chosen), with ``return_number`` / ``number_of_returns`` (n,) uint8;
+    dropout_cause: (n_pulses,) int8, index into DROPOUT_CAUSES, or NO_DROPOUT when the pulse has a return.
+    reference_time_s: (n_pulses,) refined CH0 peak time.
+    """
+
+    returns: Peaks
+    return_number: np.ndarray
+    number_of_returns: np.ndarray
+    peaks: Peaks
+    dropout_cause: np.ndarray
+    reference_time_s: np.ndarray
+
+
+def choose_returns(model: OpticalModel, peaks: Peaks):
+    """Group peaks of different channels into returns and keep one channel per return.
+
+    The unsaturated peak with the best SNR wins (CH3 inside its gate, by its gain); a return whose every
+    peak is clipped keeps the lowest-gain channel under ``saturation_policy = "keep"`` and is dropped under
+    ``"drop"``. Returns (chosen Peaks, return_number, number_of_returns, pulses with a dropped return).
+    """
+    proc = model.instrument.processing
+    n = peaks.pulse.shape[0]
+    if n == 0:
+        empty = np.zeros(0, np.uint8)
+        return peaks, empty, empty, np.zeros(0, np.int64)
+    new = np.ones(n, bool)
+    new[1:] = (peaks.pulse[1:] != peaks.pulse[:-1]) | (np.diff(peaks.time_s) > proc.merge_window_s)
+    gain = np.array([0.0] + [ch.volts_per_watt for ch in model.instrument.channels])
+    score = np.where(peaks.saturated, -gain[peaks.channel], peaks.snr)
+    best = best_of_clusters(new, peaks.saturated, score)
+    all_clipped = peaks.saturated[best]
+    dropped = peaks.pulse[best[all_clipped]] if proc.saturation_policy == "drop" else np.zeros(0, np.int64)
+    if proc.saturation_policy == "drop":
+        best = best[~all_clipped]
+    chosen = peaks.select(best)  # ascending: clusters are runs of peaks in order
+    pulse = chosen.pulse
+    first = np.ones(pulse.shape[0], bool)
+    first[1:] = pulse[1:] != pulse[:-1]
+    group_start = np.maximum.accumulate(np.where(first, np.arange(pulse.shape[0]), 0))
+    return_number = (np.arange(pulse.shape[0]) - group_start + 1).astype(np.uint8)
+    counts = np.bincount(pulse, minlength=int(pulse.max()) + 1 if pulse.size else 0)
+    number_of_returns = counts[pulse].astype(np.uint8)
+    return chosen, return_number, number_of_returns, dropped
+
+
+@kernel(nogil=True)
+def best_of_clusters(new, saturated, score):
+    """(k,) int64, ascending: the peak each cluster keeps, where a cluster is a run of peaks that ``new`` (n,) bool
+    starts: the unsaturated one with the highest ``score`` before any saturated one, a tie going to the later peak,
+    and NaN above every number, as the last of a stable lexsort by (cluster, unsaturated, score) would be."""
+    n = new.shape[0]
+    out = np.empty(n, np.int64)
+    m = 0
+    start = 0
+    while start < n:
+        end = start + 1
+        while end < n and not new[end]:
+            end += 1
+        b = start
+        for k in range(start + 1, end):
+            if saturated[k] != saturated[b]:
+                if not saturated[k]:
+                    b = k
+            elif not (score[k] < score[b]) and not (math.isnan(score[b]) and not math.isnan(score[k])):
+                b = k
+        out[m] = b
+        m += 1
+        start = end
+    return out[:m]
+
+
+def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated_dropped, echoes: Echoes,
+                   phase_s) -> np.ndarray:
+    """Cause of each pulse without a return (index into DROPOUT_CAUSES), NO_DROPOUT otherwise; ``phase_s`` (n,) the
+    pulses' sampling phases [s] (:attr:`Waveforms.phase_s`).
+
+    One rule per cause, the first that holds (docs/outputs.md tables them): ``no_hit`` no echo begins within the
+    record; ``blind_zone`` none that does carries light; ``saturated`` a clipped return was dropped; then, over the
+    samples of the strongest echo (from its start to the end of its pulse, :func:`echo_span_samples`) and at the
+    sample where the echoes alone are highest (the echo's peak): ``masked_by_backscatter`` if in a channel open at
+    the peak the echo alone clears the threshold over dark noise (k sigma) and the column hides it there: the
+    residual over the processor's baseline (the open-water column and background) is at most k times the noise
+    with the baseline's shot noise, or the column alone or the column with the echo clips the channel at an open
+    sample of the span; ``outside_gate`` if no open channel would see the echo alone but a channel shut at its peak
+    would; ``below_threshold`` otherwise.
+    """
+    ins = model.instrument
+    dig = ins.digitizer
+    offsets, delay, energy = echoes.offsets, echoes.delay_s, echoes.energy_j
+    record_end = dig.record_length_s
+    cause = np.full(batch.n_pulses, NO_DROPOUT, np.int8)
+    missing = ~np.asarray(has_return, bool)
+    in_record = np.zeros(batch.n_pulses, bool)
+    lit = np.zeros(batch.n_pulses, bool)
+    pulse_of = np.repeat(np.arange(batch.n_pulses), np.diff(offsets))
+    in_record[pulse_of[delay < record_end]] = True
+    lit[pulse_of[(energy > 0.0) & (delay < record_end)]] = True
+    cause[missing & ~in_record] = DROPOUT_CAUSES.index("no_hit")
+    cause[missing & in_record & ~lit] = DROPOUT_CAUSES.index("blind_zone")
+    sat = np.zeros(batch.n_pulses, bool)
+    sat[np.asarray(saturated_dropped, np.int64)] = True
+    cause[missing & lit & sat] = DROPOUT_CAUSES.index("saturated")
+    todo = np.nonzero(missing & lit & ~sat)[0]
+    if todo.size == 0:
+        return cause
+    # The strongest echo within the record, the earliest of equals.
+    strongest = np.full(batch.n_pulses, -1, np.int64)
+    ranked = np.lexsort((-np.arange(delay.size), np.where(delay < record_end, energy, -1.0), pulse_of))
+    strongest[pulse_of[ranked]] = ranked  # the last of each pulse's run wins
+    first, count = echo_span_samples(delay[strongest[todo]], ins.pulse.duration_s, dig, phase_s[todo])
+    chans = model.channels
+    signal = slice(1, len(ins.channels) + 1)
+    top_w = (dig.max_code - chans.dark_mean_lsb[signal]) / chans.lsb_per_w[signal]  # the power that clips each channel
+    sampling = (-dig.pretrigger_s, dig.sample_interval_s)
+    t_peak, echo_peak, column_peak, base_peak, clipped = _span_terms(
+        first, count, phase_s[todo], sampling, todo, model.column, model.cuts(batch), echoes, ins.pulse.duration_s,
+        chans.gate_open_s[signal], chans.gate_close_s[signal], top_w)
+    # The residual the peak search measures: the record (column cut by the targets, echo, background) over the
+    # processor's baseline (the open-water column and background).
+    resid_peak = echo_peak + column_peak - base_peak
+    k = ins.processing.threshold_sigma
+    masked = np.zeros(todo.size, bool)
+    seen_open = np.zeros(todo.size, bool)
+    seen_shut = np.zeros(todo.size, bool)
+    for c in range(1, len(ins.channels) + 1):
+        open_at_peak = (chans.gate_open_s[c] <= t_peak) & (t_peak < chans.gate_close_s[c])
+        dark = math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
+        sigma = np.sqrt(dark**2 + chans.shot_lsb2_per_w[c] * base_peak)
+        visible_alone = chans.lsb_per_w[c] * echo_peak > k * dark  # MULS Eqs. 12-13 in LSB
+        under_column = chans.lsb_per_w[c] * resid_peak <= k * sigma
+        masked |= open_at_peak & visible_alone & (under_column | clipped[:, c - 1])
+        seen_open |= open_at_peak & visible_alone
+        seen_shut |= ~open_at_peak & visible_alone
+    cause[todo] = np.where(masked, DROPOUT_CAUSES.index("masked_by_backscatter"),
+                           np.where(seen_shut & ~seen_open, DROPOUT_CAUSES.index("outside_gate"),
+                                    DROPOUT_CAUSES.index("below_threshold")))
+    return cause
+
+
+def echo_span_samples(start_s, duration_s: float, digitizer, phase_s) -> tuple[np.ndarray, np.ndarray]:
+    """(first, count), each (n,) int64: the samples of each pulse's record from ``start_s`` (n,) [s] to
+    ``start_s + duration_s``, both included (sample k at ``-pretrigger_s + k dt + phase_s`` (n,) [s])."""
+    dt = digitizer.sample_interval_s
+    first = np.ceil((start_s + digitizer.pretrigger_s - phase_s) / dt).astype(np.int64)
+    last = np.floor((start_s + duration_s + digitizer.pretrigger_s - phase_s) / dt).astype(np.int64)
+    return first, np.maximum(last - first + 1, 0)
+
+
+@kernel(nogil=True)
+def _span_terms(first, count, phase, sampling, pulses, col, cuts, echoes, extent, gate_open, gate_close, top_w):
+    """The terms of pulse ``pulses[i]`` over its span, samples ``first[i]`` to ``first[i] + count[i] - 1`` of its
+    record (sample k at ``sampling[0] + k sampling[1] + phase[i]`` [s]): the peak's time [s] (the first sample
+    where the echoes alone are highest), there the echoes alone, the column as the targets cut it plus background,
+    and the processor's baseline (the uncut column plus background) [W], each (n,); and whether each signal
+    channel (n, channels), at a sample where its gate (``gate_open``, ``gate_close`` [s]) is open, is clipped
+    (power at or over ``top_w`` [W]) by the baseline alone or by the record (column and echo).
+
+    Each echo's pulse is stepped from sample to sample by constant factors; the cut column is evaluated only where
+    it decides a clip (the baseline under a channel's top and the baseline with the echo at or over it: the cut
+    column never exceeds the baseline)."""
+    n = pulses.shape[0]
+    n_chan = top_w.shape[0]
+    t0, dt = sampling
+    t_peak, echo_peak = np.full(n, np.nan), np.zeros(n)
+    column_peak, base_peak = np.zeros(n), np.zeros(n)
+    clipped = np.zeros((n, n_chan), np.bool_)
+    basis = col.basis
+    ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
+    times, echo = np.empty(count.max() if n else 0), np.empty(count.max() if n else 0)
+    for i in range(n):
+        p = pulses[i]
+        last = count[i]
+        if last == 0:
+            continue
+        for j in range(last):
+            times[j] = t0 + (first[i] + j) * dt + phase[i]
+        echo[:last] = 0.0
+        for e in range(echoes.offsets[p], echoes.offsets[p + 1]):
+            j = 0
+            while j < last and times[j] < echoes.delay_s[e]:
+                j += 1
+            if j == last:
+                continue
+            u = times[j] - echoes.delay_s[e]
+            ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
+            while j < last and u < extent:  # MULS Eq. 1's echo term, pulse_value(u) stepped
+                echo[j] += echoes.energy_j[e] * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
+                j += 1
+                u += dt
+                ea *= ra
+                eb *= rb
+        peak = 0
+        for j in range(last):
+            t = times[j]
+            if echo[j] > echo[peak]:
+                peak = j
+            base = cuts.background_w[p] + uncut_column_value(t, col)
+            decides = False
+            for c in range(n_chan):
+                is_open = (gate_open[c] <= t) & (t < gate_close[c])
+                if is_open and base >= top_w[c]:
+                    clipped[i, c] = True
+                decides = decides or (is_open and not clipped[i, c] and base + echo[j] >= top_w[c])
+            if decides:
+                record = _cut_column(t, p, col, cuts) + echo[j]
+                for c in range(n_chan):
+                    if (gate_open[c] <= t) & (t < gate_close[c]) and record >= top_w[c]:
+                        clipped[i, c] = True
+        t_peak[i] = times[peak]
+        echo_peak[i] = echo[peak]
+        column_peak[i] = _cut_column(times[peak], p, col, cuts)
+        base_peak[i] = cuts.background_w[p] + uncut_column_value(times[peak], col)
+    return t_peak, echo_peak, column_peak, base_peak, clipped
+
+
+@kernel(inline="always")
+def _cut_column(t, p, col, cuts):
+    """Pulse ``p``'s column at time ``t`` [s] as its targets cut it, plus background [W] (MULS Eq. 1 less echoes)."""
+    power = cuts.background_w[p]
+    for c in range(cuts.cut_tau_s.shape[1]):
+        if cuts.cut_weight[p, c] != 0.0:
+            power += cuts.cut_weight[p, c] * column_value(t, cuts.cut_tau_s[p, c], col)
+    return power
+
+
+def range_batch(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoes: Echoes | None = None) -> Ranging:
+    """Peaks, chosen returns and dropout causes of a digitised batch.
+
+    Parameters
+    ----------
+    model : OpticalModel
+        The model that made the records.
+    batch : PulseBatch
+        The batch's n_pulses pulses.
+    records : Waveforms
+        Their digitised records (:func:`muls.receiver.digitiser.digitise`).
+    echoes : Echoes, optional
+        ``model.echoes(batch)``, if the caller has it.
+
+    Returns
+    -------
+    Ranging
+        The returns, every peak, each pulse's dropout cause (n_pulses,) int8 and its CH0 reference time
+        (n_pulses,) [s].
+    """
+    echoes = echoes if echoes is not None else model.echoes(batch)
+    peaks, ref_time = find_peaks(model, batch, records, echoes)
+    chosen, return_number, number_of_returns, dropped = choose_returns(model, peaks)
+    has_return = np.zeros(batch.n_pulses, bool)
+    has_return[chosen.pulse] = True
+    cause = dropout_causes(model, batch, has_return, dropped, echoes, records.phase_s)
+    return Ranging(chosen, return_number, number_of_returns, peaks, cause, ref_time)

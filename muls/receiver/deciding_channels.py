@@ -1,0 +1,178 @@
+"""Which signal channels of a record window can decide a return, judged on the noise-free signal before any noise
+is drawn: the digitiser's ``deciding_only`` mode synthesises only those (the ``auto`` and ``fast`` levels).
+
+Ranging keeps, for each echo, the unsaturated peak with the best SNR (:func:`muls.ranging.returns.choose_returns`), and
+every normal the noise streams give is smaller than :data:`muls.infra.noise.NORMAL_BOUND` in magnitude, so some outcomes
+are certain before the noise is drawn:
+
+- a channel with no open sample that both escapes the column's clipping (the processor's calibrated baseline below
+  the top code) and carries echo over that baseline finds no echo in the window: not needed;
+- where the pulse's echoes lie within a sample of each other and their signal over the baseline is one hump, the
+  channel (gate open and baseline unclipped throughout) that surely stays unclipped and surely clears the threshold
+  at the hump, with the best least SNR, is kept; a channel surely clipped at the hump, or clipped from samples the
+  column blinds through the hump, gives a saturated peak or none and cannot win; a channel whose best SNR, times
+  :data:`SNR_MARGIN`, stays below the kept channel's least cannot win either, and is left out where its least SNR
+  exceeds :data:`TIMED_SNR` (a weaker peak, timed by its noise, may be ranged as a duplicate return). Where every
+  channel that sees the echo is clipped, the lowest-gain one is kept (its saturated peak is the return).
+
+Anything else is kept: two humps (echoes apart), a gate edge or a blind stretch for the SNR comparison, a channel
+that may or may not clip. What the pruning gives up, a pruned channel's false alarms and its duplicate returns of
+an echo another channel ranges, docs/fidelity.md states.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..infra.noise import NORMAL_BOUND
+from ..infra.runtime import kernel
+from ..instrument.channels import gate_open_at, level_lsb, processor_sigma_lsb
+
+#: The kept channel's worst SNR must exceed a lower-gain channel's best by this factor for that one to be dropped:
+#: room for the peak fit's amplitude ratio (the centre sample over the fitted peak, within a few per cent).
+SNR_MARGIN = 1.25
+#: [s] Most spread of a pulse's echo delays for its echo to count as one: a sample interval, so the echo is the
+#: pulse's shape to a few per cent and the peak search finds it once. A footprint stretched over range (grazing
+#: incidence) makes a long hump in which the search finds several peaks per channel, and which of them become
+#: returns depends on how the other channels' peaks chain them (muls.ranging.returns's merge window).
+ECHO_SPAN_S = 1e-9
+#: A peak surely this far over its noise is timed within a fraction of a nanosecond (a 10 ns pulse's edge over
+#: the SNR), far inside the 4 ns within which ranging merges the peaks of different channels into one return; a
+#: weaker one, timed by its noise, can fall outside it and be ranged as a return of its own (a duplicate).
+TIMED_SNR = 20.0
+
+
+@kernel(nogil=True)
+def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, echo_span_s, scratch):
+    """Fill ``out`` (n_channels,) bool with the channels of one window that can decide a return (module doc);
+    ``scratch``: (3, n_channels) bool work space.
+
+    power: (n,) noise-free optical power at the window's samples [W]; baseline: (n,) the processor's calibrated
+    baseline there [W] (background plus the uncut column, as :mod:`muls.ranging.peaks` uses it); times: (n,) the sample
+    times [s]; chans: the signal channels' :class:`muls.instrument.channels.ChannelArrays`; max_code: the top code [LSB];
+    k_sigma: the detection threshold [sigma]; echo_span_s: the spread of the pulse's echo delays [s].
+    """
+    n_chan, n = out.shape[0], power.shape[0]
+    whole, plain, clipped = scratch[0], scratch[1], scratch[2]
+    tolerance = np.inf  # [W] one dark sigma of the most sensitive channel that sees the echo
+    top, highest = 0, power[0]
+    for k in range(1, n):
+        highest = max(highest, power[k])
+        if power[k] - baseline[k] > power[top] - baseline[top]:
+            top = k
+    for c in range(n_chan):
+        # whole: gate open over the whole window; plain: no sample where the baseline alone clips it (a blind
+        # sample's residual is 0); out: an open sample where the baseline alone leaves it below the top code, with
+        # echo on it. Bitwise, not short-circuit, so that the loop has no branch.
+        all_open, no_blind, echo = True, True, False
+        for k in range(n):
+            is_open = gate_open_at(chans, c, times[k])
+            blind = is_open & (level_lsb(chans, c, baseline[k]) >= max_code)
+            all_open &= is_open
+            echo |= is_open & (not blind) & (power[k] > baseline[k])
+            no_blind &= not blind
+        whole[c], plain[c], out[c] = all_open, no_blind, echo
+        if out[c]:
+            tolerance = min(tolerance, processor_sigma_lsb(chans, c, 0.0) / chans.lsb_per_w[c])
+    if echo_span_s > ECHO_SPAN_S or not _one_hump(power, baseline, top, tolerance):
+        return
+    best, best_snr = -1, -np.inf  # the surely unclipped, surely detected channel with the best least SNR
+    for c in range(n_chan):
+        least = _snr_bounds(c, power, baseline, top, chans)[0]
+        candidate = out[c] and whole[c] and plain[c] and least > k_sigma and least > best_snr
+        if candidate and _surely_unclipped(c, highest, chans, max_code):
+            best, best_snr = c, least
+    # a channel open at the hump and surely clipped there gives a saturated peak there, or none (clipped)
+    clipped[:] = False
+    lowest = -1  # the lowest-gain channel that gives a saturated peak at the hump
+    for c in range(n_chan):
+        if out[c] and gate_open_at(chans, c, times[top]):
+            if plain[c]:
+                clipped[c] = _surely_clipped(c, power[top], chans, max_code)
+                if clipped[c] and (lowest < 0 or chans.lsb_per_w[c] < chans.lsb_per_w[lowest]):
+                    lowest = c
+            else:
+                clipped[c] = _clipped_from_blindness(c, power, baseline, times, top, chans, max_code)
+    if best < 0:
+        # every channel that sees is clipped: the return is the lowest-gain saturated peak (muls.ranging.returns)
+        every_clipped = lowest >= 0
+        for c in range(n_chan):
+            every_clipped = every_clipped and (clipped[c] or not out[c])
+        if every_clipped:
+            for c in range(n_chan):
+                out[c] = c == lowest
+        return
+    for c in range(n_chan):
+        if out[c] and c != best:
+            least, most = _snr_bounds(c, power, baseline, top, chans)
+            # its peak cannot win, and is timed too well to be ranged as a return of its own
+            loses = whole[c] and plain[c] and SNR_MARGIN * most < best_snr and least > TIMED_SNR
+            out[c] = not (clipped[c] or loses)
+
+
+@kernel(inline="always")
+def _noise_reach(chans, c, power):
+    """Most that channel c's noise and rounding can move a code at optical power ``power`` [W] [LSB]."""
+    return NORMAL_BOUND * (chans.dark_std_lsb[c] + math.sqrt(chans.shot_lsb2_per_w[c] * power)) + 0.5
+
+
+@kernel(inline="always")
+def _surely_unclipped(c, highest_power, chans, max_code):
+    """No sample of channel c, whose gate is open throughout, can reach the top code whatever the noise: its level
+    and the noise's reach both grow with the power, so the window's highest power [W] decides."""
+    return level_lsb(chans, c, highest_power) + _noise_reach(chans, c, highest_power) < max_code
+
+
+@kernel(inline="always")
+def _surely_clipped(c, power, chans, max_code):
+    """Channel c's sample at optical power ``power`` [W] reaches the top code, whatever the noise."""
+    return level_lsb(chans, c, power) - _noise_reach(chans, c, power) >= max_code
+
+
+@kernel(nogil=True)
+def _clipped_from_blindness(c, power, baseline, times, top, chans, max_code):
+    """Channel c, which the baseline alone clips at some samples, surely stays clipped from its last such sample
+    through the hump, which lies after all of them, with its gate open all along: the plateau at the hump then runs
+    back into samples the backscatter clips, and the peak search takes it for the column, not an echo."""
+    last = -1
+    for k in range(power.shape[0]):
+        if gate_open_at(chans, c, times[k]) and level_lsb(chans, c, baseline[k]) >= max_code:
+            if k >= top:
+                return False
+            last = k
+    if last < 0:
+        return False
+    for k in range(last, top + 1):
+        if not (gate_open_at(chans, c, times[k]) and _surely_clipped(c, power[k], chans, max_code)):
+            return False
+    return True
+
+
+@kernel(nogil=True)
+def _snr_bounds(c, power, baseline, top, chans):
+    """(least, most) SNR of channel c's peak at the hump: its amplitude over the baseline, less or plus the noise's
+    reach, over the processor's noise there (dark, rounding and the baseline's shot noise, as muls.ranging.peaks has it)."""
+    amplitude = chans.lsb_per_w[c] * (power[top] - baseline[top])
+    reach = _noise_reach(chans, c, power[top])
+    sigma = processor_sigma_lsb(chans, c, baseline[top])
+    return (amplitude - reach) / sigma, (amplitude + reach) / sigma
+
+
+@kernel(nogil=True)
+def _one_hump(power, baseline, top, tolerance):
+    """The echo signal r = power - baseline has one hump, at ``top``: going out from it either way, r never rises
+    by more than ``tolerance`` [W] over both its lowest value since the hump and zero (a rise below the baseline,
+    the column's deficit behind a cut shrinking, cannot start a run over it)."""
+    lowest = np.inf
+    for k in range(top, -1, -1):
+        lowest = min(lowest, power[k] - baseline[k])
+        if power[k] - baseline[k] > max(lowest, 0.0) + tolerance:
+            return False
+    lowest = np.inf
+    for k in range(top, power.shape[0]):
+        lowest = min(lowest, power[k] - baseline[k])
+        if power[k] - baseline[k] > max(lowest, 0.0) + tolerance:
+            return False
+    return True

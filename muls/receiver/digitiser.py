@@ -1,0 +1,438 @@
+"""From optical power to digitised records: beam splitter and gains (Eq. 12), range gate, dark and shot
+noise, sampling with a random phase, quantisation and clipping (Eq. 13); CH0 the reference photodiode.
+
+Two record modes share this code: ``full`` synthesises every sample of the record, ``windowed`` only
+windows around the emission (for CH0) and around each echo (one window for a pulse's echoes that chain).
+Noise is keyed by (seed, pulse id, channel, sample index), so both modes and any batching see identical
+samples where they overlap.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from ..infra.errors import check_choice
+from ..infra.noise import (
+    FIRST_SIGNAL_STREAM,
+    NORMAL_BOUND,
+    PHASE_STREAM,
+    REFERENCE_STREAM,
+    fill_hashes,
+    fill_normal_pairs,
+    seed_key,
+    stream_base,
+    uniform_at,
+)
+from ..infra.runtime import kernel
+from ..instrument.channels import gate_open_at, level_lsb
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, baseline_values, column_integrals_at
+from .channel_codes import channel_codes, quantise, ranging_codes
+from .deciding_channels import deciding_channels
+
+RECORD_MODES = ("windowed", "full")
+
+#: Windowed mode: samples of the CH0 reference record (the emitted pulse peaks ~21 samples in).
+REFERENCE_SAMPLES = 40
+#: Windowed mode: samples per echo window (at least; longer when a pulse's echoes chain, see _plan), and
+#: how many of them precede an echo's start.
+WINDOW_SAMPLES = 64
+WINDOW_LEAD_S = 8e-9
+#: Samples after an echo's start that its window must hold (a strongly clipped echo's run is ~50 ns long);
+#: a pulse's echoes closer than this to the previous window's end share its window.
+WINDOW_NEED_S = 56e-9
+
+
+@dataclass(frozen=True)
+class Waveforms:
+    """Digitised records of a batch (struct of arrays).
+
+    reference: (n_pulses, n_ref) uint16 CH0 record from sample 0 (the whole record in ``full`` mode; under
+    :func:`digitise`'s ``ranging_only`` only the samples around its peak, the others 0).
+    codes: (n_windows, n_channels, n_samples) uint16 signal-channel windows, channel j is
+    ``instrument.channels[j]`` (``full`` mode under ``ranging_only``: only the samples the peak search may read, the
+    others 0). window_pulse: (n_windows,) batch index of each window's pulse;
+    window_start: (n_windows,) index of the window's first sample in the full record. Sample k of the full
+    record is taken at ``-pretrigger_s + k / sample_rate_hz + phase_s[pulse]``. noise_free_lsb and
+    reference_noise_free_lsb: same shapes (float32, before noise, rounding and clipping) when asked for.
+    synthesised: (n_windows, n_channels) bool, the channels synthesised in each window (the others' codes are 0),
+    or None when every one was (:func:`digitise`'s ``deciding_only``).
+    """
+
+    reference: np.ndarray
+    codes: np.ndarray
+    window_pulse: np.ndarray
+    window_start: np.ndarray
+    phase_s: np.ndarray
+    mode: str
+    noise_free_lsb: np.ndarray | None = None
+    reference_noise_free_lsb: np.ndarray | None = None
+    synthesised: np.ndarray | None = None
+
+    @property
+    def n_pulses(self) -> int:
+        return int(self.phase_s.shape[0])
+
+    def sample_times_s(self, model: OpticalModel) -> np.ndarray:
+        """(n_windows, n_samples) sample times [s] after emission."""
+        dig = model.instrument.digitizer
+        k = self.window_start[:, None] + np.arange(self.codes.shape[2])[None, :]
+        return -dig.pretrigger_s + k * dig.sample_interval_s + self.phase_s[self.window_pulse][:, None]
+
+    def reference_times_s(self, model: OpticalModel) -> np.ndarray:
+        """(n_pulses, n_ref) sample times [s] of the CH0 record."""
+        dig = model.instrument.digitizer
+        k = np.arange(self.reference.shape[1])[None, :]
+        return -dig.pretrigger_s + k * dig.sample_interval_s + self.phase_s[:, None]
+
+
+def sampling_phase_s(key: np.uint64, pulse_id: np.ndarray, sample_interval_s: float) -> np.ndarray:
+    """Random sampling phase of each pulse in [0, sample interval) [s] (the ADC clock is free-running)."""
+    return _phases(key, np.asarray(pulse_id, np.int64)) * sample_interval_s
+
+
+@kernel(nogil=True)
+def _phases(key, pulse_id):
+    out = np.empty(pulse_id.shape[0])
+    for i in range(pulse_id.shape[0]):
+        out[i] = uniform_at(stream_base(key, pulse_id[i], PHASE_STREAM), 0)
+    return out
+
+
+def plan_windows(model: OpticalModel, batch: PulseBatch, echoes: Echoes, mode: str):
+    """(window_pulse, window_start, n_samples) of the signal-channel records to synthesise."""
+    check_choice("record_mode", mode, RECORD_MODES)
+    dig = model.instrument.digitizer
+    n = batch.n_pulses
+    if mode == "full":
+        return np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64), dig.n_samples
+    first = np.floor((echoes.delay_s + dig.pretrigger_s - WINDOW_LEAD_S) * dig.sample_rate_hz).astype(np.int64)
+    usable = (echoes.energy_j > 0.0) & (first < dig.n_samples - WINDOW_SAMPLES)
+    # each echo's window holds the lead and the samples a strongly clipped echo's run may take after it
+    reach = max(WINDOW_SAMPLES, int(math.ceil((WINDOW_LEAD_S + WINDOW_NEED_S) * dig.sample_rate_hz)))
+    pulses, starts, spans = _plan(echoes.offsets, np.maximum(first, 0), usable, reach)
+    width = max(WINDOW_SAMPLES, int(spans.max())) if spans.size else WINDOW_SAMPLES
+    width = min(width, dig.n_samples)
+    return pulses, np.minimum(starts, dig.n_samples - width), width
+
+
+@kernel(nogil=True)
+def _plan(offsets, first, usable, reach):
+    """Windows per pulse, one per cluster of echoes: an echo whose window would start before the cluster's
+    earlier windows end (``reach`` samples after each window start) joins the cluster, whose window then
+    runs to its last echo's reach. A run of samples that chains several echoes so lies whole in one window
+    (the ranging drops a run cut by a window's edge, unless it is clipped and its plateau ends inside the
+    window). ``first`` must ascend within a pulse (it does, from :class:`Echoes`' delays). Returns (pulse, first
+    sample, samples the cluster spans) per window."""
+    n = offsets.shape[0] - 1
+    out_p = np.empty(first.shape[0], np.int64)
+    out_s = np.empty(first.shape[0], np.int64)
+    out_n = np.empty(first.shape[0], np.int64)
+    m = 0
+    for p in range(n):
+        end = -(1 << 40)
+        for j in range(offsets[p], offsets[p + 1]):  # ascending: Echoes are sorted by delay within a pulse
+            if not usable[j]:
+                continue
+            s = first[j]
+            if s < end:  # within the cluster: it only extends it
+                end = max(end, s + reach)
+                out_n[m - 1] = end - out_s[m - 1]
+                continue
+            end = s + reach
+            out_p[m] = p
+            out_s[m] = s
+            out_n[m] = reach
+            m += 1
+    return out_p[:m], out_s[:m], out_n[:m]
+
+
+class Sampling(NamedTuple):
+    """How the digitiser samples a batch: sample k of pulse p is taken at ``t0_s + k dt_s + phase_s[p]`` [s
+    after emission]; its noise is keyed by (``key``, ``pulse_id[p]``, stream, k)."""
+
+    t0_s: float
+    dt_s: float
+    phase_s: np.ndarray
+    pulse_id: np.ndarray
+    key: np.uint64
+
+
+def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
+             keep_noise_free: bool = False, noise: bool = True, echoes: Echoes | None = None,
+             deciding_only: bool = False, ranging_only: bool = False) -> Waveforms:
+    """Digitised records of every channel for a batch of pulses (MULS Eqs. 1, 12, 13).
+
+    ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
+    ``echoes``: ``model.echoes(batch)`` if already computed. ``deciding_only``: in each window, synthesise only the
+    channels that can decide a return (:mod:`muls.receiver.deciding_channels`); the others' codes are 0 and
+    ``Waveforms.synthesised`` says which. ``ranging_only``: only the samples the ranging may read get their codes,
+    the others 0: of each CH0 record the samples around its peak (:func:`_reference`), and of ``full`` records
+    the samples where a run of the peak search may start or go on or a code may clip, and those beside them
+    (:func:`muls.receiver.channel_codes.ranging_codes`; windows are mostly echo, and draw faster whole). The same peaks and
+    ranges, the records not whole.
+    """
+    ins = model.instrument
+    dig = ins.digitizer
+    key = seed_key(seed)
+    echoes = echoes if echoes is not None else model.echoes(batch)
+    window_pulse, window_start, n_samples = plan_windows(model, batch, echoes, mode)
+    phase = sampling_phase_s(key, batch.pulse_id, dig.sample_interval_s)
+    sampling = Sampling(-dig.pretrigger_s, dig.sample_interval_s, phase, batch.pulse_id.astype(np.int64), key)
+    chans = model.channels
+    n_ref = dig.n_samples if mode == "full" else REFERENCE_SAMPLES
+    shape, ref_shape = (window_pulse.shape[0], len(ins.channels), n_samples), (batch.n_pulses, n_ref)
+    codes, reference = np.empty(shape, np.uint16), np.empty(ref_shape, np.uint16)
+    clean = np.empty(shape if keep_noise_free else (0, 0, 0), np.float32)
+    ref_clean = np.empty(ref_shape if keep_noise_free else (0, 0), np.float32)
+    pulse = ins.pulse
+    synthesised = np.empty(shape[:2], np.bool_)
+    settings = DigitiserSettings(float(dig.max_code), 1.0 if noise else 0.0, deciding_only,
+                                 ins.processing.threshold_sigma, ranging_only and noise and mode == "full")
+    _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, model.column, model.cuts(batch),
+              echoes, chans.signal(), settings)
+    _reference(reference, ref_clean, sampling, model.basis, pulse.duration_s,
+               ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
+               chans.dark_std_lsb[0], settings.max_code, settings.noise_scale, ranging_only)
+    return Waveforms(reference, codes, window_pulse, window_start, phase, mode,
+                   clean if keep_noise_free else None, ref_clean if keep_noise_free else None,
+                   synthesised if deciding_only else None)
+
+
+#: Windows (or CH0 records) per block of the digitiser kernels: each block allocates its work arrays once.
+WINDOW_BLOCK = 64
+
+
+@kernel(parallel=True, nogil=True)
+def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_mean, dark_std, max_code,
+               noise_scale, peak_only):
+    """The CH0 records (n_pulses, n_ref) from sample 0 (MULS Eqs. 2, 13 through the photodiode). ``peak_only``:
+    only the samples that can hold the record's highest code or flank it (what :func:`muls.ranging.peaks._reference_peaks`
+    reads) get their noise and code, the others code 0: a sample whose noise-free level lies more than two noise
+    bounds (:data:`muls.infra.noise.NORMAL_BOUND` sigma and a rounding each) under the highest level is below the highest
+    code whatever the draws, and so is 0."""
+    n_pulses, n_ref = reference.shape
+    keep = clean.shape[0] > 0
+    ra, rb = math.exp(-basis[0] * sampling.dt_s), math.exp(-basis[1] * sampling.dt_s)
+    bound = noise_scale * dark_std * NORMAL_BOUND + 0.5
+    for block in numba.prange((n_pulses + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
+        normal, no_low, tails, levels = np.empty(n_ref), np.empty(0), np.empty(n_ref, np.uint64), np.empty(n_ref)
+        for p in range(block * WINDOW_BLOCK, min(n_pulses, (block + 1) * WINDOW_BLOCK)):
+            ea, eb = -1.0, -1.0  # the pulse basis's two exponentials at u, stepped by constant factors once u >= 0
+            for k in range(n_ref):
+                u = sampling.t0_s + k * sampling.dt_s + sampling.phase_s[p]
+                levels[k] = 0.0
+                if 0.0 <= u < extent:  # the filtered pulse (MULS Eq. 2), as muls.optics.optical_model.pulse_value
+                    if ea < 0.0:
+                        ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
+                    levels[k] = lsb_per_density * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
+                    ea *= ra
+                    eb *= rb
+                if keep:
+                    clean[p, k] = levels[k] + dark_mean
+            first, last = 0, n_ref - 1
+            if peak_only:
+                first, last = _reference_span(levels, dark_mean, bound, max_code)
+                reference[p, :first] = 0
+                reference[p, last + 1:] = 0
+            fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM), first,
+                              normal[: last + 1 - first], no_low, tails)
+            for k in range(first, last + 1):
+                reference[p, k] = quantise(levels[k] + dark_mean + noise_scale * dark_std * normal[k - first],
+                                            max_code)
+
+
+@kernel(nogil=True)
+def _reference_span(levels, dark_mean, bound, max_code):
+    """(first, last) samples of a CH0 record that can hold its highest code among samples 1 to n - 2 (where the peak
+    search looks) or flank it, from the noise-free ``levels`` (n,) [LSB over the dark mean] and the most a code can lie
+    from its noise-free value, ``bound`` [LSB]: every sample above the highest level less two bounds, or able to reach
+    the top code, and one more on each side."""
+    n = levels.shape[0]
+    top = -np.inf
+    for k in range(1, n - 1):
+        top = max(top, levels[k])
+    first, last = n, -1
+    for k in range(n):
+        if levels[k] + 2.0 * bound >= top or levels[k] + dark_mean + bound >= max_code:
+            first, last = min(first, k), max(last, k)
+    return max(0, first - 1), min(n - 1, last + 1)
+
+
+class DigitiserSettings(NamedTuple):
+    """Scalars of the digitiser kernel: the top code [LSB], the noise's scale (1, or 0 for no noise), whether only
+    the channels that can decide a return are synthesised (:mod:`muls.receiver.deciding_channels`), the threshold [sigma]
+    that decides it and that the peak search uses, and whether only the samples the peak search may read get their
+    codes (:func:`muls.receiver.channel_codes.ranging_codes`)."""
+
+    max_code: float
+    noise_scale: float
+    deciding_only: bool
+    k_sigma: float
+    read_samples_only: bool = False
+
+
+@kernel(parallel=True, nogil=True)
+def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, col, cuts, echoes, chans, settings):
+    n_windows, n_chan, n_samples = codes.shape
+    n_pairs = (n_chan + 1) // 2
+    n_detectors = 0
+    for c in range(n_chan):
+        n_detectors = max(n_detectors, chans.detector[c] + 1)
+    n_shot_pairs = (n_detectors + 1) // 2
+    keep = clean.shape[0] > 0
+    basis, dt = col.basis, sampling.dt_s
+    offsets, delay, energy = echoes.offsets, echoes.delay_s, echoes.energy_j
+    cut_tau, cut_w = cuts.cut_tau_s, cuts.cut_weight
+    ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
+    max_code, noise_scale = settings.max_code, settings.noise_scale
+    for block in numba.prange((n_windows + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
+        dark_normal = np.empty((2 * n_pairs, n_samples))
+        shot_normal = np.empty((2 * n_shot_pairs, n_samples))
+        tails, no_low = np.empty(n_samples, np.uint64), np.empty(0)
+        shot_needed = np.empty(n_detectors, np.bool_)
+        deciding_scratch = np.empty((3, n_chan), np.bool_)
+        cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
+        times, power, baseline, uncut = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
+        hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
+        read, in_tail, listed = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
+        for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
+            p = window_pulse[w]
+            # Echoes of pulse p (by delay) as three running sums over those started by time t:
+            # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
+            # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
+            sa, s1, sb = 0.0, 0.0, 0.0
+            nxt = offsets[p]
+            # The column's cuts by two-way time (insertion sort: a handful). Before a cut its share of the beam
+            # sees the full column; from the cut on, its share is the module doc's tail of waveform.py, of the same
+            # form as an echo, so it joins the three sums; ``ahead[i]``: the share of cuts i and later.
+            n_cut = 0
+            for c in range(cut_tau.shape[1]):
+                if cut_w[p, c] != 0.0:
+                    i = n_cut
+                    while i > 0 and cut_t[i - 1] > cut_tau[p, c]:
+                        cut_t[i], cut_s[i] = cut_t[i - 1], cut_s[i - 1]
+                        i -= 1
+                    cut_t[i], cut_s[i] = cut_tau[p, c], cut_w[p, c]
+                    n_cut += 1
+            ahead[n_cut] = 0.0
+            for i in range(n_cut - 1, -1, -1):
+                ahead[i] = ahead[i + 1] + cut_s[i]
+            next_cut = 0
+            sample_times(times, 0, n_samples, sampling.t0_s, dt, window_start[w], sampling.phase_s[p])
+            # The uncut column, on SIMD lanes (uncut_column_value's numbers): where a cut is still ahead, and for the
+            # baseline wherever that is needed.
+            uncut_until = 0
+            if settings.deciding_only or settings.read_samples_only:
+                uncut_until = n_samples
+            elif n_cut > 0:
+                while uncut_until < n_samples and times[uncut_until] < cut_t[n_cut - 1]:
+                    uncut_until += 1
+            baseline_values(uncut[:uncut_until], times[:uncut_until], 0.0, col)
+            for k in range(n_samples):
+                t = times[k]
+                if k > 0:
+                    s1 = (s1 + dt * sa) * ra
+                    sa *= ra
+                    sb *= rb
+                while nxt < offsets[p + 1] and delay[nxt] <= t:
+                    u = t - delay[nxt]
+                    ea = energy[nxt] * math.exp(-basis[0] * u)
+                    sa += ea
+                    s1 += u * ea
+                    sb += energy[nxt] * math.exp(-basis[1] * u)
+                    nxt += 1
+                while next_cut < n_cut and cut_t[next_cut] <= t:
+                    u = t - cut_t[next_cut]
+                    v0a, v1a, v0b = column_integrals_at(max(cut_t[next_cut], 0.0), col)
+                    ea = cut_s[next_cut] * math.exp(-basis[0] * u)
+                    sa += v0a * ea
+                    s1 += (u * v0a + v1a) * ea
+                    sb += cut_s[next_cut] * v0b * math.exp(-basis[1] * u)
+                    next_cut += 1
+                power[k] = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
+                if next_cut < n_cut:
+                    power[k] += ahead[next_cut] * uncut[k]
+            if settings.deciding_only or settings.read_samples_only:
+                for k in range(n_samples):  # the processor's calibrated baseline, as baseline_values gives it
+                    baseline[k] = cuts.background_w[p] + uncut[k]
+            if settings.deciding_only:
+                first_echo, last_echo = np.inf, -np.inf
+                for j in range(offsets[p], offsets[p + 1]):
+                    if energy[j] > 0.0:
+                        first_echo, last_echo = min(first_echo, delay[j]), max(last_echo, delay[j])
+                deciding_channels(synthesised[w], power, baseline, times, chans, max_code, settings.k_sigma,
+                                  last_echo - first_echo, deciding_scratch)
+            else:
+                synthesised[w, :] = True
+            if keep:
+                for c in range(n_chan):
+                    for k in range(n_samples):
+                        clean[w, c, k] = level_lsb(chans, c, power[k] if gate_open_at(chans, c, times[k]) else 0.0)
+            # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per
+            # detector (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's
+            # current).
+            shot_needed[:] = False
+            for c in range(n_chan):
+                shot_needed[chans.detector[c]] |= synthesised[w, c]
+            first_index = window_start[w]
+            if settings.read_samples_only:
+                _hash_pairs(hashes[:n_pairs], synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index)
+                _hash_pairs(hashes[n_pairs:], shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index)
+                for c in range(n_chan):
+                    if synthesised[w, c]:
+                        d = chans.detector[c]
+                        ranging_codes(codes[w, c], power, baseline, times, hashes[c // 2], c % 2, hashes[n_pairs + d // 2],
+                                      d % 2, chans, c, max_code, noise_scale, settings.k_sigma, read, listed,
+                                      dark_normal[0], shot_normal[0], in_tail)
+                    else:
+                        codes[w, c, :] = 0
+                continue
+            # Every sample: drawn a window at once for the pairs a synthesised channel needs.
+            _draw_pairs(dark_normal, synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index, no_low, tails)
+            _draw_pairs(shot_normal, shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index, no_low,
+                        tails)
+            for c in range(n_chan):
+                if synthesised[w, c]:
+                    channel_codes(codes[w, c], power, times, dark_normal[c], shot_normal[chans.detector[c]], chans, c,
+                                  max_code, noise_scale)
+                else:
+                    codes[w, c, :] = 0
+
+
+@kernel(inline="always")
+def sample_times(out, first, end, t0_s, dt_s, first_index, phase_s):
+    """out[k] = t0_s + (first_index + k) dt_s + phase_s [s] for first <= k < end: the times of samples of a window
+    whose sample 0 is sample ``first_index`` of its record (:class:`Sampling`; :meth:`Waveforms.sample_times_s`)."""
+    for k in range(first, end):
+        out[k] = t0_s + (first_index + k) * dt_s + phase_s
+
+
+@kernel(inline="always")
+def _pair_needed(needed, j):
+    """Whether row 2j or 2j + 1 of ``needed`` (k,) is set (the rows that share stream pair j)."""
+    return needed[2 * j] or (2 * j + 1 < needed.shape[0] and needed[2 * j + 1])
+
+
+@kernel(inline="always")
+def _hash_pairs(hashes, needed, sampling, p, first_stream, first_index):
+    """Row j of ``hashes`` (m, n): the positions ``first_index`` on of stream ``first_stream + j`` of pulse ``p``, for
+    the pairs j a ``needed`` (k,) row (2j or 2j + 1) asks for (as :func:`_draw_pairs` draws them)."""
+    for j in range(hashes.shape[0]):
+        if _pair_needed(needed, j):
+            fill_hashes(stream_base(sampling.key, sampling.pulse_id[p], first_stream + j), first_index, hashes[j])
+
+
+@kernel(inline="always")
+def _draw_pairs(normals, needed, sampling, p, first_stream, first_index, no_low, tails):
+    """Rows 2j and 2j + 1 of ``normals`` (2 m, n) from the two halves of stream ``first_stream + j`` of pulse ``p``,
+    positions ``first_index`` on, for the pairs with a ``needed`` (k,) row; a half no row needs is not drawn."""
+    for j in range(normals.shape[0] // 2):
+        low = 2 * j + 1 < needed.shape[0] and needed[2 * j + 1]
+        if _pair_needed(needed, j):
+            fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], first_stream + j), first_index,
+                              normals[2 * j], normals[2 * j + 1] if low else no_low, tails)

@@ -1,0 +1,61 @@
+"""What the tests share: the repository's root, the two command lines run in process, and the waters and models
+of the muls detection tests. Test files import these by name (``from conftest import run_cli``).
+
+Where a test file goes: tests/muls/<stage>/ or tests/scanner_sim/<stage>/ for the module it tests, named
+``test_<module>.py`` when it tests one module (a stage's README.md says where the others are); tests/system/ for
+end-to-end passes, the command lines' error handling, the docs' facts and the package layering."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+
+import numpy as np
+
+#: The repository's root.
+ROOT = Path(__file__).resolve().parent.parent
+#: [m] Noise-free ranges within this of the truth.
+RANGE_TOL_NOISE_FREE_M = 0.01
+
+
+def run_cli(argv, main=None) -> tuple[int, str]:
+    """``scanner-sim argv`` in process (or ``main(argv)``): its exit code and what it printed on stdout."""
+    if main is None:
+        from scanner_sim.cli import main
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = main(argv)
+    return code, printed.getvalue()
+
+
+def run_muls(capsys, *argv) -> tuple[int, str, str]:
+    """``muls argv`` in process: its exit code, stdout and stderr."""
+    from muls.cli import main
+
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def paper_water(name: str):
+    """The preset water under the paper's Eq. 6 (k_lidar), single scattering."""
+    from muls import water_preset
+
+    return water_preset(name).with_models(attenuation_model="k_lidar")
+
+
+def detection_model(water="pool", gate=(150e-9, 400e-9)):
+    """The MUL (CH3 gated at ``gate`` [s]: delay, width) in ``water`` under the paper's Eq. 6."""
+    from muls import mul2023
+    from muls.optics.optical_model import OpticalModel
+
+    return OpticalModel.build(mul2023(*gate), paper_water(water))
+
+
+def dropout_causes(ranging) -> dict[str, int]:
+    """How many pulses each dropout cause stopped, the causes that stopped none left out."""
+    from muls.ranging.returns import DROPOUT_CAUSES
+
+    counts = np.bincount(ranging.dropout_cause[ranging.dropout_cause >= 0], minlength=len(DROPOUT_CAUSES))
+    return {name: int(n) for name, n in zip(DROPOUT_CAUSES, counts) if n}

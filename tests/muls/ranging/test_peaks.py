@@ -1,0 +1,118 @@
+"""The peak search (muls/ranging/peaks.py): the fit table, the order of peaks, the prototype's plain peak
+detection."""
+
+import numpy as np
+import pytest
+from conftest import detection_model as _model
+
+from muls.optics.optical_model import OpticalModel, PulseBatch
+from muls.simulate import simulate
+
+
+def test_the_peak_fits_table_lookup_is_numpys_interp_bit_for_bit():
+    """The compiled lookup of the three-point fit's table (``bracket`` and ``interp_at``, in place of numba's scalar
+    np.interp) gives numpy.interp's values exactly: inside the grid, on its points, beyond both ends, at +-inf and NaN."""
+    import numba
+
+    from muls.infra.lookup import bracket, interp_at
+
+    @numba.njit
+    def lookup(xs, xp, fp):
+        out = np.empty(xs.size)
+        for i in range(xs.size):
+            out[i] = interp_at(xs[i], bracket(xs[i], xp), xp, fp)
+        return out
+
+    table = _model().fit_table
+    rng = np.random.default_rng(1)
+    x = np.concatenate([rng.uniform(table.feature[0] - 0.3, table.feature[-1] + 0.3, 20000), table.feature,
+                        [np.nan, -np.inf, np.inf]])
+    for values in (table.offset, table.centre):
+        np.testing.assert_array_equal(lookup(x, table.feature, values), np.interp(x, table.feature, values))
+
+
+
+def test_peak_order_is_the_two_stable_lexsorts_with_duplicates_dropped():
+    """``peak_order`` (one pass over each pulse's few peaks) against numpy: a stable lexsort by (pulse, channel, index),
+    repeats of (pulse, channel, index) dropped but the first, then a stable lexsort by (pulse, time); with runs found
+    twice by overlapping windows, equal times on different channels, and pulses without peaks between."""
+    from muls.ranging.peaks import peak_order
+
+    rng = np.random.default_rng(11)
+    pulse = np.sort(rng.choice(np.arange(0, 3000, 3), 4000))
+    channel = rng.integers(1, 4, pulse.size)
+    index = rng.integers(20, 30, pulse.size) + rng.choice([0.0, 0.25, 0.5], pulse.size)
+    time_s = np.floor(index) * 1e-9 + 1e-12 * (pulse % 7)  # a function of (pulse, index), with ties across both
+    order = np.lexsort((index, channel, pulse))
+    keep = np.ones(order.size, bool)
+    keep[1:] = ((pulse[order][1:] != pulse[order][:-1]) | (channel[order][1:] != channel[order][:-1])
+                | (index[order][1:] != index[order][:-1]))
+    order = order[keep]
+    expected = order[np.lexsort((time_s[order], pulse[order]))]
+    assert expected.size < pulse.size  # duplicates were there to drop
+    np.testing.assert_array_equal(peak_order(pulse, channel, index, time_s), expected)
+
+
+
+def test_each_return_keeps_the_peak_a_stable_lexsort_would_put_last():
+    """``best_of_clusters`` (one pass over runs of peaks) against numpy: the last of a stable lexsort by (cluster,
+    unsaturated, score) in each cluster; with saturated and unsaturated peaks mixed, tied scores and NaN."""
+    from muls.ranging.returns import best_of_clusters
+
+    rng = np.random.default_rng(5)
+    n = 5000
+    new = rng.random(n) < 0.4
+    new[0] = True
+    saturated = rng.random(n) < 0.3
+    score = rng.integers(0, 6, n).astype(float)  # many ties
+    score[rng.random(n) < 0.05] = np.nan
+    cluster = np.cumsum(new) - 1
+    order = np.lexsort((score, ~saturated, cluster))
+    last = np.ones(n, bool)
+    last[:-1] = cluster[order][1:] != cluster[order][:-1]
+    np.testing.assert_array_equal(best_of_clusters(new, saturated, score), np.sort(order[last]))
+
+
+
+def _prototype(model):
+    from dataclasses import replace
+
+    ins = model.instrument
+    return OpticalModel.build(replace(ins, processing=replace(ins.processing, peak_fit="sample_maximum")), model.water)
+
+
+
+def test_sample_maximum_ranges_are_quantised_to_the_sample_interval():
+    """Without noise, the CH0 reference and the echo are both timed at their highest sample, taken with the
+    same free-running clock. With the echo delay tau = (n + f) samples, the two indices differ by n or n + 1,
+    so the range error takes two values, -f and 1 - f range bins (c_w x 1 ns / 2), with probabilities 1 - f
+    and f over the pulses' random phases: mean 0, standard deviation sqrt(f (1 - f)) bins."""
+    model = _prototype(_model())
+    n = 600
+    batch = PulseBatch.flat_target(model.instrument, np.full(n, 15.0), pulse_id=np.arange(n))  # nothing clips
+    _, ranging = simulate(model, batch, seed=5, noise=False)
+    err = ranging.returns.range_m - 15.0
+    bin_m = model.water.speed_m_s * 1e-9 / 2.0
+    f = (15.0 / bin_m) % 1.0  # tau in samples = range in bins
+    assert err.size == n
+    assert np.all(np.isclose(err, -f * bin_m, atol=1e-9) | np.isclose(err, (1.0 - f) * bin_m, atol=1e-9))
+    assert err.std() == pytest.approx(np.sqrt(f * (1.0 - f)) * bin_m, rel=0.1)
+    assert abs(err.mean()) < 0.01
+    # the pulse-shape fit of the same records is far finer
+    _, fitted = simulate(_model(), batch, seed=5, noise=False)
+    assert np.abs(fitted.returns.range_m - 15.0).max() < 0.01
+
+
+
+def test_sample_maximum_times_a_clipped_echo_at_its_first_clipped_sample():
+    """A clipped echo's plateau starts before its true peak: plain peak detection ranges it short, by more
+    the wider the plateau; the pulse-shape fit recovers the peak from the plateau's width."""
+    model = _prototype(_model())
+    batch = PulseBatch.flat_target(model.instrument, np.full(50, 5.0), pulse_id=np.arange(50))
+    _, ranging = simulate(model, batch, seed=2)
+    ch1 = ranging.peaks.select(ranging.peaks.channel == 1)
+    assert ch1.saturated.all()
+    assert np.all(ch1.range_m < 5.0 - 0.1)
+    _, fitted = simulate(_model(), batch, seed=2)
+    ch1_fit = fitted.peaks.select(fitted.peaks.channel == 1)
+    assert np.all(np.abs(ch1_fit.range_m - 5.0) < 0.1)
