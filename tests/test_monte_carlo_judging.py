@@ -6,7 +6,7 @@ import pytest
 
 from muls import instrument_preset
 from muls.cli import main
-from muls.montecarlo.validate import MAX_MC_REL_ERR, judge
+from muls.montecarlo.validate import MAX_MC_REL_ERR
 
 
 def _run(capsys, *argv):
@@ -22,6 +22,8 @@ def test_validate_pass_with_one_packet_is_refused_not_within(capsys, tmp_path):
     within, so a run that could judge nothing passed every case. Such a case is now "not judged", and a packet count
     under which every case's error is over the limit (the error falls as 1/sqrt(packets), 0.28 % at best with
     400,000) is refused up front."""
+    from muls.montecarlo.validate import judge
+
     code, out, err = _run(capsys, "validate-pass", "--waters", "pond", "--packets", "1")
     assert code == 2 and out == ""
     assert len(err.strip().splitlines()) == 1 and "--packets = 1: at least 3,500" in err
