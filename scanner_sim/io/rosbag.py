@@ -3,7 +3,8 @@
 Topics (``docs/outputs.md``): ``/points`` (``sensor_msgs/msg/PointCloud2``, one message per scan line, the points
 in the world frame), ``/odometry`` and ``/ground_truth/odometry`` (``nav_msgs/msg/Odometry``: the navigation's
 estimate and the true pose), ``/tf`` (``tf2_msgs/msg/TFMessage``: world -> vehicle from the navigation) and
-``/tf_static`` (vehicle -> lidar, the fixed mount, once, offered transient-local as ROS 2's static broadcaster does). Axes follow REP 103 (ENU world, vehicle x forward, y left, z up) or, for ``ned``, the
+``/tf_static`` (vehicle -> lidar, the fixed mount, once, offered transient-local as ROS 2's static broadcaster does).
+Axes follow REP 103 (ENU world, vehicle x forward, y left, z up) or, for ``ned``, the
 marine convention (NED world, vehicle x forward, y starboard, z down).
 
 Coordinates: float32 metres from the scene's local origin (the LAS header offset), on the LAS's millimetre grid,
