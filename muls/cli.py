@@ -418,10 +418,11 @@ def _cmd_mobley1993(args):
         lines.append(f"{r['problem']:7d} {r['albedo']:6.1f} {r['quantity']:>8s} {r['optical_depth']:4.0f} "
                      f"{r['value']:11.4g} {2 * r['mc_sigma'] / r['value']:8.2%} {r['paper_mean']:10.3g} "
                      f"{r['paper_rel_sd']:6.3f} {r['paper_models']:2d} {r['paper_min']:10.4g} {r['paper_max']:10.4g} "
-                     f"{'yes' if r['within'] else 'NO':>6s}")
-    inside = sum(r["within"] for r in records)
-    lines.append(f"{inside} of {len(records)} values within the paper's range widened by the Monte Carlo's 2 standard "
-                 "errors")
+                     f"{ {True: 'yes', False: 'NO', None: 'not judged'}[r['within']]:>6s}")
+    judged = [r for r in records if r["within"] is not None]
+    lines.append(f"{sum(r['within'] for r in judged)} of {len(judged)} judged values within the paper's range widened "
+                 f"by the Monte Carlo's 2 standard errors; {len(records) - len(judged)} not judged (2 standard errors "
+                 "wider than the codes' range)")
     from .plots import plot_mobley1993
 
     return result, "\n".join(lines), plot_mobley1993

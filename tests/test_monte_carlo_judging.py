@@ -70,3 +70,16 @@ def test_multiscatter_plate_in_the_blind_zone_is_refused(capsys, range_m):
                           "--geometry", "coaxial", "--json")
     assert code == 0, err
     assert 0.9 < json.loads(out)["target"]["ratio"] < 1.1
+
+
+def test_mobley1993_value_whose_two_sigma_exceeds_the_codes_range_is_not_judged():
+    """``muls mobley1993 --photons 100`` marked problem 2's Eou at tau 1 (0.001241, 2 standard errors 102 %) "yes":
+    the band [paper_min - 2 sigma, paper_max + 2 sigma] was twelve times the codes' own range (0.000914-0.001018), so
+    almost any value was within. Root cause: a Monte Carlo too uncertain to judge widened the band instead of saying
+    so. Such a value is now not judged (None); the default run's values (2 sigma of 0.01 % to 3 %) are all judged."""
+    from muls.montecarlo.mobley1993 import judge
+
+    assert judge(0.001241, 0.5 * 1.0207 * 0.001241, 0.000914, 0.001018) is None
+    assert judge(0.0, 0.0, 0.000914, 0.001018) is None  # no photon: no spread to judge by
+    assert judge(0.1621, 0.5 * 0.0001 * 0.1621, 0.1613, 0.1627) is True  # the default run's problem 2, 0.2, Ed
+    assert judge(0.1700, 0.5 * 0.0001 * 0.1621, 0.1613, 0.1627) is False
