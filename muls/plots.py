@@ -159,8 +159,9 @@ def plot_multiscatter(result: dict, path):
     ax.set_ylim(floor, top * 3)
     ax.set_ylabel("received optical power [W]")
     tg = result["target"]
+    ratio, k_eff = tg["ratio"], result["effective_attenuation_per_m"]
     ax.set_title(f"{d['water']}, {d['geometry']}, plate at {d['range_m']:g} m: echo energy MC/MULS "
-                 f"{tg['ratio']:.3g}, k_eff {result['effective_attenuation_per_m']:.3f}/m "
+                 f"{'-' if ratio is None else f'{ratio:.3g}'}, k_eff {'-' if k_eff is None else f'{k_eff:.3f}'}/m "
                  f"({result['packets']:,} packets)", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     with np.errstate(divide="ignore", invalid="ignore"):

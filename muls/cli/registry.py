@@ -18,5 +18,6 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "multiscatter": ("commands", "Monte Carlo with multiple scattering beside MULS, one plate"),
     "multiscatter-study": ("commands", "where single scattering fails: MC / MULS per water and range"),
     "mobley1993": ("commands", "the Monte Carlo's transport against Mobley et al. (1993), problems 1 and 2"),
-    "validate-pass": ("commands", "the pass's waveform model against a Monte Carlo run, five waters, 2-30 m"),
+    "validate-pass": ("commands", "consistency check of the scattering tables: the pass's waveform model against a "
+                       "fresh run of the Monte Carlo that made them, five waters, 2-30 m"),
 }

@@ -109,6 +109,8 @@ def effective_attenuation_per_m(instrument: Instrument, range_m: float, reflecta
     unattenuated = instrument.transmitter.pulse_energy_j * float(target_factor(
         instrument, water.with_models(attenuation_model="c"), range_m,
         lambertian_weight(instrument, range_m, reflectance))) * math.exp(2.0 * water.attenuation_per_m * range_m)
+    if not geometry * unattenuated > 0.0:  # no overlap by the exact geometry: nothing to attenuate
+        return None
     return math.log(geometry * unattenuated / echo_energy_j) / (2.0 * range_m)
 
 

@@ -107,7 +107,9 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     residual over the processor's baseline (the open-water column and background) is at most k times the noise
     with the baseline's shot noise, or the column alone or the column with the echo clips the channel at an open
     sample of the span; ``outside_gate`` if no open channel would see the echo alone but a channel shut at its peak
-    would; ``below_threshold`` otherwise.
+    would see it and, were its gate open there, range it (the column neither hiding the echo in the residual nor
+    clipping the channel at the peak); ``masked_by_backscatter`` also if the shut channels that would see the echo
+    alone would all have it hidden by the column; ``below_threshold`` otherwise.
     """
     ins = model.instrument
     dig = ins.digitizer
@@ -146,7 +148,8 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     k = ins.processing.threshold_sigma
     masked = np.zeros(todo.size, bool)
     seen_open = np.zeros(todo.size, bool)
-    seen_shut = np.zeros(todo.size, bool)
+    ranged_if_open = np.zeros(todo.size, bool)
+    hidden_if_open = np.zeros(todo.size, bool)
     for c in range(1, len(ins.channels) + 1):
         open_at_peak = (chans.gate_open_s[c] <= t_peak) & (t_peak < chans.gate_close_s[c])
         dark = math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
@@ -155,10 +158,16 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
         under_column = chans.lsb_per_w[c] * resid_peak <= k * sigma
         masked |= open_at_peak & visible_alone & (under_column | clipped[:, c - 1])
         seen_open |= open_at_peak & visible_alone
-        seen_shut |= ~open_at_peak & visible_alone
-    cause[todo] = np.where(masked, DROPOUT_CAUSES.index("masked_by_backscatter"),
-                           np.where(seen_shut & ~seen_open, DROPOUT_CAUSES.index("outside_gate"),
-                                    DROPOUT_CAUSES.index("below_threshold")))
+        # A shut channel judged as if its gate were open at the peak: the column would hide the echo there too
+        # when the residual stays under the threshold or the column (with the echo) clips the channel.
+        clips_at_peak = np.maximum(base_peak, column_peak + echo_peak) >= top_w[c - 1]
+        hidden = under_column | clips_at_peak
+        ranged_if_open |= ~open_at_peak & visible_alone & ~hidden
+        hidden_if_open |= ~open_at_peak & visible_alone & hidden
+    cause[todo] = np.select(
+        [masked, ranged_if_open & ~seen_open, hidden_if_open & ~seen_open],
+        [DROPOUT_CAUSES.index("masked_by_backscatter"), DROPOUT_CAUSES.index("outside_gate"),
+         DROPOUT_CAUSES.index("masked_by_backscatter")], DROPOUT_CAUSES.index("below_threshold"))
     return cause
 
 

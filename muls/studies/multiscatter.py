@@ -32,10 +32,18 @@ def max_range_m(water: Water) -> float:
     return MAX_ATTENUATION_EXPONENT / (2.0 * water.absorption_per_m) if water.absorption_per_m > 0.0 else math.inf
 
 
-def check_range_m(key: str, water: Water, range_m: float) -> float:
-    """``range_m``, or a :class:`ParameterError` naming ``key`` when it is not > 0 or lies beyond
-    :func:`max_range_m`."""
+def check_range_m(key: str, water: Water, range_m: float, geometry: str | None = None) -> float:
+    """``range_m``, or a :class:`ParameterError` naming ``key`` when it is not > 0, lies beyond :func:`max_range_m`,
+    or, with ``geometry`` (an instrument preset's name), within its blind zone: there the beam has not entered the
+    receiver's field of view, MULS's echo is zero (MULS Eq. 11: overlap 0) and the study would compare nothing."""
     check_positive(key, range_m)
+    if geometry is not None:
+        blind_m = instrument_preset(geometry).geometry.blind_zone_m
+        if range_m <= blind_m:
+            raise ParameterError(f"{key} = {range_m!r}: the plate lies in the {geometry} geometry's blind zone (closer "
+                                 f"than {blind_m:.2f} m the beam is outside the receiver's field of view, so MULS sees no "
+                                 f"echo and the study compares nothing); give a range beyond {blind_m:.2f} m, or the "
+                                 "coaxial geometry (no blind zone)")
     if range_m > max_range_m(water):
         raise ParameterError(f"{key} = {range_m!r}: no light comes back from so far in {water.name}: absorption alone "
                              f"leaves e^-{2.0 * water.absorption_per_m * range_m:,.0f} of it (none beyond "
@@ -58,9 +66,9 @@ def multiscatter_study(water: str | Water = "pond", range_m: float = 10.0, geome
     w = water if isinstance(water, Water) else water_preset(water)
     if attenuation_model is not None:
         w = w.with_models(attenuation_model=attenuation_model)
-    check_range_m("range_m", w, range_m)
     if geometry not in ("mul2023", "coaxial"):
         raise ParameterError(f"geometry = {geometry!r}: must be 'mul2023' or 'coaxial'")
+    check_range_m("range_m", w, range_m, geometry)
     instrument = instrument_preset(geometry)
     t0 = time.perf_counter()
     result = run_monte_carlo(instrument, w, TargetPlanes((float(range_m),), reflectance), phase=phase,

@@ -33,7 +33,8 @@ def _cmd_dataset(args) -> int:
     out = Path(args.out or Path("out") / "datasets" / dataset.name)
     quiet = args.quiet or args.json
     # the folder's lock before the cluster starts, so a second writer is refused at once
-    with hold_output(out), maybe_client(scheduler=args.scheduler, workers=_workers(args), announce=not quiet) as client:
+    with hold_output(out), maybe_client(scheduler=args.scheduler, workers=_workers(args), announce=not quiet,
+                                        passes=dataset.spec.scenes) as client:
         result = run_dataset(dataset, out, client, redo=args.redo, progress=not quiet)
     if "failed" in result:
         first = result["failed"][0]

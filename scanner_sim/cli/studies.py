@@ -223,8 +223,10 @@ def _check_cell_memory(args, config) -> None:
     if size is None:  # the study refuses the scene itself (or measures a mesh seabed, sized once built)
         return
     cells = math.prod(math.ceil(s / args.cell_m) for s in size)
+    from scanner_sim.runs.cluster import capped_workers
+
     workers = _workers(args)
-    at_once = 1 if args.scheduler or workers == 0 else workers
+    at_once = 1 if args.scheduler or workers == 0 else capped_workers(workers)
 
     def smallest(budget: float) -> str:
         cell = math.sqrt(math.prod(size) * COVERAGE_BYTES_PER_CELL * at_once / budget)
@@ -242,7 +244,8 @@ def _add_dask_arguments(p) -> None:
     p.add_argument("--scheduler", metavar="tcp://HOST:8786", type=nonempty(),
                    help="address of a running Dask scheduler (default: a local cluster on this machine)")
     p.add_argument("--workers", type=non_negative_int(), metavar="N", help="workers of the local cluster, one thread each "
-                   "(default: one per core; 0: every pass in this process, without Dask)")
+                   "(default: one per core; at most one per core and one per pass; 0: every pass in this process, "
+                   "without Dask)")
     p.add_argument("--redo", action="store_true", help="run every pass again, even those already complete in --out")
 
 
@@ -276,7 +279,7 @@ def _cmd_campaign(args) -> int:
     out = Path(args.out or Path("out") / "campaigns" / campaign.name)
     # the folder's lock before the cluster starts, so a second writer is refused at once
     with hold_output(out), maybe_client(scheduler=args.scheduler, workers=_workers(args),
-                                        announce=not args.quiet) as client:
+                                        announce=not args.quiet, passes=len(campaign.jobs)) as client:
         result = run_campaign(campaign, out, client, redo=args.redo, progress=not args.quiet)
     if not args.quiet:
         print(f"{len(result['passes'])} passes in {result['wall_s']:.0f} s: {result['ran']} ran, "

@@ -18,7 +18,7 @@ def _add_uncertainty(sub):
     p.add_argument("--seed", type=seed(), help="seed of the pass (default: the scene's survey.seed)")
     p.add_argument("--seeds", type=positive_int(), default=1, metavar="N",
                    help="run N passes, their survey and navigation-noise seeds derived from the seed, and pool their "
-                        "points (default 1: the pass itself); the JSON lists each pass's seeds and shares")
+                        "points (default 1: the pass itself; at most 10,000); the JSON lists each pass's seeds and shares")
     p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), help="fidelity level (default: the scene's)")
     p.add_argument("--max-pulses", type=positive_int(), help="stop after this many pulses (default: the whole pass)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -31,9 +31,11 @@ def _add_uncertainty(sub):
 def _cmd_uncertainty(args) -> int:
     from scanner_sim.cli.passes import set_overrides
     from scanner_sim.config import load_scene
+    from scanner_sim.metrics.tpu_ensemble import check_ensemble_size
     from scanner_sim.survey.pipeline import simulate_pass
     from scanner_sim.survey.setup import PassOptions
 
+    check_ensemble_size(args.seeds, "--seeds")
     config = load_scene(args.scene)
     config = config.with_overrides(set_overrides(args.set))  # --set, read as `run` reads it
     options = PassOptions(water=args.water, seed=args.seed, fidelity=args.fidelity, max_pulses=args.max_pulses,

@@ -2,8 +2,9 @@
 
 Topics (``docs/outputs.md``): ``/points`` (``sensor_msgs/msg/PointCloud2``, one message per scan line, the points
 in the world frame), ``/odometry`` and ``/ground_truth/odometry`` (``nav_msgs/msg/Odometry``: the navigation's
-estimate and the true pose) and ``/tf`` (``tf2_msgs/msg/TFMessage``: world -> vehicle from the navigation, vehicle
--> lidar from the mounting). Axes follow REP 103 (ENU world, vehicle x forward, y left, z up) or, for ``ned``, the
+estimate and the true pose), ``/tf`` (``tf2_msgs/msg/TFMessage``: world -> vehicle from the navigation) and
+``/tf_static`` (vehicle -> lidar, the fixed mount, once, offered transient-local as ROS 2's static broadcaster does).
+Axes follow REP 103 (ENU world, vehicle x forward, y left, z up) or, for ``ned``, the
 marine convention (NED world, vehicle x forward, y starboard, z down).
 
 Coordinates: float32 metres from the scene's local origin (the LAS header offset), on the LAS's millimetre grid,
@@ -61,6 +62,17 @@ def typestore():
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.ROS2_JAZZY)
+
+
+def static_qos() -> list:
+    """The QoS ROS 2's static transform broadcaster offers on /tf_static (tf2_ros ``StaticBroadcasterQoS``): reliable,
+    transient-local, keep the last 1, so a late subscriber still receives the mount; durations infinite as ``ros2 bag
+    record`` writes them."""
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    infinite = QosTime(2147483647, 4294967295)
+    return [Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, infinite, infinite,
+                QosLiveliness.AUTOMATIC, infinite, avoid_ros_namespace_conventions=False)]
 
 
 def _msg(kind: str, **fields):
@@ -172,8 +184,12 @@ class RosbagWriter(StreamingWriter):
                 self._bag.set_custom_data(key, value)
             self._bag.open()
             for topic, kind in (("/points", "sensor_msgs/msg/PointCloud2"), ("/odometry", "nav_msgs/msg/Odometry"),
-                                ("/ground_truth/odometry", "nav_msgs/msg/Odometry"), ("/tf", "tf2_msgs/msg/TFMessage")):
-                self._topics[topic] = (self._bag.add_connection(topic, kind, typestore=typestore()), kind)
+                                ("/ground_truth/odometry", "nav_msgs/msg/Odometry"), ("/tf", "tf2_msgs/msg/TFMessage"),
+                                ("/tf_static", "tf2_msgs/msg/TFMessage")):
+                qos = static_qos() if topic == "/tf_static" else ()
+                self._topics[topic] = (self._bag.add_connection(topic, kind, typestore=typestore(),
+                                                                offered_qos_profiles=qos), kind)
+            self._write("/tf_static", PASS_START_UNIX_NS, self._mount(PASS_START_UNIX_NS))
         except BaseException:
             self.abort()
             raise
@@ -232,17 +248,25 @@ class RosbagWriter(StreamingWriter):
                             twist=_msg("geometry_msgs/msg/TwistWithCovariance", twist=twist, covariance=covariance))
             self._write("/ground_truth/odometry" if truth else "/odometry", t, odometry)
             if not truth:
-                self._write("/tf", t, self._transforms(t, p, q))
+                self._write("/tf", t, self._vehicle_transform(t, p, q))
 
-    def _transforms(self, stamp: int, position: np.ndarray, quaternion: np.ndarray):
-        frame, stamped = self.frame, "geometry_msgs/msg/TransformStamped"
-        vehicle = _msg(stamped, header=_header(stamp, frame.world), child_frame_id=frame.vehicle,
-                       transform=_msg("geometry_msgs/msg/Transform", translation=_vector(position),
-                                      rotation=_quaternion(quaternion)))
-        lidar = _msg(stamped, header=_header(stamp, frame.vehicle), child_frame_id=frame.lidar,
-                     transform=_msg("geometry_msgs/msg/Transform", translation=_vector(self.lidar_offset_m),
-                                    rotation=_quaternion((0.0, 0.0, 0.0, 1.0))))
-        return _msg("tf2_msgs/msg/TFMessage", transforms=[vehicle, lidar])
+    def _vehicle_transform(self, stamp: int, position: np.ndarray, quaternion: np.ndarray):
+        """/tf at ``stamp``: world -> vehicle, the navigation's pose."""
+        frame = self.frame
+        vehicle = _msg("geometry_msgs/msg/TransformStamped", header=_header(stamp, frame.world),
+                       child_frame_id=frame.vehicle, transform=_msg("geometry_msgs/msg/Transform",
+                                                                    translation=_vector(position),
+                                                                    rotation=_quaternion(quaternion)))
+        return _msg("tf2_msgs/msg/TFMessage", transforms=[vehicle])
+
+    def _mount(self, stamp: int):
+        """/tf_static: vehicle -> lidar, the fixed mount (the lidar's axes are the vehicle's)."""
+        frame = self.frame
+        lidar = _msg("geometry_msgs/msg/TransformStamped", header=_header(stamp, frame.vehicle),
+                     child_frame_id=frame.lidar, transform=_msg("geometry_msgs/msg/Transform",
+                                                                translation=_vector(self.lidar_offset_m),
+                                                                rotation=_quaternion((0.0, 0.0, 0.0, 1.0))))
+        return _msg("tf2_msgs/msg/TFMessage", transforms=[lidar])
 
     def close(self) -> None:
         """Finish the bag (its index and metadata.yaml) and swap it in under ``path``."""

@@ -44,6 +44,11 @@ FORMAT_VERSION = 1
 #: Sweep axes that are not dotted scene keys, and the key each one sets.
 AXIS_ALIASES = {"water": "water", "instrument": "instrument.preset", "fidelity": "survey.fidelity",
                 "seed": "survey.seed"}
+#: Most passes (combinations of the axes' values) in one campaign, counted before any is expanded. Each pass is a
+#: survey simulated in seconds to minutes and a folder of files, checked in full before the first runs: 10,000
+#: passes of 10 s are a day on a 2-core machine and a chart of 10,000 points. A larger sweep (2 x 10**12 expands
+#: to more combinations than memory holds) is refused at once, not found out of memory or after hours.
+MAX_PASSES = 10_000
 #: Options that set a scene key, and the key each one sets.
 OPTION_KEYS = {"max_pulses": "survey.max_pulses", "chunk_pulses": "survey.chunk_pulses"}
 #: Figures a chart can draw: name -> (the campaign table's column, scale, axis label).
@@ -75,6 +80,11 @@ def _sweep(value: Any) -> dict[str, tuple]:
         if key in keys:
             raise invalid(f"sets {key!r}, as axis {keys[key]!r} does; sweep it once", key=axis)
         keys[key] = axis
+    combinations = math.prod(len(values) for values in value.values())
+    if combinations > MAX_PASSES:
+        sizes = " x ".join(f"{len(values):,}" for values in value.values())
+        raise invalid(f"{sizes} values give {combinations:,} combinations, more than the {MAX_PASSES:,} passes a "
+                      "campaign runs; sweep fewer values, or split the sweep into campaigns")
     return {axis: tuple(values) for axis, values in value.items()}
 
 
@@ -280,7 +290,9 @@ def _run_campaign(campaign: Campaign, out: Path, client, redo: bool, progress: b
     started = time.perf_counter()
     outcomes = run_jobs(campaign.jobs, out, client, retries=campaign.config.options.retries, redo=redo,
                         progress=progress)
-    rows = [table_row(values, outcome, campaign.cubes) for values, outcome in zip(campaign.values, outcomes)]
+    sweep = campaign.config.sweep
+    rows = [table_row(axis_labels(sweep, values), outcome, campaign.cubes)
+            for values, outcome in zip(campaign.values, outcomes)]
     io.write_text(out / "campaign.csv", csv_text(rows))
     tables = ["campaign.csv", "campaign.json"]
     if write_parquet(out / "campaign.parquet", rows):
@@ -320,9 +332,18 @@ def _flatten(summary: Mapping, prefix: str = "") -> dict[str, Any]:
     return flat
 
 
+def axis_labels(sweep: Mapping[str, tuple], values: Mapping[str, Any]) -> dict[str, Any]:
+    """A combination's values as the campaign table and charts name them: numbers and texts as they are, a list or
+    a mapping (a custom water) by its sweep label, its position in the axis as its folder shows it (``v2``)."""
+    return {axis: v if v is None or isinstance(v, (bool, int, float, str)) else _folder_value(v, sweep[axis].index(v))
+            for axis, v in values.items()}
+
+
 def table_row(values: Mapping[str, Any], outcome: PassOutcome, cubes: list[dict] = ()) -> dict[str, Any]:
-    """One row of the campaign table: the axis values, the folder, the status, the summary's figures, and with
-    ``cubes`` placed, per size ``features.SIZE.placed``, ``.detected`` and ``.fraction``."""
+    """One row of the campaign table: the axis values (``values``: already labelled, :func:`axis_labels`), the
+    folder, the status, the summary's figures, and with ``cubes`` placed, per size ``features.SIZE.placed``,
+    ``.detected`` and ``.fraction``. An axis keeps its column where the summary has a figure of the same name (the
+    ``water`` axis and the summary's resolved water name, the same for every custom water of one scene)."""
     axes = {axis: v if v is None or isinstance(v, (bool, int, float, str)) else json.dumps(v)
             for axis, v in values.items()}
     row = {**axes, "dir": outcome.job.name, "status": outcome.status, "error": outcome.error}
@@ -336,7 +357,7 @@ def table_row(values: Mapping[str, Any], outcome: PassOutcome, cubes: list[dict]
             table = detection_table(summary["coverage"]["objects"], cubes)
             row |= _flatten({"features": {size: {k: v for k, v in c.items() if k != "valid_soundings"}
                                           for size, c in table.items()}})
-    return row
+    return row | axes
 
 
 def _columns(rows: list[dict]) -> list[str]:

@@ -87,18 +87,31 @@ def _quiet_logs() -> Iterator:
         logger.setLevel(level)
 
 
+def capped_workers(workers: int, passes: int | None = None) -> int:
+    """Worker processes worth starting on this machine for ``passes`` passes: ``workers``, at most one per pass
+    (a pass is one task: a worker more would idle) and one per core this process may use (each worker runs its pass
+    on one thread, so a second worker on a core shares it and adds only its memory, a few hundred MB)."""
+    return max(1, min(workers, default_workers(), workers if passes is None else passes))
+
+
 @contextlib.contextmanager
 def maybe_client(client=None, scheduler: str | None = None, workers: int | None = None,
-                 dashboard: bool = True, announce: bool = False) -> Iterator:
-    """``client`` if given; else a client of ``scheduler``, or of a local cluster of ``workers`` (> 0);
-    else None (``workers`` 0 or None: run in this process). ``announce`` prints the dashboard address."""
+                 dashboard: bool = True, announce: bool = False, passes: int | None = None) -> Iterator:
+    """``client`` if given; else a client of ``scheduler``, or of a local cluster of ``workers`` (> 0) capped by
+    ``passes`` and the cores (:func:`capped_workers`); else None (``workers`` 0 or None: run in this process).
+    ``announce`` prints the dashboard address, and the cap where it lowered ``workers``."""
     if client is not None or (not scheduler and not workers):
         yield client
         return
     if not scheduler and not (isinstance(workers, int) and workers >= 1):
         raise ValueError(f"workers = {workers!r}: must be an integer >= 0 (0: in this process, without Dask)")
-    with dask_client(scheduler, workers, dashboard=dashboard) as new:
+    local = None if scheduler else capped_workers(workers, passes)
+    with dask_client(scheduler, local, dashboard=dashboard) as new:
         if announce:
             where = scheduler or f"a local cluster of {len(new.scheduler_info()['workers'])} workers"
+            if local is not None and local < workers:
+                where += (f" (--workers {workers} capped: {passes:,} pass{'es' * (passes != 1)}, "
+                          f"{default_workers()} cores)" if passes is not None else
+                          f" (--workers {workers} capped: {default_workers()} cores)")
             print(f"Dask: {where}; dashboard {new.dashboard_link}", flush=True)
         yield new

@@ -88,18 +88,20 @@ def completed_summary(folder: Path, job: PassJob) -> dict | None:
     return summary
 
 
-def check_jobs(jobs: Sequence[PassJob]) -> None:
+def check_jobs(jobs: Sequence[PassJob], passes: int | None = None) -> None:
     """Run every job's set-up checks here, before any pass runs: the pass's size and memory, its start within the
     track (:func:`~scanner_sim.survey.sizing.check_pass_budget`), and its built track against the water surface, the
     seabed and the objects (:func:`~scanner_sim.survey.setup.checked_trajectory`). Raises the first refusal as a
     ConfigError naming the pass; a set-up error is then never met in a task, where it would be retried and
     reported only when its pass started. Passes that would all write one bag folder (``output.rosbag.dir``) are
-    refused: each would replace the one before."""
+    refused: each would replace the one before. ``passes``: how many passes write into one folder, when ``jobs`` are
+    some of them (a dataset checks its scenes as it draws them); default ``len(jobs)``."""
+    passes = len(jobs) if passes is None else passes
     for job in jobs:
         config = job.config.with_overrides(job.options.scene_overrides())
         bag = config.output.rosbag
-        if len(jobs) > 1 and bag is not None and bag.dir is not None:
-            raise ConfigError(f"output.rosbag.dir = {bag.dir!r}: the {len(jobs)} passes would each replace the one "
+        if passes > 1 and bag is not None and bag.dir is not None:
+            raise ConfigError(f"output.rosbag.dir = {bag.dir!r}: the {passes:,} passes would each replace the one "
                               "bag there; leave dir out, so that each pass writes rosbag/ in its own folder")
         try:
             checked_trajectory(config, cached_scene(job.config))

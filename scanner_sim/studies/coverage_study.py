@@ -162,7 +162,7 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
         started = time.perf_counter()
         scene = cached_scene(config)
         io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
-        with maybe_client(client, scheduler, workers, announce=progress) as dask:
+        with maybe_client(client, scheduler, workers, announce=progress, passes=len(jobs)) as dask:
             outcomes = run_jobs(jobs, out, dask, redo=redo, progress=progress)
         failed = [o for o in outcomes if o.status == "failed"]
         if failed:

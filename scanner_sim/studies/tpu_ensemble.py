@@ -21,6 +21,19 @@ from scanner_sim.survey.pipeline import pass_chunks, warm_up
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.survey.tpu_calibration import UncertaintySink
 
+#: Most passes in one ensemble. The spread of the members' shares is what many passes add: with N members the
+#: standard deviation of the share within TVU is known to a relative 1/sqrt(2 (N - 1)), 0.7 % at 10,000, and the
+#: pooled share's sampling error is far below the 1 % the shares are printed to. Beyond, passes add time only (a
+#: pass takes a second or more: 10,000 are hours) and the JSON lists every member.
+MAX_ENSEMBLE_PASSES = 10_000
+
+
+def check_ensemble_size(count: int, key: str = "count") -> None:
+    """Refuse an ensemble of more than :data:`MAX_ENSEMBLE_PASSES` passes (ValueError, one line naming ``key``)."""
+    if count > MAX_ENSEMBLE_PASSES:
+        raise ValueError(f"{key} = {count}: at most {MAX_ENSEMBLE_PASSES:,} passes; their spread is then known to "
+                         "0.7 % and more passes add hours, not precision")
+
 
 def ensemble_seeds(seed: int, count: int) -> list[tuple[int, int]]:
     """(survey seed, navigation noise seed) of each of ``count`` members derived from ``seed`` (module doc)."""
@@ -34,6 +47,7 @@ def ensemble_calibration(config: SceneConfig, options: PassOptions, count: int) 
     uses (measured with the base seed)."""
     if isinstance(count, bool) or not isinstance(count, int) or count < 1:
         raise ValueError(f"count: {count!r} is not allowed; the number of passes is an integer >= 1")
+    check_ensemble_size(count)
     base = PassSetup.build(config, options)
     warm_up(base, options)
     pooled, members, pulses, points = UncertaintySink(base.tpu), [], 0, 0

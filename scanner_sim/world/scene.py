@@ -447,6 +447,8 @@ def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]
     import trimesh
 
     where = f"objects[{index}].file = {obj.file!r} (object {obj.name!r})"
+    if obj.resolved_path is not None:
+        _check_mesh_size(obj.resolved_path, where)
     try:
         mesh = obj.file if obj.resolved_path is None else trimesh.load(obj.resolved_path, force="mesh", process=False)
         v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), float)
@@ -473,6 +475,28 @@ def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]
         raise ConfigError(f"{where}: all {len(f):,} triangles are degenerate (zero area)")
     mesh = trimesh.Trimesh(v, f, process=True)
     return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+
+
+def _check_mesh_size(path, where: str) -> None:
+    """Refuse a mesh file whose triangles, counted before loading (:func:`~scanner_sim.world.mesh_size.declared_triangles`),
+    would need more memory to load than a pass may plan on (80 % of what is available)."""
+    from muls.memory import MEMORY_SHARE, available_memory_bytes, gb
+
+    from scanner_sim.world.mesh_size import MESH_BYTES_PER_TRIANGLE, declared_triangles
+
+    try:
+        triangles = declared_triangles(path)
+    except OSError:
+        return  # unreadable: trimesh's own refusal names it
+    available = available_memory_bytes()
+    if triangles is None or available is None:
+        return
+    need, budget = triangles * MESH_BYTES_PER_TRIANGLE, MEMORY_SHARE * available
+    if need > budget:
+        raise ConfigError(f"{where}: {triangles:,} triangles would need about {gb(need)} of memory to load, more than "
+                          f"the {gb(budget)} a pass may use ({MEMORY_SHARE:.0%} of the {gb(available)} available); at "
+                          f"most {int(budget // MESH_BYTES_PER_TRIANGLE):,} triangles on this machine (decimate the "
+                          "mesh, e.g. with MeshLab's quadric edge collapse)")
 
 
 def _check_ply_whole(obj: MeshObject, where: str, n_vertices: int, n_faces: int) -> None:

@@ -71,6 +71,12 @@ def expected_causes(model: OpticalModel, batch: PulseBatch, seed, margin=0.0):
     column, baseline = dark.noise_free_lsb.astype(float), base.noise_free_lsb.astype(float)
     times = rec.sample_times_s(model)
     echo_w = _echo_watts(total, column, times, chans)
+    # The records the shut channels would make with their gates open: whether opening the gate would range the echo.
+    ungated = replace(ins, channels=tuple(replace(ch, gate_delay_s=None, gate_width_s=None) for ch in ins.channels))
+    opened = OpticalModel.build(ungated, model.water, model.multiple_scattering)
+    rec_open, _ = simulate(opened, batch, seed, mode="full", keep_noise_free=True)
+    base_open, _ = simulate(opened, _open_water(batch), seed, mode="full", keep_noise_free=True)
+    total_open, baseline_open = rec_open.noise_free_lsb.astype(float), base_open.noise_free_lsb.astype(float)
 
     echoes = model.echoes(batch)
     expected = np.full(batch.n_pulses, NO_DROPOUT)
@@ -92,7 +98,7 @@ def expected_causes(model: OpticalModel, batch: PulseBatch, seed, margin=0.0):
         span = (times[p] >= start) & (times[p] <= start + ins.pulse.duration_s)
         peak = np.flatnonzero(span)[np.argmax(echo_w[p, span])]
         t = times[p, peak]
-        masked = seen_open = seen_shut = False
+        masked = seen_open = ranged_if_open = hidden_if_open = False
         for j in range(len(ins.channels)):
             c = j + 1
             is_open = chans.gate_open_s[c] <= t < chans.gate_close_s[c]
@@ -105,9 +111,15 @@ def expected_causes(model: OpticalModel, batch: PulseBatch, seed, margin=0.0):
             clipped = bool(np.any(span & ((baseline[p, j] >= top) | (total[p, j] >= top))))
             masked |= is_open and visible and (under or clipped)
             seen_open |= is_open and visible
-            seen_shut |= (not is_open) and visible
-        name = ("masked_by_backscatter" if masked else "outside_gate" if seen_shut and not seen_open
-                else "below_threshold")
+            if not is_open and visible:  # would the channel range it, its gate open at the peak?
+                base_open_w = (baseline_open[p, j, peak] - chans.dark_mean_lsb[c]) / chans.lsb_per_w[c]
+                sigma_open = np.sqrt(dark_sigma**2 + chans.shot_lsb2_per_w[c] * base_open_w)
+                under_open = total_open[p, j, peak] - baseline_open[p, j, peak] <= k * sigma_open * (1 + margin)
+                clipped_open = max(total_open[p, j, peak], baseline_open[p, j, peak]) >= top
+                ranged_if_open |= not (under_open or clipped_open)
+                hidden_if_open |= under_open or clipped_open
+        name = ("masked_by_backscatter" if masked else "outside_gate" if ranged_if_open and not seen_open
+                else "masked_by_backscatter" if hidden_if_open and not seen_open else "below_threshold")
         expected[p] = DROPOUT_CAUSES.index(name)
     return ranging.dropout_cause.astype(int), expected
 
@@ -141,7 +153,8 @@ def _scene_batch(name, pulses=150, **overrides):
     ("blind_zone_edge", {"water": "jerlov_9C"}, {"masked_by_backscatter": 150}),
     ("weak_echo_5m", {}, {"masked_by_backscatter": 150}),
     ("saturation_2m", {}, {}),  # every channel clips; the clipped returns are kept
-    ("weak_echo_5m", {"instrument.gate_delay_ns": 10, "instrument.gate_width_ns": 20}, {"outside_gate": 150}),
+    # the far gate shut over the echo, but the column would hide it there too: opening the gate ranges nothing
+    ("weak_echo_5m", {"instrument.gate_delay_ns": 10, "instrument.gate_width_ns": 20}, {"masked_by_backscatter": 150}),
     ("../pond_panel", {}, {"outside_gate": 93}),  # the far gate opens 9 ns after the echo starts
 ])
 def test_dropout_causes_of_shipped_scenes_follow_their_definitions(name, overrides, lost):
@@ -244,3 +257,37 @@ def test_echo_span_is_every_sample_from_the_echo_start_to_the_end_of_its_pulse()
     by_hand = [[k for k in range(60) if s - 1e-15 <= -pre + k * dt + ph <= s + 4e-9 + 1e-15] for s, ph in zip(start, phase)]
     assert [len(h) for h in by_hand] == [5, 4, 4, 4]
     assert [list(range(f, f + c)) for f, c in zip(first, count)] == by_hand
+
+
+def _dark_plate_scene(gate_delay_ns: float):
+    """A dark plate (reflectance 0.02) 1.75 m below a static lidar in turbid harbour water, the far channel's
+    gate opening at ``gate_delay_ns``; its first 60 pulses as a pass casts them."""
+    from scanner_sim.config.scene_config import parse_scene
+
+    config = parse_scene({
+        "format_version": 1, "name": "dark_plate_turbid", "water": "turbid_harbor",
+        "instrument": {"preset": "mul2023", "gate_delay_ns": gate_delay_ns, "gate_width_ns": 400},
+        "objects": [{"type": "panel", "name": "plate", "center_m": [0, 0, -2.75], "size_m": [3, 3],
+                     "reflectance": 0.02, "label": "panel"}],
+        "platform": {"mode": "static", "position_m": [0, 0, -1.0]},
+        "scanner": {"mode": "static", "aim_deg": 0},
+        "survey": {"seed": 2, "fidelity": "balanced", "max_pulses": 60},
+    })
+    setup = PassSetup.build(config, PassOptions(max_pulses=60, progress=False))
+    slots = next(setup.slot_chunks())
+    return setup.physics.model, setup.cast_chunk(slots).batch, setup.seed
+
+
+def test_dark_plate_in_turbid_water_behind_far_gate_is_masked_not_outside_gate():
+    """A dark plate 1.75 m down in turbid harbour water with the far channel's gate opening at 25 ns: every pulse
+    was ``outside_gate``, yet with the gate open from 0 ns every pulse is ``masked_by_backscatter``. Opening the gate
+    ranges nothing: the column is what limits, and the cause must say so.
+
+    Root cause: ``outside_gate`` was given wherever a channel shut at the echo's peak could see the echo alone and no
+    open channel did, without asking whether that channel, opened, would range it: the column there hides the echo
+    in the residual over the processor's baseline. A shut channel is now judged as if open at the peak; when the
+    column would hide the echo there too, the cause is ``masked_by_backscatter``."""
+    assert _lost_to(*_dark_plate_scene(0.0)) == {"masked_by_backscatter": 60}
+    gated = _dark_plate_scene(25.0)
+    assert _lost_to(*gated) == {"masked_by_backscatter": 60}
+    assert assert_causes_match_definitions(*gated) == {"masked_by_backscatter": 60}

@@ -98,7 +98,7 @@ def test_bag_timestamps_increase_one_message_per_scan_line(enu_pass):
     for topic, messages in topics.items():
         stamps = [t for t, _ in messages]
         assert np.all(np.diff(stamps) > 0), topic
-        headers = [m.header if topic != "/tf" else m.transforms[0].header for _, m in messages]
+        headers = [m.transforms[0].header if topic.startswith("/tf") else m.header for _, m in messages]
         assert stamps == [_stamp(h) for h in headers], topic
     lines = [np.unique(_points(m)["line"]) for _, m in topics["/points"]]
     assert all(line.size == 1 for line in lines)
@@ -109,7 +109,7 @@ def test_bag_timestamps_increase_one_message_per_scan_line(enu_pass):
 def test_odometry_and_tf_span_the_pass_and_follow_the_navigation(enu_pass):
     """/odometry, /ground_truth/odometry and /tf start at or before the first point and end at or after the last;
     their positions plus the local origin are trajectory.csv's estimated and true positions at the same times;
-    /tf chains world -> base_link -> lidar."""
+    /tf carries world -> base_link."""
     out, topics, las = enu_pass
     first, last = topics["/points"][0][0], topics["/points"][-1][0] + 1e9 * float(
         _points(topics["/points"][-1][1])["time"].max())
@@ -126,11 +126,32 @@ def test_odometry_and_tf_span_the_pass_and_follow_the_navigation(enu_pass):
                                        [float(row[f"{prefix}{a}_m"]) for a in "xyz"], atol=2e-6)
             assert message.child_frame_id == "base_link" and message.header.frame_id == "world"
     for (_, tf), (_, odometry) in zip(topics["/tf"], topics["/odometry"]):
-        vehicle, lidar = tf.transforms
+        (vehicle,) = tf.transforms
         assert (vehicle.header.frame_id, vehicle.child_frame_id) == ("world", "base_link")
-        assert (lidar.header.frame_id, lidar.child_frame_id) == ("base_link", "lidar")
         assert vehicle.transform.translation.x == odometry.pose.pose.position.x
     assert len(topics["/tf"]) == len(topics["/odometry"])
+
+
+def test_fixed_mount_is_published_once_on_tf_static_transient_local(enu_pass):
+    """The lidar's mount on the vehicle does not move: a bag published it on /tf with every 10 Hz tick and never on
+    /tf_static, where ROS 2 tools look for fixed frames, and a subscriber joining late saw it
+    only at the next tick. Root cause: the writer put both transforms in one TFMessage per pose. The mount now goes
+    once to /tf_static, stamped at the pass start, its connection offering the QoS of ROS 2's static broadcaster
+    (reliable, transient-local, keep last 1); /tf carries world -> base_link alone."""
+    out, topics, _ = enu_pass
+    ((stamp, message),) = topics["/tf_static"]
+    (lidar,) = message.transforms
+    assert (lidar.header.frame_id, lidar.child_frame_id) == ("base_link", "lidar")
+    assert stamp == _stamp(lidar.header) == rosbag.PASS_START_UNIX_NS <= min(t for t, _ in topics["/tf"])
+    mount = load_scene("cable_survey").scanner.mount_position_m  # forward, left, up: ENU's vehicle axes as they are
+    t = lidar.transform.translation
+    assert (t.x, t.y, t.z) == pytest.approx(tuple(mount), abs=1e-12)
+    assert all(f.child_frame_id != "lidar" for _, m in topics["/tf"] for f in m.transforms)
+    with Reader(out / "rosbag") as reader:
+        (connection,) = [c for c in reader.connections if c.topic == "/tf_static"]
+        (qos,) = connection.ext.offered_qos_profiles
+        assert (qos.durability.name, qos.reliability.name, qos.history.name, qos.depth) == (
+            "TRANSIENT_LOCAL", "RELIABLE", "KEEP_LAST", 1)
 
 
 def test_odometry_twist_at_the_track_start_is_the_full_speed(enu_pass):
@@ -171,7 +192,7 @@ def test_ned_bag_turns_the_axes_as_documented(tmp_path, enu_pass):
         np.testing.assert_allclose(r_ned[:, 1], [-r_enu[1, 1], -r_enu[0, 1], r_enu[2, 1]], atol=1e-9)  # starboard
         p_ned, p_enu = ned.pose.pose.position, enu.pose.pose.position
         assert (p_ned.x, p_ned.y, p_ned.z) == pytest.approx((p_enu.y, p_enu.x, -p_enu.z), abs=1e-9)
-    lidar = topics["/tf"][0][1].transforms[1]
+    (lidar,) = topics["/tf_static"][0][1].transforms
     assert lidar.child_frame_id == "lidar_frd"
     t = lidar.transform.translation
     assert (t.x, t.y, t.z) == pytest.approx((0.5, -0.2, 0.3))
