@@ -31,7 +31,7 @@ def _add_uncertainty(sub):
 def _cmd_uncertainty(args) -> int:
     from scanner_sim.cli.passes import set_overrides
     from scanner_sim.config import load_scene
-    from scanner_sim.metrics.tpu_ensemble import check_ensemble_size
+    from scanner_sim.studies.tpu_ensemble import check_ensemble_size
     from scanner_sim.survey.pipeline import simulate_pass
     from scanner_sim.survey.setup import PassOptions
 

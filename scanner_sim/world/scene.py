@@ -480,8 +480,7 @@ def load_mesh_file(obj: MeshObject, index: int) -> tuple[np.ndarray, np.ndarray]
 def _check_mesh_size(path, where: str) -> None:
     """Refuse a mesh file whose triangles, counted before loading (:func:`~scanner_sim.world.mesh_size.declared_triangles`),
     would need more memory to load than a pass may plan on (80 % of what is available)."""
-    from muls.memory import MEMORY_SHARE, available_memory_bytes, gb
-
+    from muls.infra.memory import MEMORY_SHARE, available_memory_bytes, gb
     from scanner_sim.world.mesh_size import MESH_BYTES_PER_TRIANGLE, declared_triangles
 
     try:
