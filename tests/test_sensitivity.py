@@ -29,7 +29,7 @@ from muls.water.phase_family import (
 )
 
 #: A small run for the tests: the pond (the paper's water), three members spanning b_b/b, few packets.
-TEST_PACKETS = 20_000
+TEST_PACKETS = 10_000
 TEST_RANGES_M = (4.0, 10.0, 16.0)
 
 
@@ -96,18 +96,24 @@ def test_a_flat_plate_echo_in_clear_water_has_the_lidar_equation_energy_and_no_d
     assert np.all(q["column_w"] == 0.0)
 
 
+#: Petzold and Fournier-Forand at b_b/b 0.005 and 0.025: the ends of the published range, and the default.
+SMALL_FAMILY = (SENSITIVITY_FAMILY[0], fournier_forand_member(0.005, "test"), fournier_forand_member(0.025, "test"))
+
+
 @pytest.fixture(scope="module")
-def small_band(tmp_path_factory):
-    """The pond's band at three ranges over Petzold and Fournier-Forand at b_b/b 0.005 and 0.025 (20,000 packets a
-    member, tables cached in a temporary folder)."""
+def table_cache(tmp_path_factory):
+    """The Monte Carlo's user cache in a temporary folder for this file's quick table runs."""
     folder = tmp_path_factory.mktemp("tables")
     saved = tables_module.user_cache_dir
     tables_module.user_cache_dir = lambda: folder
-    try:
-        family = (SENSITIVITY_FAMILY[0], fournier_forand_member(0.005, "test"), fournier_forand_member(0.025, "test"))
-        yield sensitivity_study("pond", TEST_RANGES_M, packets=TEST_PACKETS, family=family)
-    finally:
-        tables_module.user_cache_dir = saved
+    yield folder
+    tables_module.user_cache_dir = saved
+
+
+@pytest.fixture(scope="module")
+def small_band(table_cache):
+    """The pond's band at three ranges over :data:`SMALL_FAMILY` (10,000 packets a member)."""
+    return sensitivity_study("pond", TEST_RANGES_M, packets=TEST_PACKETS, family=SMALL_FAMILY)
 
 
 def test_the_band_contains_the_model_s_default(small_band):
@@ -140,7 +146,7 @@ def test_a_more_forward_peaked_phase_function_gives_a_stronger_echo_at_10_m(smal
 
 
 def test_the_band_is_wider_than_the_monte_carlo_noise(small_band):
-    """Even at 20,000 packets a member the spread of the echo energy over b_b/b 0.005-0.025 is many times the run's
+    """Even at 10,000 packets a member the spread of the echo energy over b_b/b 0.005-0.025 is many times the run's
     own relative error: the band is the phase function's, not the noise's."""
     for row in small_band["ranges"]:
         spread = row["echo_energy_j"]["spread"] - 1.0
@@ -159,6 +165,25 @@ def test_the_family_has_at_least_five_sourced_members_starting_with_the_default(
     ratios = [phase_from_spec(m.spec).backscatter_fraction for m in SENSITIVITY_FAMILY if m.label.startswith("FF")]
     assert min(ratios) == pytest.approx(0.005, rel=0.01) and max(ratios) == pytest.approx(0.025, rel=0.01)
     assert all("(19" in m.source or "(20" in m.source for m in SENSITIVITY_FAMILY)
+
+
+def test_the_pond_experiment_carries_the_detected_fraction_s_band_per_channel_and_distance(small_band):
+    """Run once per phase function (the same tables as the band above): the default column is the experiment's own
+    prediction, and the most forward-peaked member, with the strongest echo, detects CH3's 11.5 m panel at least as
+    often as the least."""
+    from muls.studies.bands import experiment_band
+    from muls.studies.experiment import experiment_study
+
+    band = experiment_band("pond", shots=60, family=SMALL_FAMILY, packets=TEST_PACKETS)
+    default = experiment_study("pond", shots=60, waveforms=False)["distances"]
+    assert band["phase_function"] == "petzold (default)" and band["band"] is True
+    for d in ("8.5", "10", "11.5"):
+        for ch in ("ch1", "ch2", "ch3"):
+            b = band["distances"][d][ch]["detected_fraction"]
+            assert b["default"] == default[d][ch]["detected_fraction"]
+            assert b["low"] <= b["median"] <= b["high"] and b["low"] <= b["default"] <= b["high"]
+    members = band["members"]
+    assert members["FF b_b/b 0.005"]["11.5"]["ch3"] >= members["FF b_b/b 0.025"]["11.5"]["ch3"]
 
 
 @pytest.mark.parametrize("argv, key", [

@@ -8,7 +8,7 @@ import argparse
 from ..infra.command import fraction, nonempty, positive_float, positive_int, seed
 from .commands import _common, _water_name, _waters
 
-DEFAULT_OUT = {"sensitivity": "sensitivity.png"}
+DEFAULT_OUT = {"sensitivity": "sensitivity.png", "pond-unknowns": ""}
 FOLDER_OUTPUTS = ()
 
 
@@ -47,7 +47,7 @@ def _cmd_sensitivity(args):
         lines.append(f"{row['range_m']:5.1f} {e['default']:10.3e} [{e['min']:9.3e} {e['median']:9.3e} "
                      f"{e['max']:9.3e}] {p['default']:9.3e} [{p['min']:9.3e} {p['max']:9.3e}] "
                      f"[{d['min']:6.2f} {d['max']:6.2f}] {row['mc_rel_err_max']:7.2%}  {e['moved_most_by']}")
-    from ..band_plots import plot_sensitivity
+    from ..plots import plot_sensitivity
 
     return result, "\n".join(lines), plot_sensitivity
 
@@ -67,4 +67,32 @@ def _add_sensitivity(p: argparse.ArgumentParser) -> None:
     p.set_defaults(run=_cmd_sensitivity)
 
 
-BUILDERS = {"sensitivity": _add_sensitivity}
+def _cmd_pond_unknowns(args):
+    from ..experiments import RANGING
+    from ..studies.pond_unknowns import pond_unknowns_study
+
+    if args.ranging not in RANGING:
+        raise ValueError(f"--ranging {args.ranging!r}: must be one of {', '.join(RANGING)}")
+    result = pond_unknowns_study(shots=args.shots, seed=args.seed, ranging=args.ranging)
+    s = result["settings"]
+    cells = [(d, ch) for d, chans in result["cases"][0]["detected"].items() for ch in chans]
+    lines = [f"the pond's detected fractions as each unknown moves ({s['shots']} shots, seed {s['seed']}, "
+             f"{s['ranging']} ranging, {s['elapsed_s']:.0f} s); the paper: {result['paper']}",
+             f"{'unknown':26s} {'setting':62s} " + " ".join(f"{ch}@{d:>4s}" for d, ch in cells) + "  all"]
+    for c in result["cases"]:
+        lines.append(f"{c['unknown']:26s} {c['setting'][:62]:62s} "
+                     + " ".join(f"{c['detected'][d][ch]:8.3f}" for d, ch in cells)
+                     + f"  {'yes' if c['every_cell_half_the_shots'] else 'no'}")
+    lines.append(f"phase function: {result['phase_function']}; band over {len(result['members'])} phase functions")
+    return result, "\n".join(lines), None
+
+
+def _add_pond_unknowns(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--shots", type=positive_int(), default=1000, help="static shots at each distance")
+    p.add_argument("--seed", type=seed(), default=0)
+    p.add_argument("--ranging", default="prototype", type=nonempty(), help="prototype or template")
+    _common(p, plot=False)
+    p.set_defaults(run=_cmd_pond_unknowns, no_plot=True, out=None)
+
+
+BUILDERS = {"sensitivity": _add_sensitivity, "pond-unknowns": _add_pond_unknowns}

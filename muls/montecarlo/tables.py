@@ -8,6 +8,9 @@ from __future__ import annotations
 import math
 import os
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 from typing import NamedTuple
 
@@ -156,9 +159,26 @@ def user_cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "muls-scanner" / "scattering"
 
 
-def find_tables(geometry: TransceiverGeometry, water: Water, packets: int = TABLE_PACKETS) -> ScatteringTables | None:
-    """The tables of ``geometry`` and ``water`` (run with ``packets``) if they exist already (memory, shipped, user
-    cache), else None."""
+#: The packet count of the tables found or built where a caller gives none (:func:`table_packets`).
+_context_packets: ContextVar[int] = ContextVar("table_packets", default=TABLE_PACKETS)
+
+
+@contextmanager
+def table_packets(packets: int) -> Iterator[None]:
+    """Within the block, the tables a study finds or builds without naming a packet count are runs of ``packets``
+    beam packets (their own key): a band over a family of phase functions runs its members quicker than the
+    standard tables, through studies that build their models themselves."""
+    token = _context_packets.set(int(packets))
+    try:
+        yield
+    finally:
+        _context_packets.reset(token)
+
+
+def find_tables(geometry: TransceiverGeometry, water: Water, packets: int | None = None) -> ScatteringTables | None:
+    """The tables of ``geometry`` and ``water`` (run with ``packets``, by default :data:`TABLE_PACKETS` or the
+    block's :func:`table_packets`) if they exist already (memory, shipped, user cache), else None."""
+    packets = _context_packets.get() if packets is None else packets
     key = tables_key(geometry, water, packets=_packets_key(packets))
     with _lock:
         if key in _memory:
@@ -177,10 +197,12 @@ def find_tables(geometry: TransceiverGeometry, water: Water, packets: int = TABL
     return None
 
 
-def scattering_tables(geometry: TransceiverGeometry, water: Water, packets: int = TABLE_PACKETS) -> ScatteringTables:
+def scattering_tables(geometry: TransceiverGeometry, water: Water, packets: int | None = None) -> ScatteringTables:
     """The tables of ``geometry`` and ``water``: found (:func:`find_tables`), or built by the Monte Carlo with
     ``packets`` beam packets and kept in the user cache (one run per water, receiver, phase function and packet
-    count). A water that does not scatter needs no run: its tables are exp(-2 a R)."""
+    count; by default :data:`TABLE_PACKETS` or the block's :func:`table_packets`). A water that does not scatter
+    needs no run: its tables are exp(-2 a R)."""
+    packets = _context_packets.get() if packets is None else packets
     found = find_tables(geometry, water, packets)
     if found is not None:
         return found

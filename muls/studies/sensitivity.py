@@ -24,14 +24,14 @@ from ..optics.scattering import ScatteringTables
 from ..presets import mul2023, study_water
 from ..water.phase_family import DEFAULT_PHASE, SENSITIVITY_FAMILY, PhaseMember, phase_from_spec
 from ..water.properties import Water
+from .bands import BAND_PACKETS
 from .common import _ranges, _water
 
 #: Plate ranges of the study [m]: 2 to 20 m every metre.
 SENSITIVITY_RANGES_M = tuple(float(r) for r in range(2, 21))
-#: Beam packets of a member's table run (the default member uses the model's own, :data:`TABLE_PACKETS`): a quarter of
-#: the standard run, a pond member in about 15 s of one core; the echo energies' Monte Carlo error stays under 2 % to
-#: 20 m, well inside the band (docs/studies.md).
-SENSITIVITY_PACKETS = 100_000
+#: Beam packets of a member's table run (the default member uses the model's own, :data:`TABLE_PACKETS`): the bands'
+#: (:data:`muls.studies.bands.BAND_PACKETS`), so that a member's tables serve every band.
+SENSITIVITY_PACKETS = BAND_PACKETS
 #: Quantities per range: key, unit, and whether its spread is a ratio (positive quantities) or a difference.
 QUANTITIES = {"echo_energy_j": ("J", True), "echo_peak_w": ("W", True), "echo_delay_ns": ("ns", False),
               "column_w": ("W", True)}
@@ -50,7 +50,7 @@ def member_tables(water: Water, member: PhaseMember, packets: int, seed: int = T
     geometry = mul2023().geometry if geometry is None else geometry
     w = replace(water, phase_function=member.spec)
     if member.spec == DEFAULT_PHASE:
-        return scattering_tables(geometry, w)
+        return scattering_tables(geometry, w, TABLE_PACKETS)
     return scattering_tables(geometry, w, packets)
 
 
