@@ -214,3 +214,27 @@ def test_muls_sensitivity_pond_json_lists_the_band_per_range_over_the_family(cap
             assert row[q]["min"] <= row[q]["default"] <= row[q]["max"]
             assert row[q]["min"] <= row[q]["median"] <= row[q]["max"]
     assert (tmp_path / "s.png").is_file()
+
+
+@pytest.mark.slow
+def test_the_pond_s_unknowns_each_move_the_prediction_the_expected_way(small_band):
+    """Opening CH3's gate earlier can only add CH3 detections at 8.5 and 10 m (their echoes start before the
+    100 ns gate opens: 76.9 and 90.5 ns); a wider tolerance counts every detection a narrower one does; the near
+    channels never see the gate. All together the count is at least any single unknown's."""
+    from muls.studies.pond_unknowns import pond_unknowns_study
+
+    result = pond_unknowns_study(shots=60, family=SMALL_FAMILY, packets=TEST_PACKETS)
+    cases = {(c["unknown"], c["setting"]): c["detected"] for c in result["cases"]}
+    default = cases[("none", "the model's defaults")]
+    gate = [v for (u, _), v in cases.items() if u == "gate reference"]
+    for d in ("8.5", "10", "11.5"):
+        for ch in ("ch1", "ch2"):
+            assert all(g[d][ch] == default[d][ch] for g in gate)
+    assert gate[-1]["8.5"]["ch3"] >= default["8.5"]["ch3"] and gate[-1]["10"]["ch3"] >= default["10"]["ch3"]
+    wide = cases[("detection criterion", "within 10 range bins")]
+    assert all(wide[d][ch] >= default[d][ch] for d in default for ch in default[d])
+    together = result["cases"][-1]
+    assert together["unknown"] == "all together"
+    total = sum(f for chans in together["detected"].values() for f in chans.values())
+    assert total >= max(sum(f for chans in v.values() for f in chans.values()) for v in cases.values()) - 0.1
+    assert result["phase_function"] == "petzold (default)" and result["band"] is True

@@ -28,7 +28,7 @@ from ..experiments import EXPERIMENT_SHOTS, Experiment, experiment_preset
 from ..montecarlo.tables import table_packets
 from ..optics.optical_model import OpticalModel
 from ..simulate import simulate
-from ..water.phase_family import DEFAULT_PHASE, SENSITIVITY_FAMILY
+from ..water.phase_family import DEFAULT_PHASE, SENSITIVITY_FAMILY, PhaseMember
 from .bands import BAND_PACKETS, experiment_band, family_summary
 from .common import DETECTION_TOLERANCE_BINS, _shots, detections, range_tolerance_m, truth_batch
 
@@ -86,7 +86,7 @@ def _all_detected(fractions: dict, level: float = 0.5) -> bool:
 
 
 def pond_unknowns_study(shots: int = EXPERIMENT_SHOTS, seed: int = 0, ranging: str = "prototype",
-                        packets: int = BAND_PACKETS) -> dict:
+                        packets: int = BAND_PACKETS, family: tuple[PhaseMember, ...] = SENSITIVITY_FAMILY) -> dict:
     """Each unknown of the pond moved alone over its range, then all at their most favourable ends (module doc).
     Returns ``cases`` (unknown, setting, detected fractions per distance and channel, whether every cell reaches
     half the shots), the phase functions' ``band`` (:func:`muls.studies.bands.experiment_band`), ``sources``,
@@ -101,9 +101,9 @@ def pond_unknowns_study(shots: int = EXPERIMENT_SHOTS, seed: int = 0, ranging: s
                       "every_cell_half_the_shots": _all_detected(fractions)})
 
     case("none", "the model's defaults", detected(exp, shots, seed, ranging))
-    band = experiment_band(exp, shots, seed, ranging, packets=packets)
+    band = experiment_band(exp, shots, seed, ranging, family, packets)
     for label, fractions in band["members"].items():
-        if label != SENSITIVITY_FAMILY[0].label:
+        if label != family[0].label:
             case("phase function and b_b/b", label, fractions)
     for lead in GATE_LEADS_S[1:]:
         case("gate reference", f"trigger {lead * 1e9:g} ns before the light (gate opens at "
@@ -123,7 +123,7 @@ def pond_unknowns_study(shots: int = EXPERIMENT_SHOTS, seed: int = 0, ranging: s
     # open at emission, the widest tolerance, the lower threshold.
     best = max(band["members"], key=lambda k: _total(band["members"][k]))
     fov = max(fov_detected, key=lambda f: _total(fov_detected[f]))
-    member = next(m for m in SENSITIVITY_FAMILY if m.label == best)
+    member = next(m for m in family if m.label == best)
     water = replace(exp.water, phase_function=member.spec)
     standard = member.spec == DEFAULT_PHASE and fov == FOV_FULL_RAD[0]
     with nullcontext() if standard else table_packets(packets):
@@ -132,7 +132,7 @@ def pond_unknowns_study(shots: int = EXPERIMENT_SHOTS, seed: int = 0, ranging: s
     case("all together", f"{best}, gate open at emission, {TOLERANCE_BINS[-1]} bins, {THRESHOLDS_SIGMA[-1]:g} sigma, "
          f"{fov * 1e3:g} mrad full angle", together)
     return {"cases": cases, "band": band["distances"], "sources": SOURCES, "paper": PAPER_CLAIM,
-            **family_summary(packets=packets),
+            **family_summary(family, packets),
             "settings": {"experiment": "pond", "shots": shots, "seed": int(seed), "ranging": ranging,
                          "detected_means": "share of the shots whose channel has a peak that detects the panel",
                          "every_cell": "every channel at every distance detects in at least half the shots",
