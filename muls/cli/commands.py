@@ -139,7 +139,7 @@ def _cmd_maxrange(args):
 
         result["band"] = maxrange_band(waters, shots=shots, reflectance=args.reflectance, seed=args.seed,
                                        attenuation_model=_attenuation(args.attenuation))
-        lines.append(f"band [low median high] over {len(result['band']['members'])} phase functions:")
+        lines.append(f"band [low median high] over {len(result['band']['phase_functions'])} phase functions:")
         for w, b in result["band"]["waters"].items():
             lines.append(f"{w:15s} " + "; ".join(
                 f"{f.removesuffix('_m')} [{_fmt(b['figures'][f]['low'], 1)} {_fmt(b['figures'][f]['median'], 1)} "

@@ -83,7 +83,8 @@ def _cmd_pond_unknowns(args):
         lines.append(f"{c['unknown']:26s} {c['setting'][:62]:62s} "
                      + " ".join(f"{c['detected'][d][ch]:8.3f}" for d, ch in cells)
                      + f"  {'yes' if c['every_cell_half_the_shots'] else 'no'}")
-    lines.append(f"phase function: {result['phase_function']}; band over {len(result['members'])} phase functions")
+    lines.append(f"phase function: {result['phase_function']}; band over {len(result['phase_functions'])} phase "
+                 "functions")
     return result, "\n".join(lines), None
 
 

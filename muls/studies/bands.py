@@ -56,7 +56,7 @@ def family_summary(family: tuple[PhaseMember, ...] = SENSITIVITY_FAMILY, packets
     """What a band's summary says of its family: the phase function of the default, that a band was computed, and
     each member with its source and b_b/b."""
     return {"phase_function": f"{DEFAULT_PHASE} (default)", "band": True, "packets_members": int(packets),
-            "members": [{"label": m.label, "spec": m.spec, "source": m.source,
+            "phase_functions": [{"label": m.label, "spec": m.spec, "source": m.source,
                          "backscatter_ratio": round(phase_from_spec(m.spec).backscatter_fraction, 5)}
                         for m in family]}
 
