@@ -238,3 +238,14 @@ def test_the_pond_s_unknowns_each_move_the_prediction_the_expected_way(small_ban
     total = sum(f for chans in together["detected"].values() for f in chans.values())
     assert total >= max(sum(f for chans in v.values() for f in chans.values()) for v in cases.values()) - 0.1
     assert result["phase_function"] == "petzold (default)" and result["band"] is True
+
+
+def test_a_band_leaves_out_members_without_a_value_and_names_its_ends():
+    """A member with no maximum range (None: nothing detectable) is not a range of 0 m: the band is over the others;
+    the default is the first member's value, whatever its place in the band."""
+    from muls.studies.bands import band
+
+    b = band([4.2, None, 6.0, 3.1], ["default", "a", "b", "c"], 3)
+    assert (b["low"], b["median"], b["high"], b["default"]) == (3.1, 4.2, 6.0, 4.2)
+    assert (b["low_member"], b["high_member"]) == ("c", "b")
+    assert band([None, None], ["default", "a"])["low"] is None
