@@ -133,6 +133,18 @@ def _cmd_maxrange(args):
             cells.append(f"{group} -" if lim is None else
                          f"{group} {lim['channel']} {lim['cause']} (SNR {_fmt(lim['snr'], 1)})")
         lines.append(f"{w:15s} " + "; ".join(cells))
+    result["settings"] = {**s, "phase_function": "petzold (default)", "band": bool(args.band)}
+    if args.band:
+        from ..studies.bands import MAXRANGE_FIGURES, maxrange_band
+
+        result["band"] = maxrange_band(waters, shots=shots, reflectance=args.reflectance, seed=args.seed,
+                                       attenuation_model=_attenuation(args.attenuation))
+        lines.append(f"band [low median high] over {len(result['band']['phase_functions'])} phase functions:")
+        for w, b in result["band"]["waters"].items():
+            lines.append(f"{w:15s} " + "; ".join(
+                f"{f.removesuffix('_m')} [{_fmt(b['figures'][f]['low'], 1)} {_fmt(b['figures'][f]['median'], 1)} "
+                f"{_fmt(b['figures'][f]['high'], 1)}]" for f in MAXRANGE_FIGURES))
+    lines.append("phase function: petzold (default); " + ("band computed" if args.band else "no band (--band)"))
     from ..plots import plot_maxrange
 
     return result, "\n".join(lines), plot_maxrange
@@ -227,15 +239,26 @@ def _cmd_experiment(args):
              f"{s['gate_delay_ns']:g}/{s['gate_width_ns']:g} ns, {s['ranging']} ranging, {s['attenuation_model']} "
              f"attenuation, seed {s['seed']} ({s['elapsed_s']:.1f} s)",
              f"gains: {s['gain_rule']}",
-             f"{'dist m':>6s} {'ch':4s} {'detected':>8s} {'std m':>8s} {'mad m':>8s} {'bias m':>8s} {'clipped':>8s}"]
+             f"{'dist m':>6s} {'ch':4s} {'detected':>8s} {'std m':>8s} {'mad m':>8s} {'bias m':>8s} {'clipped':>8s}"
+             + ("" if args.no_band else "  detected band [low median high] over the phase functions")]
+    from ..studies.bands import experiment_band
+
+    band = None if args.no_band else experiment_band(exp, shots=shots, seed=args.seed, ranging=args.ranging)
     for key, chans in full["distances"].items():
         for ch, st in chans.items():
+            cells = "" if band is None else "  [{low:.3f} {median:.3f} {high:.3f}]".format(
+                **band["distances"][key][ch]["detected_fraction"])
             lines.append(f"{key:>6s} {ch:4s} {_fmt(st['detected_fraction'], 3):>8s} {_fmt(st['precision_m'], 4):>8s} "
                          f"{_fmt(st['mean_abs_deviation_m'], 4):>8s} {_fmt(st['bias_m'], 4):>8s} "
-                         f"{_fmt(st['clipped_fraction'], 3):>8s}")
+                         f"{_fmt(st['clipped_fraction'], 3):>8s}{cells}")
+    lines.append("phase function: petzold (default)" + ("; no band computed (--no-band)" if band is None else
+                 f"; band over {len(band['members'])} phase functions: {', '.join(band['members'])}"))
     from ..plots import plot_experiment
 
     result = {k: full[k] for k in EXPERIMENT_KEYS}
+    result["settings"] = {**result["settings"], "phase_function": "petzold (default)", "band": band is not None}
+    if band is not None:
+        result["band"] = band
 
     def write(res, out_dir):  # the experiment's directory: its JSON and its picture
         os.makedirs(out_dir, exist_ok=True)
@@ -473,6 +496,8 @@ def _add_maxrange(p: argparse.ArgumentParser) -> None:
                    help=f"water presets ({_waters()})")
     p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
                    help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    p.add_argument("--band", action="store_true",
+                   help="each figure's band over the family of phase functions (the study once per member)")
     _common(p)
     p.set_defaults(run=_cmd_maxrange)
 
@@ -512,6 +537,8 @@ def _add_experiment(p: argparse.ArgumentParser) -> None:
                    help="prototype (plain peak detection on the 1 GS/s record) or template (pulse-shape fit)")
     p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
                    help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    p.add_argument("--no-band", action="store_true",
+                   help="skip the band over the family of phase functions (one more run per member)")
     _common(p, out_type=output_dir)  # a folder: experiment.json and experiment.png
     p.set_defaults(run=_cmd_experiment)
 

@@ -20,4 +20,6 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "mobley1993": ("commands", "the Monte Carlo's transport against Mobley et al. (1993), problems 1 and 2"),
     "validate-pass": ("commands", "consistency check of the scattering tables: the pass's waveform model against a "
                        "fresh run of the Monte Carlo that made them, five waters, 2-30 m"),
+    "sensitivity": ("sensitivity", "band of the echo and the column over a family of phase functions, 2-20 m"),
+    "pond-unknowns": ("sensitivity", "the pond's detections as each input the paper leaves unknown moves"),
 }

@@ -8,6 +8,9 @@ from __future__ import annotations
 import math
 import os
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 from typing import NamedTuple
 
@@ -15,8 +18,8 @@ import numpy as np
 
 from ..instrument.overlap import TransceiverGeometry
 from ..optics.scattering import SHIPPED_DIR, SPREAD_NODES, ScatteringTables, clear_water_tables, tables_key
-from ..water.phase import check_phase
-from ..water.properties import PHASE_FUNCTION, Water
+from ..water.phase_family import phase_from_spec
+from ..water.properties import Water
 from .run import TargetPlanes, run_monte_carlo
 
 #: Plate ranges of a table's run [m]: every 0.25 m through the near field, where the finite aperture starts to see
@@ -28,8 +31,6 @@ TABLE_RANGES_M = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.25, 2.5, 2.75, 3
 #: energies, a few % on the column's 0.25 ns bins within 100 times of its peak.
 TABLE_PACKETS = 400_000
 TABLE_SEED = 20231
-#: Phase function of a table's run: Petzold's average particle phase function, as every water's (docs).
-TABLE_PHASE = PHASE_FUNCTION
 #: Histogram bin of a table's run [s].
 TABLE_TIME_STEP_S = 0.25e-9
 #: The farthest plate lies where Eq. 6's two-way attenuation reaches e^-FARTHEST_ATTENUATION (no echo returns
@@ -61,13 +62,18 @@ def farthest_range_m(water: Water) -> float:
     return float(min(FARTHEST_MAX_M, max(FARTHEST_MIN_M, far)))
 
 
+def _packets_key(packets: int) -> int | None:
+    """The packet count a table's key records: None for the standard :data:`TABLE_PACKETS`."""
+    return None if packets == TABLE_PACKETS else int(packets)
+
+
 def build_tables(geometry: TransceiverGeometry, water: Water, packets: int = TABLE_PACKETS, seed: int = TABLE_SEED
                  ) -> ScatteringTables:
-    """Run the Monte Carlo for ``water`` and the receiver of ``geometry`` and tabulate it (module doc of
-    :mod:`muls.optics.scattering`)."""
+    """Run the Monte Carlo for ``water`` (with its phase function) and the receiver of ``geometry`` and tabulate it
+    (module doc of :mod:`muls.optics.scattering`)."""
     far = farthest_range_m(water)
     ranges = tuple(r for r in TABLE_RANGES_M if r <= far)
-    phase = check_phase(TABLE_PHASE)
+    phase = phase_from_spec(water.phase_function)
     result = run_monte_carlo(RunOptics("tables", geometry), water, TargetPlanes(ranges, 0.1), phase=phase,
                              packets=packets, seed=seed, time_step_s=TABLE_TIME_STEP_S)
     t, dt, speed = result.time_s, result.time_step_s, result.speed_m_s
@@ -92,9 +98,10 @@ def build_tables(geometry: TransceiverGeometry, water: Water, packets: int = TAB
     far_scene = len(ranges) - 1
     column = _smoothed(result.column[:, far_scene].mean(axis=0)[t < 2.0 * ranges[-1] / speed]) / dt
     column = _extended(column, dt)
-    source = (f"Monte Carlo (muls.montecarlo.run), flat 0.1 plates at {ranges[0]:g}-{ranges[-1]:g} m, "
+    source = (f"Monte Carlo (muls.montecarlo.run), phase function {water.phase_function}, flat 0.1 plates at "
+              f"{ranges[0]:g}-{ranges[-1]:g} m, "
               f"{result.packets:,} beam packets, seed {seed}, {result.seconds:.0f} s")
-    return ScatteringTables(tables_key(geometry, water, TABLE_PHASE), np.array(ranges), k_table, rel_err,
+    return ScatteringTables(tables_key(geometry, water, packets=_packets_key(packets)), np.array(ranges), k_table, rel_err,
                             direct_share, spread, dt, column, float(phase.value_at_pi_per_sr), source)
 
 
@@ -152,9 +159,27 @@ def user_cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "muls-scanner" / "scattering"
 
 
-def find_tables(geometry: TransceiverGeometry, water: Water) -> ScatteringTables | None:
-    """The tables of ``geometry`` and ``water`` if they exist already (memory, shipped, user cache), else None."""
-    key = tables_key(geometry, water)
+#: The packet count of the tables found or built where a caller gives none (:func:`table_packets`).
+_context_packets: ContextVar[int] = ContextVar("table_packets", default=TABLE_PACKETS)
+
+
+@contextmanager
+def table_packets(packets: int) -> Iterator[None]:
+    """Within the block, the tables a study finds or builds without naming a packet count are runs of ``packets``
+    beam packets (their own key): a band over a family of phase functions runs its members quicker than the
+    standard tables, through studies that build their models themselves."""
+    token = _context_packets.set(int(packets))
+    try:
+        yield
+    finally:
+        _context_packets.reset(token)
+
+
+def find_tables(geometry: TransceiverGeometry, water: Water, packets: int | None = None) -> ScatteringTables | None:
+    """The tables of ``geometry`` and ``water`` (run with ``packets``, by default :data:`TABLE_PACKETS` or the
+    block's :func:`table_packets`) if they exist already (memory, shipped, user cache), else None."""
+    packets = _context_packets.get() if packets is None else packets
+    key = tables_key(geometry, water, packets=_packets_key(packets))
     with _lock:
         if key in _memory:
             return _memory[key]
@@ -172,16 +197,19 @@ def find_tables(geometry: TransceiverGeometry, water: Water) -> ScatteringTables
     return None
 
 
-def scattering_tables(geometry: TransceiverGeometry, water: Water) -> ScatteringTables:
-    """The tables of ``geometry`` and ``water``: found (:func:`find_tables`), or built by the Monte Carlo and kept
-    in the user cache. A water that does not scatter needs no run: its tables are exp(-2 a R)."""
-    found = find_tables(geometry, water)
+def scattering_tables(geometry: TransceiverGeometry, water: Water, packets: int | None = None) -> ScatteringTables:
+    """The tables of ``geometry`` and ``water``: found (:func:`find_tables`), or built by the Monte Carlo with
+    ``packets`` beam packets and kept in the user cache (one run per water, receiver, phase function and packet
+    count; by default :data:`TABLE_PACKETS` or the block's :func:`table_packets`). A water that does not scatter
+    needs no run: its tables are exp(-2 a R)."""
+    packets = _context_packets.get() if packets is None else packets
+    found = find_tables(geometry, water, packets)
     if found is not None:
         return found
     if water.scattering_per_m == 0.0:
         tables = clear_water_tables(geometry, water)
     else:
-        tables = build_tables(geometry, water)
+        tables = build_tables(geometry, water, packets)
         try:
             tables.save(user_cache_dir() / f"{tables.key}.npz")
         except OSError:  # an unwritable cache costs a run in the next process, nothing else

@@ -214,14 +214,17 @@ class OpticalModel:
     multiple_scattering: str = "none"
 
     @classmethod
-    def build(cls, instrument: Instrument, water: Water, multiple_scattering: str = "table") -> OpticalModel:
+    def build(cls, instrument: Instrument, water: Water, multiple_scattering: str = "table",
+              tables: ScatteringTables | None = None) -> OpticalModel:
         """``multiple_scattering``: one of :data:`MULTIPLE_SCATTERING`; ``table`` applies only under the
-        ``monte_carlo`` attenuation rule (the other rules are single-scattering lidar equations)."""
+        ``monte_carlo`` attenuation rule (the other rules are single-scattering lidar equations); ``tables``: the
+        Monte Carlo's tables of that rule if the caller holds them (e.g. a quicker run's), else found or built."""
         if multiple_scattering not in MULTIPLE_SCATTERING:
             raise ParameterError(f"multiple_scattering = {multiple_scattering!r}: must be one of "
                                  f"{', '.join(map(repr, MULTIPLE_SCATTERING))}")
-        tables = None
-        if water.attenuation_model == "monte_carlo":
+        if water.attenuation_model != "monte_carlo":
+            tables = None
+        elif tables is None:
             from ..montecarlo.tables import scattering_tables  # the Monte Carlo sits above the model: lazily
 
             tables = scattering_tables(instrument.geometry, water)

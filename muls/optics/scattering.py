@@ -122,14 +122,19 @@ class ScatteringTables:
                        float(z["phase_value_at_pi_per_sr"]), str(z["source"]))
 
 
-def tables_key(geometry: TransceiverGeometry, water: Water, phase: str = "petzold") -> str:
+def tables_key(geometry: TransceiverGeometry, water: Water, phase: str | None = None, packets: int | None = None
+               ) -> str:
     """16 hex digits naming the tables of ``geometry`` and ``water``: every input the Monte Carlo run sees (the
-    geometry's lengths and angles, a, b, the group index, the phase function) and :data:`TABLE_FORMAT`."""
+    geometry's lengths and angles, a, b, the group index, the phase function's spec: ``phase``, by default the
+    water's) and :data:`TABLE_FORMAT`; ``packets``: a run's packet count where it is not the standard one (None),
+    so that a quicker, noisier table never stands in for a standard one."""
     inputs = {"format": TABLE_FORMAT, "beam_diameter_m": geometry.beam_diameter_m,
               "beam_divergence_full_rad": geometry.beam_divergence_full_rad,
               "receiver_diameter_m": round(geometry.receiver_diameter_m, 12), "fov_full_rad": geometry.fov_full_rad,
               "offset_m": geometry.offset_m, "a": water.absorption_per_m, "b": water.scattering_per_m,
-              "group_index": water.group_index, "phase": phase}
+              "group_index": water.group_index, "phase": water.phase_function if phase is None else phase}
+    if packets is not None:
+        inputs["packets"] = int(packets)
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:16]
 
 

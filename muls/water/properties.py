@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, replace
 
 from ..infra.errors import ParameterError, check_choice, check_non_negative
-from .phase import petzold
+from .phase_family import parse_phase_spec, phase_from_spec
 
 SPEED_OF_LIGHT_M_S = 299_792_458.0
 
@@ -40,8 +40,9 @@ ATTENUATION_MODELS = ("monte_carlo", "k_lidar", "c", "kd", "small_angle")
 #: The rules that depend on the range and the receiver (muls.optics.radiometry.lidar_attenuation_per_m evaluates them).
 RANGE_DEPENDENT_MODELS = ("monte_carlo", "small_angle")
 
-#: The particle phase function of every water's scattering in the model: the Monte Carlo's tables
-#: (muls.montecarlo.tables) and the small-angle rule (muls.water.smallangle) integrate Petzold's average (muls.water.phase).
+#: The particle phase function of a water's scattering unless a study varies it (Water.phase_function): the Monte
+#: Carlo's tables (muls.montecarlo.tables) integrate the water's; the small-angle rule (muls.water.smallangle) always
+#: integrates Petzold's average (muls.water.phase).
 PHASE_FUNCTION = "petzold"
 
 #: Backscatter rules (docs/design.md#backscatter): ``measured`` (the default) takes beta(180 deg) measured in the water
@@ -68,7 +69,9 @@ class Water:
     absorption_per_m: a [1/m]; scattering_per_m: b [1/m]; beta_pi_measured_per_m_sr: beta(180 deg)
     [1/(m sr)] from measured volume scattering functions (Petzold's waters: measured in that water; Jerlov's
     types: pure water's and Petzold's average particle function, weighted by their shares of b) or None;
-    kd_per_m: measured diffuse attenuation K_d [1/m] or None; group_index: n_g of the water (ranging speed c/n_g).
+    kd_per_m: measured diffuse attenuation K_d [1/m] or None; group_index: n_g of the water (ranging speed c/n_g);
+    phase_function: the particle phase function's spec (:mod:`muls.water.phase_family`), Petzold's average unless
+    a study varies it: the Monte Carlo's tables are built with it, and beta_pi follows it where none is measured.
     """
 
     name: str
@@ -80,6 +83,7 @@ class Water:
     attenuation_model: str = "monte_carlo"
     backscatter_model: str = "measured"
     source: str = ""
+    phase_function: str = PHASE_FUNCTION
 
     def __post_init__(self):
         check_non_negative(f"water '{self.name}': absorption_per_m", self.absorption_per_m)
@@ -94,6 +98,7 @@ class Water:
             check_non_negative(f"water '{self.name}': kd_per_m", self.kd_per_m)
         check_choice("attenuation_model", self.attenuation_model, ATTENUATION_MODELS)
         check_choice("backscatter_model", self.backscatter_model, BACKSCATTER_MODELS)
+        parse_phase_spec(self.phase_function)
 
     @classmethod
     def from_attenuation(cls, name: str, attenuation_per_m: float, absorption_per_m: float, **kw) -> Water:
@@ -152,7 +157,7 @@ class Water:
         if self.backscatter_model == "measured":
             # Without a measurement, the phase function every other part of the model uses: the Monte Carlo's
             # column then needs no rescaling, and the column and the echo share one phase function.
-            return "measured" if self.beta_pi_measured_per_m_sr is not None else PHASE_FUNCTION
+            return "measured" if self.beta_pi_measured_per_m_sr is not None else self.phase_function
         return {"petzold": PHASE_FUNCTION, "hg": "henyey_greenstein", "eq5": "eq5"}[self.backscatter_model]
 
     @property
@@ -161,12 +166,12 @@ class Water:
         b, source = self.scattering_per_m, self.beta_pi_source
         if source == "measured":
             return self.beta_pi_measured_per_m_sr
-        if source == PHASE_FUNCTION:
-            return b * petzold().value_at_pi_per_sr
         if source == "eq5":
             # MULS Eq. 5 read literally: HG value at pi over the HG backward fraction.
             return b * henyey_greenstein(-1.0) / hg_backward_fraction()
-        return b * henyey_greenstein(-1.0)  # b * p_HG(pi), g = 0.924
+        if source == "henyey_greenstein":
+            return b * henyey_greenstein(-1.0)  # b * p_HG(pi), g = 0.924
+        return b * phase_from_spec(source).value_at_pi_per_sr
 
     @property
     def speed_m_s(self) -> float:

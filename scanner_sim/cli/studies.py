@@ -173,6 +173,9 @@ def _add_coverage(sub):
     p.add_argument("--view-pass", metavar="NAME", type=nonempty(),
                    help="the pass whose interactive 3-D view report.html embeds, by its folder name, e.g. "
                         "clean_ocean-mul2023-6m (default: the first)")
+    p.add_argument("--water-uncertainty", action="store_true",
+                   help="also fly each combination with the phase functions of the weakest and strongest echo: covered "
+                        "and Order 1a shares as (low, default, high) bands (docs/coverage.md)")
     p.add_argument("--quiet", action="store_true", help="no progress; print only the path of coverage.json")
     p.add_argument("--json", action="store_true", help="print coverage.json's content (records with their S-44 "
                    "orders, s44_orders) instead of the table and the path")
@@ -192,7 +195,7 @@ def _cmd_coverage(args) -> int:
     config = load_scene(args.scene)
     _check_cell_memory(args, config)
     plan = StudyPlan(tuple(args.waters), tuple(args.altitudes_m) if args.altitudes_m else (None,),
-                     tuple(args.instruments), args.gate)
+                     tuple(args.instruments), args.gate, args.water_uncertainty)
     settings = CoverageSettings(args.cell_m, args.min_points, args.tolerance_m, args.order_min_soundings)
     out = Path(args.out or Path(config.output_dir) / "coverage")
     with hold_output(out):  # taken before the passes are built, so a second writer is refused at once

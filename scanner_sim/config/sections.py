@@ -10,7 +10,9 @@ from typing import Annotated, Any
 from pydantic import BeforeValidator, model_validator
 
 from muls import WATER_PRESETS, instrument_preset, water_preset
+from muls.infra.errors import ParameterError
 from muls.optics.optical_model import MULTIPLE_SCATTERING
+from muls.water.phase_family import phase_from_spec
 from muls.water.properties import (
     ATTENUATION_MODELS,
     BACKSCATTER_MODELS,
@@ -72,9 +74,18 @@ class WaterConfig(StrictModel):
     background_radiance_w_m2_sr_nm: NonNegative = 0.0
     """Spectral radiance L_b of artificial light in the water [W/(m^2 sr nm)] (MULS Eqs. 8-10), allowed beside a
     preset; 0 (the default) is deep, dark water."""
+    phase_function: str | None = None
+    """The particles' phase function, allowed beside a preset: a name with optional parameters, e.g. ``petzold``
+    (the default), ``fournier_forand:mu=3.37,n=1.066``, ``henyey_greenstein:g=0.9`` (muls.water.phase_family)."""
 
     @model_validator(mode="after")
     def _one_description(self):
+        if self.phase_function is not None:
+            try:
+                phase_from_spec(self.phase_function)
+            except ParameterError as exc:  # the reason without muls's own naming of the value
+                reason = str(exc).split(": ", 1)[1] if str(exc).startswith("phase_function = ") else str(exc)
+                raise invalid(reason, key="phase_function", value=self.phase_function) from None
         a, b, c = self.absorption_per_m, self.scattering_per_m, self.attenuation_per_m
         if self.preset is not None:
             if any(v is not None for v in (a, b, c, self.group_index, self.beta_pi_per_m_sr)):
@@ -102,7 +113,8 @@ class WaterConfig(StrictModel):
             else:
                 water = Water(name, self.absorption_per_m, self.scattering_per_m, **kw)
         return replace(water, attenuation_model=self.attenuation_model or water.attenuation_model,
-                       backscatter_model=self.backscatter_model or water.backscatter_model)
+                       backscatter_model=self.backscatter_model or water.backscatter_model,
+                       phase_function=self.phase_function or water.phase_function)
 
 
 def _preset_shorthand(value: Any) -> Any:

@@ -54,6 +54,9 @@ class StudyPlan:
     altitudes_m: tuple[float | None, ...] = (None,)
     instruments: tuple[str, ...] = DEFAULT_INSTRUMENTS
     gate: str = "follow"
+    #: Fly each combination also with the phase functions of the weakest and strongest echo
+    #: (:mod:`scanner_sim.studies.water_uncertainty`): its covered and Order 1a shares as (low, default, high).
+    water_uncertainty: bool = False
 
     def __post_init__(self):
         for name, values in (("waters", self.waters), ("altitudes_m", self.altitudes_m),
@@ -157,19 +160,28 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
     names = [job.name for job in jobs]
     if view_pass is not None and view_pass not in names:
         raise ValueError(f"view_pass = {view_pass!r}: not a pass of this study; one of {', '.join(names)}")
+    bands = _band_jobs(combos, jobs) if plan.water_uncertainty else []
     with hold_output(out):  # one writer at a time (io/run_dir.py)
         out.mkdir(parents=True, exist_ok=True)
         started = time.perf_counter()
         scene = cached_scene(config)
         io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
-        with maybe_client(client, scheduler, workers, announce=progress, passes=len(jobs)) as dask:
-            outcomes = run_jobs(jobs, out, dask, redo=redo, progress=progress)
+        all_jobs = jobs + [j for _, _, pair in bands for j in pair]
+        with maybe_client(client, scheduler, workers, announce=progress, passes=len(all_jobs)) as dask:
+            outcomes = run_jobs(all_jobs, out, dask, redo=redo, progress=progress)
         failed = [o for o in outcomes if o.status == "failed"]
         if failed:
             raise RuntimeError(f"{len(failed)} of {len(jobs)} passes failed ({failed[0].job.name}: {failed[0].error}); "
                                "the others are complete in the output folder: run the study again to redo only these")
         records = [study_record(job.config, o.summary, water, altitude, instrument, job.name)
                    for (water, altitude, instrument), job, o in zip(combos, jobs, outcomes)]
+        if bands:
+            from scanner_sim.studies.water_uncertainty import band_figures
+
+            extra = outcomes[len(jobs):]
+            for i, (record, o, (low, high, _)) in enumerate(zip(records, outcomes, bands)):
+                record["water_uncertainty"] = band_figures(o.summary, extra[2 * i].summary, extra[2 * i + 1].summary,
+                                                           low, high)
         if placed:
             from scanner_sim.metrics.feature_cubes import detection_table
 
@@ -181,7 +193,8 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
                       "altitudes_m": [a if a is not None else config.platform.altitude_m for a in plan.altitudes_m],
                       "instruments": list(plan.instruments), "gate": plan.gate, "cell_m": settings.cell_m,
                       "min_points": settings.min_points, "tolerance_m": settings.tolerance_m,
-                      "order_min_soundings": settings.order_min_soundings},
+                      "order_min_soundings": settings.order_min_soundings,
+                      "phase_function": "petzold (default)", "water_uncertainty": plan.water_uncertainty},
             "s44_orders": s44.orders_table(),
             "cubes": placed,
             "s44_source": s44.SOURCE,
@@ -199,6 +212,25 @@ def run_study(config: SceneConfig, plan: StudyPlan, out_dir: str | Path, *,
             _calibration_charts(out, records)
             io.write_text(out / "report.html", report.report_html(study, out))
     return study
+
+
+def _band_jobs(combos, jobs: list[PassJob]) -> list:
+    """Per combination (weakest member, strongest member, their two passes), the members ranked at the vehicle's
+    altitude (the nadir range)."""
+    from dataclasses import replace
+
+    from scanner_sim.studies.water_uncertainty import extreme_members, member_config
+
+    out = []
+    for (_, altitude, _), job in zip(combos, jobs):
+        if altitude is None:
+            raise ParameterError("water uncertainty: the scene flies at constant depth (platform.altitude_m is not "
+                                 "set); give --altitudes-m to rank the phase functions at the nadir range")
+        low, high = extreme_members(job.config, altitude)
+        out.append((low, high, [PassJob(f"{job.name}-phase-{end}", member_config(job.config, member),
+                                        replace(job.options, water=None))
+                                for end, member in (("low", low), ("high", high))]))
+    return out
 
 
 def study_record(config: SceneConfig, summary: dict, water: str, altitude_m, instrument: str, name: str) -> dict:

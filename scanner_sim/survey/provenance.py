@@ -46,7 +46,8 @@ def water_provenance(config: SceneConfig, water: Water) -> dict:
         "group_index": water.group_index,
         "attenuation_model": water.attenuation_model,
         "backscatter_model": water.backscatter_model,
-        "phase_function": PHASE_FUNCTION if water.attenuation_model in RANGE_DEPENDENT_MODELS else None,
+        "phase_function": water.phase_function if water.attenuation_model == "monte_carlo" else
+        PHASE_FUNCTION if water.attenuation_model in RANGE_DEPENDENT_MODELS else None,
         "beta_pi_per_m_sr": water.beta_pi_per_m_sr,
         "beta_pi_source": water.beta_pi_source,
         "kd_per_m": water.kd_estimate_per_m,

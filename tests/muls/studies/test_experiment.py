@@ -92,11 +92,12 @@ def test_prototype_and_template_ranging_differ_only_in_timing():
 
 def test_muls_experiment_json_and_folder(capsys, tmp_path):
     out = tmp_path / "pond"
-    code = main(["experiment", "pond", "--shots", "30", "--json", "--out", str(out)])
+    code = main(["experiment", "pond", "--shots", "30", "--no-band", "--json", "--out", str(out)])
     printed, err = capsys.readouterr()
     assert code == 0, err
     r = json.loads(printed)
     assert set(r) == {"distances", "settings"}
+    assert r["settings"]["phase_function"] == "petzold (default)" and r["settings"]["band"] is False
     assert set(r["distances"]) == {"8.5", "10", "11.5"}
     assert set(r["distances"]["10"]["ch2"]) == STAT_KEYS
     assert json.loads((out / "experiment.json").read_text()) == r
@@ -121,7 +122,7 @@ def test_muls_experiment_runs_1000_shots_within_two_minutes(capsys, tmp_path, na
     import time
 
     t0 = time.perf_counter()
-    assert main(["experiment", name, "--shots", "1000", "--json", "--out", str(tmp_path / name)]) == 0
+    assert main(["experiment", name, "--shots", "1000", "--no-band", "--json", "--out", str(tmp_path / name)]) == 0
     assert time.perf_counter() - t0 < 120.0
     assert json.loads(capsys.readouterr()[0])["settings"]["shots"] == 1000
 
