@@ -423,12 +423,15 @@ def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_o
                 altitudes_m=None, speeds_m_s=None, *, required_share: float = DEFAULT_REQUIRED_SHARE,
                 sample_lines: int = 3, sample_length_m: float = 20.0, min_spacing_m: float = 0.5,
                 max_confirm_pulses: int = 2_000_000, out_dir: str | Path | None = None, client=None,
-                workers: int | None = None, scheduler: str | None = None, progress: bool = False) -> SurveyPlan:
+                workers: int | None = None, scheduler: str | None = None, redo: bool = False, render: bool = True,
+                progress: bool = False) -> SurveyPlan:
     """The plan of least survey time meeting ``order`` over ``scene``'s site, per water (module docstring,
     docs/planning.md). ``scene``: a SceneConfig or a shipped scene's name or file; ``altitudes_m`` and
     ``speeds_m_s`` default to the scene's times :data:`DEFAULT_ALTITUDE_FACTORS` and :data:`DEFAULT_SPEED_FACTORS`.
     The passes (``sample-*``, ``confirm-*``) run into ``out_dir`` (a temporary folder when None) as Dask tasks on
-    ``client``, ``scheduler`` or a local cluster of ``workers``; complete ones are kept on a re-run."""
+    ``client``, ``scheduler`` or a local cluster of ``workers``; complete ones are kept on a re-run (unless ``redo``).
+    With ``out_dir``, the plan's files are written there too (:func:`~scanner_sim.studies.plan_files.write_plan_files`;
+    ``render``: the chart and plan.html). Every input is checked before anything is written."""
     config = _scene_config(scene)
     k = order_index(order)
     factor = s44.ORDERS[k].coverage_percent / 100.0
@@ -445,8 +448,10 @@ def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_o
     jobs = [PassJob(f"sample-{w}-{a:g}m-{v:g}mps-{i + 1}", sample_config(config, w, a, v, line),
                     PassOptions(progress=False, render=False, write_scene=False))
             for w, a, v in combos for i, line in enumerate(lines)]
-    with _folder(out_dir) as out, maybe_client(client, scheduler, workers, announce=progress) as dask:
-        outcomes = _ran(run_jobs(jobs, out, dask, progress=progress))
+    from scanner_sim.io.run_dir import hold_output
+
+    with _folder(out_dir) as out, hold_output(out), maybe_client(client, scheduler, workers, announce=progress) as dask:
+        outcomes = _ran(run_jobs(jobs, out, dask, redo=redo, progress=progress))
         profiles = []
         for j, (w, a, v) in enumerate(combos):
             parts = [profile_of(_grid(out / o.job.name), line, half_band, trim)
@@ -457,21 +462,25 @@ def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_o
                                     {c: float(g) for c, g in zip(GAP_CAUSES, gaps) if g}, by_order, soundings))
         ladders = {w: _candidates([p for p in profiles if p.water == w], area, factor, need, min_spacing_m)
                    for w in waters}
-        results, configs, n_confirm = _confirm(config, out, dask, area, ladders, k, factor, need, built,
-                                               max_confirm_pulses, progress)
-    plans = []
-    for w in waters:
-        chosen, confirmation = results[w]
-        cands = tuple(ladders[w])
-        if chosen is None:
-            best, cause = _best_and_cause([p for p in profiles if p.water == w], k, required_share,
-                                          min_spacing_m, area)
-            plans.append(WaterPlan(w, None, cands, confirmation, best, cause))
-        else:
-            plans.append(WaterPlan(w, chosen, cands, confirmation))
-    return SurveyPlan(config.name, order, area, required_share, tuple((tuple(map(float, a)), tuple(map(float, b)))
-                                                                      for a, b in lines),
-                      tuple(plans), tuple(profiles), len(jobs), n_confirm, config, configs)
+        results, configs, n_confirm = _confirm(config, out, dask, area, ladders, k, need, built,
+                                               max_confirm_pulses, progress, redo)
+        plans = []
+        for w in waters:
+            chosen, confirmation = results[w]
+            if chosen is None:
+                best, cause = _best_and_cause([p for p in profiles if p.water == w], k, required_share,
+                                              min_spacing_m, area)
+                plans.append(WaterPlan(w, None, tuple(ladders[w]), confirmation, best, cause))
+            else:
+                plans.append(WaterPlan(w, chosen, tuple(ladders[w]), confirmation))
+        plan = SurveyPlan(config.name, order, area, required_share,
+                          tuple((tuple(map(float, a)), tuple(map(float, b))) for a, b in lines),
+                          tuple(plans), tuple(profiles), len(jobs), n_confirm, config, configs)
+        if out_dir is not None:
+            from scanner_sim.studies.plan_files import write_plan_files
+
+            write_plan_files(plan, out, render=render)
+    return plan
 
 
 def _scene_config(scene) -> SceneConfig:
@@ -594,7 +603,7 @@ def _candidates(profiles, area: SiteArea, factor: float, need: float, step: floa
     return sorted(out, key=lambda c: (c.status != "feasible", c.survey_time_s, c.altitude_m, c.speed_m_s))
 
 
-def _confirm(config, out: Path, dask, area, ladders, k, factor, need, built, max_pulses, progress):
+def _confirm(config, out: Path, dask, area, ladders, k, need, built, max_pulses, progress, redo):
     """Confirm each water's cheapest feasible candidate by a pass; on a shortfall try the next, up to
     MAX_CONFIRMATIONS. Returns per water (chosen, confirmation), the confirmation configs by water, and the passes."""
     results: dict = {w: (None, None) for w in ladders}
@@ -618,7 +627,7 @@ def _confirm(config, out: Path, dask, area, ladders, k, factor, need, built, max
                                                PassOptions(progress=False, render=False, write_scene=False)))
         if not round_jobs:
             break
-        outcomes = _ran(run_jobs([j for _, _, j in round_jobs.values()], out, dask, progress=progress))
+        outcomes = _ran(run_jobs([j for _, _, j in round_jobs.values()], out, dask, redo=redo, progress=progress))
         runs += len(outcomes)
         for (w, (i, flown, job)), outcome in zip(round_jobs.items(), outcomes):
             tried[w] += 1
