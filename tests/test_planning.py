@@ -145,3 +145,18 @@ def test_bad_inputs_are_refused_before_anything_is_written(site, tmp_path):
     with pytest.raises(ParameterError, match="no seabed section"):
         plan_survey(no_seabed, "special", out_dir=out)
     assert not out.exists()
+
+
+def test_cached_scene_over_a_raster_is_not_reused_for_another_plan():
+    """A raster seabed is read in a window around the plan, but a process kept one built scene keyed by the CRS,
+    seabed and objects only: the planner's confirmation over the whole real site reused the window of a 20 m sample
+    line a worker had just flown (a 48 x 48 m grid instead of 72 x 56 m), and judged the plan on the wrong cells."""
+    from scanner_sim.runs.tasks import cached_scene
+
+    site = load_scene("real_site")
+    line = site.with_overrides({"platform.mode": "waypoints", "platform.lawnmower": None,
+                                "platform.waypoints_m": [[614166.0, 4494760.0], [614186.0, 4494760.0]]})
+    whole_extent = cached_scene(site).heightfield.extent_m
+    window = cached_scene(line).heightfield.extent_m
+    assert window != whole_extent
+    assert cached_scene(site).heightfield.extent_m == whole_extent

@@ -345,11 +345,6 @@ def plan_config(config, water, area: SiteArea, candidate: Candidate) -> SceneCon
                               "heading_deg": area.heading_deg, "line_spacing_m": candidate.spacing_m}})
 
 
-def pulse_rate_hz(config: SceneConfig) -> float:
-    """Pulses per second the scene's scanner fires: its own rate, else the instrument's repetition rate."""
-    return float(config.scanner.pulse_rate_hz or config.instrument_model().transmitter.repetition_rate_hz)
-
-
 def confirm_area(area: SiteArea, candidate: Candidate, pulse_rate_hz: float, max_pulses: int) -> SiteArea:
     """The area the confirmation flies: the whole ``area`` when its pulses fit ``max_pulses``, else a centred sample:
     the lines cut shorter, then fewer lines (at least 3), until they fit."""
@@ -462,8 +457,10 @@ def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_o
                                     {c: float(g) for c, g in zip(GAP_CAUSES, gaps) if g}, by_order, soundings))
         ladders = {w: _candidates([p for p in profiles if p.water == w], area, factor, need, min_spacing_m)
                    for w in waters}
+        # the pulses a second the scanner fires, as the first sample pass counted them over its line's time
+        rate = outcomes[0].summary["pulses"] / (sample_length_m / combos[0][2])
         results, configs, n_confirm = _confirm(config, out, dask, area, ladders, k, need, built,
-                                               max_confirm_pulses, progress, redo)
+                                               max_confirm_pulses, progress, redo, rate)
         plans = []
         for w in waters:
             chosen, confirmation = results[w]
@@ -603,9 +600,10 @@ def _candidates(profiles, area: SiteArea, factor: float, need: float, step: floa
     return sorted(out, key=lambda c: (c.status != "feasible", c.survey_time_s, c.altitude_m, c.speed_m_s))
 
 
-def _confirm(config, out: Path, dask, area, ladders, k, need, built, max_pulses, progress, redo):
+def _confirm(config, out: Path, dask, area, ladders, k, need, built, max_pulses, progress, redo, rate):
     """Confirm each water's cheapest feasible candidate by a pass; on a shortfall try the next, up to
-    MAX_CONFIRMATIONS. Returns per water (chosen, confirmation), the confirmation configs by water, and the passes."""
+    MAX_CONFIRMATIONS; ``rate``: the pulses a second the passes fire [Hz]. Returns per water (chosen, confirmation),
+    the confirmation configs by water, and the passes."""
     results: dict = {w: (None, None) for w in ladders}
     configs: dict = {}
     tried = {w: 0 for w in ladders}
@@ -620,7 +618,6 @@ def _confirm(config, out: Path, dask, area, ladders, k, need, built, max_pulses,
                 continue
             i = feasible[0]
             c = cands[i]
-            rate = pulse_rate_hz(config)
             flown = confirm_area(area, c, rate, max_pulses)
             cfg = plan_config(config, w, flown, c).with_overrides({"output.las": True})
             round_jobs[w] = (i, flown, PassJob(f"confirm-{w}-{c.altitude_m:g}m-{c.speed_m_s:g}mps-{c.spacing_m:g}m", cfg,
