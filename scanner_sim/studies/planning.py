@@ -459,7 +459,8 @@ def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_o
                    for w in waters}
         # the pulses a second the scanner fires, as the first sample pass counted them over its line's time
         rate = outcomes[0].summary["pulses"] / (sample_length_m / combos[0][2])
-        results, configs, n_confirm = _confirm(config, out, dask, area, ladders, k, need, built,
+        by_combo = {(p.water, p.altitude_m, p.speed_m_s): p for p in profiles}
+        results, configs, n_confirm = _confirm(config, out, dask, area, ladders, by_combo, k, factor, need, built,
                                                max_confirm_pulses, progress, redo, rate)
         plans = []
         for w in waters:
@@ -600,23 +601,55 @@ def _candidates(profiles, area: SiteArea, factor: float, need: float, step: floa
     return sorted(out, key=lambda c: (c.status != "feasible", c.survey_time_s, c.altitude_m, c.speed_m_s))
 
 
-def _confirm(config, out: Path, dask, area, ladders, k, need, built, max_pulses, progress, redo, rate):
-    """Confirm each water's cheapest feasible candidate by a pass; on a shortfall try the next, up to
-    MAX_CONFIRMATIONS; ``rate``: the pulses a second the passes fire [Hz]. Returns per water (chosen, confirmation),
-    the confirmation configs by water, and the passes."""
+#: Steps of one line fewer tried below a confirmed plan, per water.
+MAX_DESCENT = 6
+
+
+def make_candidate(p: Profile, area: SiteArea, spacing_m: float, factor: float, need: float) -> Candidate:
+    """The candidate of profile ``p``'s altitude and speed at ``spacing_m`` over ``area``, with its prediction."""
+    n = line_count(area.size_m[1], spacing_m)
+    return Candidate(p.altitude_m, p.speed_m_s, spacing_m, p.swath_m(need),
+                     predicted_share(p, spacing_m, factor), survey_time_s(area, spacing_m, p.speed_m_s),
+                     n * area.size_m[0], n)
+
+
+def _confirm(config, out: Path, dask, area, ladders, profiles, k, factor, need, built, max_pulses, progress, redo,
+             rate):
+    """Per water: confirm the cheapest feasible candidate by a pass, on a shortfall the next (up to
+    MAX_CONFIRMATIONS); once one is confirmed, confirm the plan of one line fewer at its altitude and speed, and
+    while that meets the order too, take it and go one line fewer again (the prediction errs on the safe side), up to
+    MAX_DESCENT. ``rate``: the pulses a second the passes fire [Hz]. Returns per water (chosen, confirmation), the
+    chosen plans' confirmation configs by water, and the passes run."""
     results: dict = {w: (None, None) for w in ladders}
     configs: dict = {}
-    tried = {w: 0 for w in ladders}
+    mode = {w: "search" for w in ladders}
+    steps = {w: 0 for w in ladders}
+    chosen_at: dict = {}
     runs = 0
     while True:
         round_jobs = {}
         for w, cands in ladders.items():
-            if results[w][0] is not None or tried[w] >= MAX_CONFIRMATIONS:
+            if mode[w] == "search":
+                feasible = [i for i, c in enumerate(cands) if c.status == "feasible"]
+                if not feasible or steps[w] >= MAX_CONFIRMATIONS:
+                    mode[w] = "done"
+                    continue
+                i = feasible[0]
+            elif mode[w] == "descend":
+                c = cands[chosen_at[w]]
+                if c.lines <= 2 or steps[w] >= MAX_DESCENT:
+                    mode[w] = "done"
+                    continue
+                spacing = area.size_m[1] / (c.lines - 2)
+                same = [j for j, d in enumerate(cands) if (d.altitude_m, d.speed_m_s, d.lines)
+                        == (c.altitude_m, c.speed_m_s, c.lines - 1)]
+                if same:
+                    i = same[0]
+                else:
+                    cands.append(make_candidate(profiles[w, c.altitude_m, c.speed_m_s], area, spacing, factor, need))
+                    i = len(cands) - 1
+            else:
                 continue
-            feasible = [i for i, c in enumerate(cands) if c.status == "feasible"]
-            if not feasible:
-                continue
-            i = feasible[0]
             c = cands[i]
             flown = confirm_area(area, c, rate, max_pulses)
             cfg = plan_config(config, w, flown, c).with_overrides({"output.las": True})
@@ -627,7 +660,7 @@ def _confirm(config, out: Path, dask, area, ladders, k, need, built, max_pulses,
         outcomes = _ran(run_jobs([j for _, _, j in round_jobs.values()], out, dask, redo=redo, progress=progress))
         runs += len(outcomes)
         for (w, (i, flown, job)), outcome in zip(round_jobs.items(), outcomes):
-            tried[w] += 1
+            steps[w] += 1
             c = ladders[w][i]
             grid = _grid(out / job.name)
             reading = judged(grid, area_cells(grid, flown, c.spacing_m, built), k)
@@ -635,15 +668,27 @@ def _confirm(config, out: Path, dask, area, ladders, k, need, built, max_pulses,
             confirmation = {"pass": job.name, "whole_area": flown == area,
                             "area": {"center_m": list(flown.center_m), "size_m": list(flown.size_m)},
                             "pulses": outcome.summary["pulses"], "met": met, **reading}
-            reason = ("chosen: least survey time confirmed" if met else
-                      f"confirmed short: compliance {100 * reading['compliant_share']:.1f} %, coverage "
-                      f"{100 * reading['covered_share']:.1f} % (need {100 * need:g} %)")
-            ladders[w][i] = replace(c, status="chosen" if met else "rejected", reason=reason, confirmed=confirmation)
+            short = (f"compliance {100 * reading['compliant_share']:.1f} %, coverage "
+                     f"{100 * reading['covered_share']:.1f} % (need {100 * need:g} %)")
             if met:
-                results[w] = (ladders[w][i], confirmation)
-                configs[w] = job.config
+                if w in chosen_at:  # the one before, a line more, met too: costlier
+                    before = ladders[w][chosen_at[w]]
+                    ladders[w][chosen_at[w]] = replace(before, status="rejected", reason=(
+                        f"costlier than the chosen plan, one line fewer, which also met the order "
+                        f"({duration(before.survey_time_s)} against {duration(c.survey_time_s)})"))
+                ladders[w][i] = replace(c, status="chosen", reason="chosen: least survey time confirmed; one line "
+                                        "fewer confirmed short or not possible", confirmed=confirmation)
+                results[w], configs[w], chosen_at[w] = (ladders[w][i], confirmation), job.config, i
+                if mode[w] == "search":
+                    mode[w], steps[w] = "descend", 0
             else:
-                results[w] = (None, confirmation)
+                prefix = "one line fewer than the chosen plan: " if mode[w] == "descend" else ""
+                ladders[w][i] = replace(c, status="rejected", reason=f"{prefix}confirmed short: {short}",
+                                        confirmed=confirmation)
+                if mode[w] == "descend":
+                    mode[w] = "done"
+                else:
+                    results[w] = (None, confirmation)
     for w, cands in ladders.items():
         chosen = results[w][0]
         for i, c in enumerate(cands):
@@ -652,6 +697,7 @@ def _confirm(config, out: Path, dask, area, ladders, k, need, built, max_pulses,
                     f"costlier than the chosen plan ({duration(c.survey_time_s)} against "
                     f"{duration(chosen.survey_time_s)})" if chosen else f"not confirmed: {MAX_CONFIRMATIONS} "
                     "cheaper candidates were confirmed short first"))
+        cands.sort(key=lambda c: (c.status != "chosen", c.survey_time_s, c.altitude_m, c.speed_m_s))
     return results, configs, runs
 
 
