@@ -13,6 +13,7 @@ from scanner_sim.io.tables import read_coverage_grid_npz
 from scanner_sim.studies import planning
 from scanner_sim.studies.planning import (
     BIN_M,
+    Candidate,
     Profile,
     SiteArea,
     area_cells,
@@ -160,3 +161,16 @@ def test_cached_scene_over_a_raster_is_not_reused_for_another_plan():
     window = cached_scene(line).heightfield.extent_m
     assert window != whole_extent
     assert cached_scene(site).heightfield.extent_m == whole_extent
+
+
+def test_a_large_site_is_confirmed_over_a_centred_sample_that_fits_the_pulse_budget():
+    """72 x 52 m at 52/7 m spacing (8 lines), 2 m/s, 1,260 pulses/s: the whole plan is 314 s, 395,640 pulses. Under a
+    100,000-pulse budget the lines are cut to 20 m (not shorter), still (8 x 20 + 7 x 7.43) / 2 x 1,260 = 133,560
+    pulses; 6 lines fit ((6 x 20 + 5 x 7.43) / 2 x 1,260 = 99,000), so the sample is 20 x 37.1 m."""
+    area = SiteArea((0.0, 0.0), (72.0, 52.0), 90.0)
+    plan = Candidate(4.0, 2.0, 52 / 7, 7.0, 0.95, survey_time_s(area, 52 / 7, 2.0), 8 * 72.0, 8)
+    assert plan.survey_time_s * 1260 == pytest.approx(395_640)
+    assert planning.confirm_area(area, plan, 1260.0, 400_000) == area
+    sample = planning.confirm_area(area, plan, 1260.0, 100_000)
+    assert sample.size_m == pytest.approx((20.0, 5 * 52 / 7))
+    assert survey_time_s(sample, plan.spacing_m, 2.0) * 1260 <= 100_000
