@@ -13,7 +13,10 @@ CANDIDATE_HEADER = ["altitude [m]", "speed [m/s]", "spacing [m]", "lines", "swat
 
 
 def _pct(x) -> str:
-    return "—" if x is None else f"{100 * x:.1f} %"
+    """A share as a percentage; two decimals above 99.9 %, so that 99.97 % does not read as a full 100.0 %."""
+    if x is None:
+        return "—"
+    return f"{100 * x:.2f} %" if 0.999 < x < 1.0 else f"{100 * x:.1f} %"
 
 
 def candidate_rows(water: dict) -> list[list[str]]:

@@ -676,8 +676,10 @@ def _confirm(config, out: Path, dask, area, ladders, profiles, k, factor, need, 
                     ladders[w][chosen_at[w]] = replace(before, status="rejected", reason=(
                         f"costlier than the chosen plan, one line fewer, which also met the order "
                         f"({duration(before.survey_time_s)} against {duration(c.survey_time_s)})"))
-                ladders[w][i] = replace(c, status="chosen", reason="chosen: least survey time confirmed; one line "
-                                        "fewer confirmed short or not possible", confirmed=confirmation)
+                how = ("confirmed a line fewer than a confirmed plan (the prediction erred safe)" if w in chosen_at
+                       else "the least-time candidate predicted to meet the order, confirmed")
+                ladders[w][i] = replace(c, status="chosen", reason=f"chosen: {how}; one line fewer confirmed short or "
+                                        "not possible", confirmed=confirmation)
                 results[w], configs[w], chosen_at[w] = (ladders[w][i], confirmation), job.config, i
                 if mode[w] == "search":
                     mode[w], steps[w] = "descend", 0
