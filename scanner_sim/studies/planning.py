@@ -38,6 +38,7 @@ from scanner_sim.runs.cluster import maybe_client
 from scanner_sim.runs.jobs import PassOutcome, run_jobs
 from scanner_sim.runs.tasks import PassJob, cached_scene
 from scanner_sim.studies.coverage_study import combination_config
+from scanner_sim.studies.features import cube_positions, with_cubes
 from scanner_sim.survey.setup import PassOptions
 
 #: Share of the planned area on which the order must hold, by default.
@@ -47,6 +48,10 @@ BIN_M = CoverageSettings().cell_m
 #: Altitudes and speeds tried by default, as multiples of the scene's own.
 DEFAULT_ALTITUDE_FACTORS = (0.5, 1.0, 1.5)
 DEFAULT_SPEED_FACTORS = (0.5, 1.0)
+#: Cubes of the order's feature size placed in a confirmation, by default: 19 of 20 detected is the 95 % share.
+DEFAULT_FEATURE_CUBES = 20
+#: Seed of the cubes' positions.
+CUBE_SEED = 0
 #: Confirmations tried per water (each a pass over the area) before the water is declared not achievable.
 MAX_CONFIRMATIONS = 3
 
@@ -417,16 +422,19 @@ def profile_of(grid: dict, line, half_band_m: float, trim_m: float) -> tuple[np.
 def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_ocean", "turbid_harbor"),
                 altitudes_m=None, speeds_m_s=None, *, required_share: float = DEFAULT_REQUIRED_SHARE,
                 sample_lines: int = 3, sample_length_m: float = 20.0, min_spacing_m: float = 0.5,
-                max_confirm_pulses: int = 2_000_000, out_dir: str | Path | None = None, client=None,
-                workers: int | None = None, scheduler: str | None = None, redo: bool = False, render: bool = True,
+                max_confirm_pulses: int = 2_000_000, feature_cubes: int = DEFAULT_FEATURE_CUBES,
+                out_dir: str | Path | None = None, client=None, workers: int | None = None,
+                scheduler: str | None = None, redo: bool = False, render: bool = True,
                 progress: bool = False) -> SurveyPlan:
     """The plan of least survey time meeting ``order`` over ``scene``'s site, per water (module docstring,
     docs/planning.md). ``scene``: a SceneConfig or a shipped scene's name or file; ``altitudes_m`` and
     ``speeds_m_s`` default to the scene's times :data:`DEFAULT_ALTITUDE_FACTORS` and :data:`DEFAULT_SPEED_FACTORS`.
     The passes (``sample-*``, ``confirm-*``) run into ``out_dir`` (a temporary folder when None) as Dask tasks on
     ``client``, ``scheduler`` or a local cluster of ``workers``; complete ones are kept on a re-run (unless ``redo``).
-    With ``out_dir``, the plan's files are written there too (:func:`~scanner_sim.studies.plan_files.write_plan_files`;
-    ``render``: the chart and plan.html). Every input is checked before anything is written."""
+    ``feature_cubes``: cubes of the order's feature size placed in each confirmation pass, where the order asks
+    feature detection (0: none, the density rule alone judges it). With ``out_dir``, the plan's files are written
+    there too (:func:`~scanner_sim.studies.plan_files.write_plan_files`; ``render``: the chart and plan.html).
+    Every input is checked before anything is written."""
     config = _scene_config(scene)
     k = order_index(order)
     factor = s44.ORDERS[k].coverage_percent / 100.0
@@ -461,7 +469,7 @@ def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_o
         rate = outcomes[0].summary["pulses"] / (sample_length_m / combos[0][2])
         by_combo = {(p.water, p.altitude_m, p.speed_m_s): p for p in profiles}
         results, configs, n_confirm = _confirm(config, out, dask, area, ladders, by_combo, k, factor, need, built,
-                                               max_confirm_pulses, progress, redo, rate)
+                                               max_confirm_pulses, progress, redo, rate, feature_cubes)
         plans = []
         for w in waters:
             chosen, confirmation = results[w]
@@ -614,11 +622,12 @@ def make_candidate(p: Profile, area: SiteArea, spacing_m: float, factor: float, 
 
 
 def _confirm(config, out: Path, dask, area, ladders, profiles, k, factor, need, built, max_pulses, progress, redo,
-             rate):
+             rate, cubes):
     """Per water: confirm the cheapest feasible candidate by a pass, on a shortfall the next (up to
     MAX_CONFIRMATIONS); once one is confirmed, confirm the plan of one line fewer at its altitude and speed, and
     while that meets the order too, take it and go one line fewer again (the prediction errs on the safe side), up to
-    MAX_DESCENT. ``rate``: the pulses a second the passes fire [Hz]. Returns per water (chosen, confirmation), the
+    MAX_DESCENT. ``rate``: the pulses a second the passes fire [Hz]; ``cubes``: feature cubes placed in each
+    confirmation of an order that asks feature detection (:func:`_cubes`). Returns per water (chosen, confirmation), the
     chosen plans' confirmation configs by water, and the passes run."""
     results: dict = {w: (None, None) for w in ladders}
     configs: dict = {}
@@ -653,23 +662,30 @@ def _confirm(config, out: Path, dask, area, ladders, profiles, k, factor, need, 
             c = cands[i]
             flown = confirm_area(area, c, rate, max_pulses)
             cfg = plan_config(config, w, flown, c).with_overrides({"output.las": True})
-            round_jobs[w] = (i, flown, PassJob(f"confirm-{w}-{c.altitude_m:g}m-{c.speed_m_s:g}mps-{c.spacing_m:g}m", cfg,
+            placed = _cubes(cfg, k, cubes)
+            if placed:
+                cfg = with_cubes(cfg, placed)
+            round_jobs[w] = (i, flown, placed, PassJob(f"confirm-{w}-{c.altitude_m:g}m-{c.speed_m_s:g}mps-{c.spacing_m:g}m", cfg,
                                                PassOptions(progress=False, render=False, write_scene=False)))
         if not round_jobs:
             break
-        outcomes = _ran(run_jobs([j for _, _, j in round_jobs.values()], out, dask, redo=redo, progress=progress))
+        outcomes = _ran(run_jobs([j for *_, j in round_jobs.values()], out, dask, redo=redo, progress=progress))
         runs += len(outcomes)
-        for (w, (i, flown, job)), outcome in zip(round_jobs.items(), outcomes):
+        for (w, (i, flown, placed, job)), outcome in zip(round_jobs.items(), outcomes):
             steps[w] += 1
             c = ladders[w][i]
             grid = _grid(out / job.name)
             reading = judged(grid, area_cells(grid, flown, c.spacing_m, built), k)
-            met = reading["compliant_share"] >= need and reading["covered_share"] >= need
+            detection = _detection(outcome.summary, placed)
+            met = (reading["compliant_share"] >= need and reading["covered_share"] >= need
+                   and (detection is None or detection["detected_share"] >= need))
             confirmation = {"pass": job.name, "whole_area": flown == area,
                             "area": {"center_m": list(flown.center_m), "size_m": list(flown.size_m)},
-                            "pulses": outcome.summary["pulses"], "met": met, **reading}
+                            "pulses": outcome.summary["pulses"], "met": met, **reading, "features": detection}
             short = (f"compliance {100 * reading['compliant_share']:.1f} %, coverage "
-                     f"{100 * reading['covered_share']:.1f} % (need {100 * need:g} %)")
+                     f"{100 * reading['covered_share']:.1f} %"
+                     + (f", features detected {detection['detected']} of {detection['placed']}" if detection else "")
+                     + f" (need {100 * need:g} %)")
             if met:
                 if w in chosen_at:  # the one before, a line more, met too: costlier
                     before = ladders[w][chosen_at[w]]
@@ -701,6 +717,31 @@ def _confirm(config, out: Path, dask, area, ladders, profiles, k, factor, need, 
                     "cheaper candidates were confirmed short first"))
         cands.sort(key=lambda c: (c.status != "chosen", c.survey_time_s, c.altitude_m, c.speed_m_s))
     return results, configs, runs
+
+
+def _cubes(config: SceneConfig, k: int, count: int) -> list[dict]:
+    """``count`` cubes of order k's feature size placed across the swath of ``config``'s pass, or none when the order
+    asks no feature detection (or ``count`` is 0)."""
+    size = s44.ORDERS[k].feature_m
+    if size is None or not count:
+        return []
+    return cube_positions(config, [size], count, CUBE_SEED, None, "feature_cubes")
+
+
+def _detection(summary: dict, placed: list[dict]) -> dict | None:
+    """The cubes ``placed`` in a confirmation: placed, detected (>= s44.FEATURE_MIN_SOUNDINGS valid soundings on
+    it), their share, and the not-detected ones' causes; None without cubes."""
+    if not placed:
+        return None
+    names = {p["name"] for p in placed}
+    mine = [o for o in summary["coverage"]["objects"] if o["name"] in names]
+    detected = sum(o["detected"] for o in mine)
+    causes: dict = {}
+    for o in mine:
+        if not o["detected"]:
+            causes[o["gap_cause"]] = causes.get(o["gap_cause"], 0) + 1
+    return {"size_m": placed[0]["size_m"], "placed": len(placed), "detected": detected,
+            "detected_share": detected / len(placed), "missed_by_cause": causes}
 
 
 def _best_and_cause(profiles, k, required, step, area) -> tuple[str | None, str]:
