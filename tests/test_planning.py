@@ -125,15 +125,27 @@ def test_the_chosen_plan_meets_special_order_and_the_next_cheaper_falls_short(sp
 def test_the_chosen_spacing_follows_the_swath_each_water_measured(site, tmp_path):
     """At 3 m, turbid harbour water narrows the swath that meets Special Order (backscatter masks the far beams) and
     its neighbours' poor far soundings spoil the overlap, where clean ocean water keeps the scan's geometric swath: the
-    turbid plan drops to 2 m and a narrower line spacing than the clean one over the same site."""
+    turbid plan drops to 2 m and a narrower line spacing than the clean one over the same site. Soundings alone
+    (no cubes): at 2 m the top of a 1 m cube lies in the lidar's blind zone, which the next test shows."""
     plan = plan_survey(site, "special", ["clean_ocean", "turbid_harbor"], [2.0, 3.0], [1.0], out_dir=tmp_path,
-                       **SAMPLES)
+                       feature_cubes=0, **SAMPLES)
     clean, turbid = plan.waters
     swath = {(p.water, p.altitude_m): p.swath_m(0.95) for p in plan.profiles}
     assert swath["turbid_harbor", 3.0] < swath["clean_ocean", 3.0]
     assert clean.achievable and turbid.achievable
     assert turbid.chosen.spacing_m < clean.chosen.spacing_m
     assert (turbid.chosen.altitude_m, clean.chosen.altitude_m) == (2.0, 3.0)
+
+
+@pytest.mark.slow
+def test_cubes_in_the_blind_zone_make_a_water_not_achievable_and_say_why(site, tmp_path):
+    """At 2 m altitude the top of Special Order's 1 m cube is 1 m from the lidar, inside the blind zone where beam and
+    field of view do not yet overlap: the soundings meet the order (previous test) but the cubes are not detected,
+    so turbid harbour water, which meets it at 2 m only, is not achievable, and the cause names the blind zone."""
+    plan = plan_survey(site, "special", ["turbid_harbor"], [2.0, 3.0], [1.0], out_dir=tmp_path, **SAMPLES)
+    turbid = plan.waters[0]
+    assert not turbid.achievable
+    assert "feature detection" in turbid.limiting_cause and "blind_zone" in turbid.limiting_cause
 
 
 def test_bad_inputs_are_refused_before_anything_is_written(site, tmp_path):

@@ -476,6 +476,7 @@ def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_o
             if chosen is None:
                 best, cause = _best_and_cause([p for p in profiles if p.water == w], k, required_share,
                                               min_spacing_m, area)
+                cause = _confirmed_cause(confirmation, need) or cause
                 plans.append(WaterPlan(w, None, tuple(ladders[w]), confirmation, best, cause))
             else:
                 plans.append(WaterPlan(w, chosen, tuple(ladders[w]), confirmation))
@@ -742,6 +743,23 @@ def _detection(summary: dict, placed: list[dict]) -> dict | None:
             causes[o["gap_cause"]] = causes.get(o["gap_cause"], 0) + 1
     return {"size_m": placed[0]["size_m"], "placed": len(placed), "detected": detected,
             "detected_share": detected / len(placed), "missed_by_cause": causes}
+
+
+def _confirmed_cause(confirmation: dict | None, need: float) -> str | None:
+    """What failed the last confirmation of a water that meets no plan: its undetected cubes and their causes when
+    detection fell short, else its gap cause with the most area; None without a confirmation (or a gap)."""
+    if confirmation is None:
+        return None
+    f = confirmation.get("features")
+    if f and f["detected_share"] < need:
+        causes = ", ".join(f"{c} {n}" for c, n in sorted(f["missed_by_cause"].items(), key=lambda item: -item[1]))
+        return (f"feature detection: {f['detected']} of {f['placed']} {f['size_m']:g} m cubes detected in the "
+                f"confirmation {confirmation['pass']} (missed: {causes})")
+    gaps = confirmation["gaps_m2"]
+    if gaps:
+        cause = max(gaps, key=gaps.get)
+        return f"{cause} ({gaps[cause]:.0f} m² of the confirmation {confirmation['pass']}'s planned area)"
+    return None
 
 
 def _best_and_cause(profiles, k, required, step, area) -> tuple[str | None, str]:
