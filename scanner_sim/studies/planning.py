@@ -50,6 +50,8 @@ DEFAULT_ALTITUDE_FACTORS = (0.5, 1.0, 1.5)
 DEFAULT_SPEED_FACTORS = (0.5, 1.0)
 #: Cubes of the order's feature size placed in a confirmation, by default: 19 of 20 detected is the 95 % share.
 DEFAULT_FEATURE_CUBES = 20
+#: Fewest cubes a confirmation places.
+MIN_FEATURE_CUBES = 5
 #: Seed of the cubes' positions.
 CUBE_SEED = 0
 #: Confirmations tried per water (each a pass over the area) before the water is declared not achievable.
@@ -721,12 +723,16 @@ def _confirm(config, out: Path, dask, area, ladders, profiles, k, factor, need, 
 
 
 def _cubes(config: SceneConfig, k: int, count: int) -> list[dict]:
-    """``count`` cubes of order k's feature size placed across the swath of ``config``'s pass, or none when the order
-    asks no feature detection (or ``count`` is 0)."""
+    """``count`` cubes of order k's feature size placed across the swath of ``config``'s pass (half as many while they
+    do not fit apart and in view, down to MIN_FEATURE_CUBES), or none when the order asks no feature detection, or
+    when not even that many fit (then the density rule alone judges detection)."""
     size = s44.ORDERS[k].feature_m
-    if size is None or not count:
-        return []
-    return cube_positions(config, [size], count, CUBE_SEED, None, "feature_cubes")
+    while size is not None and count >= MIN_FEATURE_CUBES:
+        try:
+            return cube_positions(config, [size], count, CUBE_SEED, None, "feature_cubes")
+        except ParameterError:  # no room for them apart and in view: half as many
+            count //= 2
+    return []
 
 
 def _detection(summary: dict, placed: list[dict]) -> dict | None:
