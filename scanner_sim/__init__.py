@@ -10,6 +10,7 @@ The Python API (``docs/python-api.md``)::
 
 from scanner_sim.config import ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes
 from scanner_sim.records.point_records import DropoutRecords, PointRecords
+from scanner_sim.studies.planning import SurveyPlan, plan_survey
 from scanner_sim.survey.pipeline import PassResult, run_pass, simulate_pass
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.version import __version__
@@ -17,6 +18,6 @@ from scanner_sim.world.scene import Scene, build_scene
 
 __all__ = [
     "ConfigError", "DropoutRecords", "PassOptions", "PassResult", "PassSetup", "PointRecords", "Scene",
-    "SceneConfig", "__version__", "build_scene", "load_scene", "parse_scene", "run_pass", "shipped_scenes",
-    "simulate_pass",
+    "SceneConfig", "SurveyPlan", "__version__", "build_scene", "load_scene", "parse_scene", "plan_survey", "run_pass",
+    "shipped_scenes", "simulate_pass",
 ]

@@ -19,7 +19,7 @@ from scanner_sim.cli import clouds, datasets, features, passes, perf, studies, u
 from scanner_sim.cli.registry import SUBCOMMANDS
 
 #: The order ``scanner-sim --help`` lists the subcommands in: the main job first.
-HELP_ORDER = ("run", "scenes", "validate", "schema", "view", "swath", "coverage", "features", "campaign", "dataset",
+HELP_ORDER = ("run", "scenes", "validate", "schema", "view", "swath", "coverage", "features", "campaign", "plan", "dataset",
               "tradeoff", "overlap", "bench", "bench-rays")
 
 def build_parser() -> argparse.ArgumentParser:

@@ -291,3 +291,65 @@ def _cmd_campaign(args) -> int:
             print(f"failed: {failed['dir']}: {failed['error']} (run the campaign again to redo it)")
     print(out / "campaign.json")
     return 1 if result["failed"] else 0
+
+
+# -- plan ---------------------------------------------------------------------------------------------------
+@subcommand("plan")
+def _add_plan(sub):
+    from scanner_sim.metrics.s44 import ORDER_NAMES
+    from scanner_sim.studies.coverage_study import DEFAULT_WATERS
+    from scanner_sim.studies.planning import DEFAULT_REQUIRED_SHARE
+
+    p = sub.add_parser("plan", help="the cheapest survey plan (altitude, speed, line spacing) meeting an IHO S-44 "
+                       "order at the scene's site, per water type (docs/planning.md)")
+    p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path (a raster or procedural seabed)")
+    p.add_argument("--order", required=True, type=nonempty(), metavar="ORDER",
+                   help=f"IHO S-44 order, one of {', '.join(ORDER_NAMES)}")
+    p.add_argument("--waters", nargs="+", default=list(DEFAULT_WATERS), metavar="WATER", type=nonempty(),
+                   help="water presets (default: %(default)s)")
+    p.add_argument("--altitudes-m", nargs="+", type=positive_float("altitudes_m"), metavar="M",
+                   help="altitudes tried [m] (default: the scene's x 0.5, 1, 1.5)")
+    p.add_argument("--speeds-m-s", nargs="+", type=positive_float("speeds_m_s"), metavar="M_S",
+                   help="speeds tried [m/s] (default: the scene's x 0.5, 1)")
+    p.add_argument("--required-share", type=positive_float("required_share"), default=DEFAULT_REQUIRED_SHARE,
+                   help="share of the planned area the order must hold on (default: %(default)s)")
+    p.add_argument("--sample-lines", type=positive_int("sample_lines"), default=3,
+                   help="sample lines over the site, at its depth quantiles (default: %(default)s)")
+    p.add_argument("--sample-length-m", type=positive_float("sample_length_m"), default=20.0,
+                   help="length of each sample line [m] (default: %(default)s)")
+    p.add_argument("--max-confirm-pulses", type=positive_int("max_confirm_pulses"), default=2_000_000,
+                   help="largest confirmation pass; a larger plan is confirmed over a centred sample "
+                        "(default: %(default)s)")
+    p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir + /plan)")
+    p.add_argument("--no-render", action="store_true", help="no chart, no plan.html")
+    p.add_argument("--quiet", action="store_true", help="no progress; print only the path of plan.json")
+    p.add_argument("--json", action="store_true", help="print plan.json's content instead of the summary")
+    _add_dask_arguments(p)
+    p.set_defaults(func=_cmd_plan)
+
+
+def _cmd_plan(args) -> int:
+    from pathlib import Path
+
+    from scanner_sim.config import load_scene
+    from scanner_sim.render.plan_report import water_summary
+    from scanner_sim.studies.planning import plan_survey
+
+    config = load_scene(args.scene)
+    out = Path(args.out or Path(config.output_dir) / "plan")
+    plan_survey(config, args.order, tuple(args.waters), args.altitudes_m, args.speeds_m_s,
+                required_share=float(args.required_share), sample_lines=args.sample_lines,
+                sample_length_m=args.sample_length_m, max_confirm_pulses=args.max_confirm_pulses, out_dir=out,
+                workers=_workers(args), scheduler=args.scheduler, redo=args.redo, render=not args.no_render,
+                progress=not (args.quiet or args.json))
+    text = (out / "plan.json").read_text()
+    if args.json:
+        print(text, end="")
+        return 0
+    if not args.quiet:
+        data = json.loads(text)
+        for water in data["waters"]:
+            print(water_summary(data, water))
+        print(f"{data['sample_passes']} sample passes, {data['confirmation_passes']} confirmation passes")
+    print(out / "plan.json")
+    return 0

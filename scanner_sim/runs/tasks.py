@@ -61,10 +61,14 @@ _SCENES: dict[str, Scene] = {}
 
 
 def cached_scene(config: SceneConfig) -> Scene:
-    """The built scene of ``config``, kept per process: the scene depends only on its CRS, the seabed and the
-    objects (and the folder mesh files are found in), so passes that differ in water, instrument, platform,
-    scanner or survey share one build. One scene is kept."""
-    key = config.model_dump_json(include={"crs", "seabed", "objects"}) + str(config.source_path)
+    """The built scene of ``config``, kept per process: the scene depends only on its CRS, the seabed, the objects
+    (and the folder mesh files are found in) and, over a raster seabed, the plan's bounds (the raster is read in a
+    window around them), so passes that differ in water, instrument, scanner or survey share one build. One scene
+    is kept."""
+    from scanner_sim.world.raster import plan_bounds
+
+    window = plan_bounds(config) if getattr(config.seabed, "raster", None) is not None else None
+    key = config.model_dump_json(include={"crs", "seabed", "objects"}) + str(config.source_path) + str(window)
     if key not in _SCENES:
         _SCENES.clear()
         _SCENES[key] = build_scene(config)
