@@ -3,6 +3,7 @@ the chosen plan marked (``scanner-sim plan``, docs/planning.md)."""
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping
 
 from scanner_sim.render.figure_png import figure_to_png
@@ -41,8 +42,9 @@ def plot_plan_chart(path_png, plan: Mapping) -> None:
             title = f"{water['water']}: {t:.1f} min"
         else:
             title = f"{water['water']}: not achievable"
-            ax.text(0.5, 0.5, f"best order: {water['best_order'] or 'none'}\n{water['limiting_cause']}",
-                    transform=ax.transAxes, ha="center", va="center", fontsize=8, wrap=True,
+            # matplotlib's wrap=True wraps at the figure's edge, not the panel's: wrapped to the panel by hand
+            cause = textwrap.fill(f"best order: {water['best_order'] or 'none'}; {water['limiting_cause']}", 42)
+            ax.text(0.5, 0.5, cause, transform=ax.transAxes, ha="center", va="center", fontsize=8,
                     bbox=dict(facecolor="white", edgecolor="0.7"))
         ax.axhline(need, color="0.3", ls="--", lw=1, label=f"required {need:g} %")
         ax.set_title(title, fontsize=10)
