@@ -1,5 +1,6 @@
 """What the tests share: the repository's root, the two command lines run in process, and the waters and models
-of the muls detection tests. Test files import these by name (``from conftest import run_cli``).
+of the muls detection tests, the Chromium of the browser tests. Test files import these by name
+(``from conftest import run_cli``).
 
 Where a test file goes: tests/muls/<stage>/ or tests/scanner_sim/<stage>/ for the module it tests, named
 ``test_<module>.py`` when it tests one module (a stage's README.md says where the others are); tests/system/ for
@@ -9,9 +10,12 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 #: The repository's root.
 ROOT = Path(__file__).resolve().parent.parent
@@ -59,3 +63,13 @@ def dropout_causes(ranging) -> dict[str, int]:
 
     counts = np.bincount(ranging.dropout_cause[ranging.dropout_cause >= 0], minlength=len(DROPOUT_CAUSES))
     return {name: int(n) for name, n in zip(DROPOUT_CAUSES, counts) if n}
+
+
+def chromium() -> str:
+    """The Chromium on PATH; the test is skipped without one, and fails without one under MULS_REQUIRE_CHROMIUM=1."""
+    browser = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+    if browser is None:
+        if os.environ.get("MULS_REQUIRE_CHROMIUM") == "1":
+            pytest.fail("MULS_REQUIRE_CHROMIUM=1 but no chromium on PATH")
+        pytest.skip("no chromium on PATH (CI installs it)")
+    return browser

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from scanner_sim.render.point_colours import point_rgb
-from scanner_sim.render.web_view import COLOURINGS, MESH_MAX_TRIANGLES, PassFiles, cluster_mesh, stride_for
+from scanner_sim.render.web_view import COLOURINGS, MESH_MAX_TRIANGLES, PassFiles, cluster_mesh, sampled_points
 
 #: The only address the viewer listens on: this machine, never the network.
 HOST = "127.0.0.1"
@@ -31,19 +31,10 @@ def serve(files: PassFiles, *, port: int = DEFAULT_PORT, max_points: int = DEFAU
           color: str | None = None, announce=print) -> None:
     """Serve the points of ``files`` (coloured by ``color``, switchable), the faded scene mesh and the trajectory at
     http://127.0.0.1:PORT until interrupted; ``announce`` gets the address line once the server listens."""
-    from scanner_sim.io import read_las, read_scene_ply, read_trajectory_csv
-    from scanner_sim.records.point_records import PointRecords
+    from scanner_sim.io import read_scene_ply, read_trajectory_csv
 
     viser = _viser()
-    points = PointRecords.concatenate([read_las(f) for f in files.clouds])
-    n = len(points)
-    stride = stride_for(n, max_points)
-    shown = points.select(np.arange(0, n, stride)) if stride > 1 else points
-    xyz = np.asarray(shown.xyz, float)
-    lo, hi = (xyz.min(axis=0), xyz.max(axis=0)) if len(xyz) else (np.zeros(3), np.ones(3))
-    centre = (lo + hi) / 2.0
-    values = {"depth": -xyz[:, 2], "class": shown.classification, "intensity": shown.intensity,
-              "channel": shown.channel, "range_error": shown.range_error_m, "tvu": shown.tvu_m, "snr": shown.snr}
+    n, stride, _, xyz, lo, hi, centre, values = sampled_points(files, max_points)
     scene = read_scene_ply(files.scene_ply) if files.scene_ply is not None else None
     first = color or ("depth" if scene is not None else "class")
     spacing = math.sqrt(max(float((hi[0] - lo[0]) * (hi[1] - lo[1])), 1e-6) / max(len(xyz), 1))

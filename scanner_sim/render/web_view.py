@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -165,13 +166,24 @@ def _footprints(dropouts, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.n
     return where[order], rows[order]
 
 
-def page_data(files: PassFiles, *, max_points: int = DEFAULT_MAX_POINTS, color: str | None = None,
-              point_size_px: float = 2.0) -> dict:
-    """The JSON the viewer reads, from the files of one pass; ``color``: the colouring shown first (default
-    depth over a seabed, class otherwise)."""
-    from muls.ranging.returns import DROPOUT_CAUSES
-    from scanner_sim.config.materials import LABELS
-    from scanner_sim.io import read_dropouts_npz, read_las, read_scene_ply, read_trajectory_csv
+class PointSample(NamedTuple):
+    """The points of a pass as a viewer shows them: ``n`` in the files, one in every ``stride`` kept (``shown``),
+    their positions ``xyz`` (m, 3) [m], bounds ``lo``, ``hi`` and ``centre`` (3,) [m], and per colouring its values
+    (m,)."""
+
+    n: int
+    stride: int
+    shown: object
+    xyz: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    centre: np.ndarray
+    values: dict
+
+
+def sampled_points(files: PassFiles, max_points: int) -> PointSample:
+    """The points of ``files``, one in every :func:`stride_for` in file order, with what each colouring shows."""
+    from scanner_sim.io import read_las
     from scanner_sim.records.point_records import PointRecords
 
     points = PointRecords.concatenate([read_las(f) for f in files.clouds])
@@ -183,6 +195,18 @@ def page_data(files: PassFiles, *, max_points: int = DEFAULT_MAX_POINTS, color: 
     centre = (lo + hi) / 2.0
     values = {"depth": -xyz[:, 2], "class": shown.classification, "intensity": shown.intensity,
               "channel": shown.channel, "range_error": shown.range_error_m, "tvu": shown.tvu_m, "snr": shown.snr}
+    return PointSample(n, stride, shown, xyz, lo, hi, centre, values)
+
+
+def page_data(files: PassFiles, *, max_points: int = DEFAULT_MAX_POINTS, color: str | None = None,
+              point_size_px: float = 2.0) -> dict:
+    """The JSON the viewer reads, from the files of one pass; ``color``: the colouring shown first (default
+    depth over a seabed, class otherwise)."""
+    from muls.ranging.returns import DROPOUT_CAUSES
+    from scanner_sim.config.materials import LABELS
+    from scanner_sim.io import read_dropouts_npz, read_scene_ply, read_trajectory_csv
+
+    n, stride, shown, xyz, lo, hi, centre, values = sampled_points(files, max_points)
     names = [f.name for f in files.clouds]
     rule = (f"all {n:,} points" if stride == 1 else
             f"one point in every {stride} in file order ({len(shown):,} of {n:,}; budget {max_points:,})")

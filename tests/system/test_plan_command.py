@@ -12,10 +12,10 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 import yaml
+from conftest import chromium
 
 from scanner_sim.cli import main
 from scanner_sim.runs.jobs import TIMING_KEYS
-from tests.scanner_sim.studies.test_coverage_study import _chromium
 from tests.scanner_sim.studies.test_planning import SMALL_SITE
 
 ARGS = ["--order", "special", "--waters", "clean_ocean", "turbid_harbor", "--altitudes-m", "3", "5",
@@ -101,7 +101,7 @@ def test_running_the_written_scene_reproduces_the_confirmation(planned, tmp_path
 @pytest.mark.slow
 def test_plan_page_opens_in_headless_chromium_with_its_chart(planned, tmp_path):
     """Chromium renders plan.html; the screenshot shows the chart's chosen-plan red star (#d7301f)."""
-    browser = _chromium()
+    browser = chromium()
     out, _ = planned["0"]
     shot = tmp_path / "plan.png"
     run = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",

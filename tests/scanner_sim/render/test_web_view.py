@@ -6,7 +6,6 @@ from __future__ import annotations
 import base64
 import json
 import math
-import os
 import re
 import shutil
 import subprocess
@@ -15,6 +14,7 @@ from html.parser import HTMLParser
 import laspy
 import numpy as np
 import pytest
+from conftest import chromium
 
 from scanner_sim import cli, io
 from scanner_sim.records.point_records import DropoutRecords
@@ -34,16 +34,6 @@ def pass_dir(tmp_path_factory):
     return out
 
 
-def _chromium() -> str:
-    """The Chromium on PATH; the test is skipped without one, and fails without one under MULS_REQUIRE_CHROMIUM=1."""
-    browser = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
-    if browser is None:
-        if os.environ.get("MULS_REQUIRE_CHROMIUM") == "1":
-            pytest.fail("MULS_REQUIRE_CHROMIUM=1 but no chromium on PATH")
-        pytest.skip("no chromium on PATH (CI installs it)")
-    return browser
-
-
 def _offline() -> list[str]:
     """A command prefix that runs Chromium with networking off: a network namespace of its own (no interface but
     a down loopback) where the kernel lets us make one, else a proxy and resolver that reach nothing."""
@@ -56,7 +46,7 @@ def _offline() -> list[str]:
 def _browse(page, tmp_path, fragment: str, *, screenshot=None) -> subprocess.CompletedProcess:
     """Chromium, headless with SwiftShader WebGL and no network, on ``page#fragment``: a screenshot, or the DOM."""
     profile = tmp_path / f"profile-{len(list(tmp_path.glob('profile-*')))}"
-    args = [*_offline(), _chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
+    args = [*_offline(), chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
             "--enable-unsafe-swiftshader", "--disable-background-networking", "--proxy-server=http://127.0.0.1:9",
             "--host-resolver-rules=MAP * ~NOTFOUND", f"--user-data-dir={profile}", "--hide-scrollbars",
             f"--window-size={WINDOW[0]},{WINDOW[1]}", "--virtual-time-budget=20000",

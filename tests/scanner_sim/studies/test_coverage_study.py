@@ -4,14 +4,13 @@ import base64
 import contextlib
 import io as stdio
 import json
-import os
 import re
-import shutil
 import subprocess
 from html.parser import HTMLParser
 
 import numpy as np
 import pytest
+from conftest import chromium
 from matplotlib import image as mpimg
 
 from muls.infra.errors import ParameterError
@@ -133,22 +132,12 @@ def _hex_rgb(colour):
     return tuple(int(colour[i:i + 2], 16) for i in (1, 3, 5))
 
 
-def _chromium() -> str:
-    """The Chromium on PATH; the test is skipped without one, and fails without one under MULS_REQUIRE_CHROMIUM=1."""
-    browser = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
-    if browser is None:
-        if os.environ.get("MULS_REQUIRE_CHROMIUM") == "1":
-            pytest.fail("MULS_REQUIRE_CHROMIUM=1 but no chromium on PATH")
-        pytest.skip("no chromium on PATH (CI installs it)")
-    return browser
-
-
 def test_report_opens_in_headless_chromium_with_every_picture(small_study, tmp_path):
     """Chromium renders the page; the screenshot shows the map's covered teal and the renders' navy.
     .ci/run installs Chromium and sets MULS_REQUIRE_CHROMIUM=1, so CI never skips this."""
     from scanner_sim.render.plan_map import COVERAGE_COLOURS
 
-    browser = _chromium()
+    browser = chromium()
     out, _ = small_study
     shot = tmp_path / "report.png"
     run = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
@@ -183,7 +172,7 @@ def test_coverage_json_carries_s44_orders_and_compliance_per_record(small_study)
 
 def test_report_s44_section_opens_in_chromium_with_every_image_decoding(small_study, tmp_path):
     """A copy of report.html with a script that counts, once loaded, the images Chromium decoded and the sections."""
-    browser = _chromium()
+    browser = chromium()
     out, _ = small_study
     probe = ('<script>window.addEventListener("load", () => { const imgs = [...document.images];'
              ' const ok = imgs.filter(i => i.complete && i.naturalWidth > 0).length;'
