@@ -11,8 +11,9 @@ full angles theta_t (divergence) and theta_r (field of view).
   axis is seen by the share lens(r_ap, rho, s) / (pi r_ap^2) of the aperture
   (:func:`~muls.instrument.overlap_kernels.lens_area`: the intersection of the aperture disc and the disc of radius
   rho around the point), and the overlap is that share averaged over the uniformly lit spot. It is 0 up to
-  (d - r1 - r_ap) / tan(theta_r / 2) and reaches Eq. 11's plateau only where every aperture point sees the whole
-  spot, about 3.6 m for the MUL instead of Eq. 11's 2.0 m. The Monte Carlo reference (:mod:`muls.montecarlo`) sees the same geometry.
+  (d - r1 - r_ap) / tan(theta_r / 2) and reaches Eq. 11's plateau only where every aperture point sees the
+  whole spot, about 3.6 m for the MUL instead of Eq. 11's 2.0 m. The Monte Carlo reference (:mod:`muls.montecarlo`)
+  sees the same geometry.
 """
 
 from __future__ import annotations

@@ -24,11 +24,11 @@ def _add_scenes(p):
 
 
 def _cmd_scenes(args) -> int:
-    from scanner_sim.config import load_scene, shipped_scenes
+    from scanner_sim.config.loading import parse_yaml_text, read_scene_text, shipped_scenes
 
-    for name in shipped_scenes():
-        cfg = load_scene(name)
-        first = cfg.description.strip().splitlines()[0] if cfg.description.strip() else ""
+    for name, path in shipped_scenes().items():  # each file's description alone: no raster or mesh opened to list it
+        description = str(parse_yaml_text(read_scene_text(path), path).get("description") or "").strip()
+        first = description.splitlines()[0] if description else ""
         print(f"{name:18s} {first}")
     return 0
 
