@@ -11,15 +11,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .infra.errors import ParameterError
-from .instrument.channels import shot_noise_lsb2_per_w
 from .instrument.description import Channel, Instrument
-from .optics.optical_model import OpticalModel
 from .water.phase import PETZOLD_VALUES_PER_SR
 from .water.properties import GROUP_INDEX_FRESHWATER, GROUP_INDEX_SEAWATER, Water
+
+if TYPE_CHECKING:
+    from .optics.optical_model import OpticalModel
 
 # --- Waters ------------------------------------------------------------------------------------------------
 
@@ -206,6 +208,8 @@ def instrument_preset(name: str, water: Water | None = None) -> Instrument:
 def headroom_lsb(channel: Channel, digitizer, peak_w: float, k_sigma: float = GAIN_RULE_SIGMA) -> float:
     """Codes left above a signal of ``peak_w`` [W] in ``channel``: top code minus (dark level + signal +
     ``k_sigma`` standard deviations of dark and shot noise) [LSB]; negative when it would clip."""
+    from .instrument.channels import shot_noise_lsb2_per_w  # here: that module defines kernels, a preset needs none
+
     level = channel.volts_per_watt * peak_w * digitizer.lsb_per_volt  # MULS Eqs. 12, 13
     shot_var = shot_noise_lsb2_per_w(channel, digitizer.bandwidth_hz, digitizer.lsb_per_volt) * peak_w
     return digitizer.max_code - (channel.dark_mean_lsb + level + k_sigma * math.sqrt(channel.dark_std_lsb**2 + shot_var))
@@ -242,6 +246,8 @@ def single_channel(water: Water, base: Instrument | None = None) -> Instrument:
     base = base or mul2023()
     template = Channel("ch1", "single", split_ratio=1.0, voltage_ratio=1.0, gain=1.0)
     unit = replace(base, name="single_channel", channels=(template,))
+    from .optics.optical_model import OpticalModel  # kernels: only for a gain designed for a water
+
     peak_w = column_peak_w(OpticalModel.build(unit, water))
     try:
         gain = highest_unclipped_gain(template, unit.digitizer, peak_w, SINGLE_CHANNEL_MAX_GAIN)
@@ -259,6 +265,8 @@ def designed_mul(water: Water, gate_delay_s: float = POND_GATE_S[0], gate_width_
     the column near the instrument, which is what CH2 is for. PMT2 behind its gate runs at ``max_gain``.
     """
     probe = mul2023(gate_delay_s, gate_width_s, gain_pmt1=1.0, gain_pmt2=max_gain)
+    from .optics.optical_model import OpticalModel  # kernels: only for a gain designed for a water
+
     peak_w = column_peak_w(OpticalModel.build(probe, water))
     m1 = highest_unclipped_gain(probe.channel("ch2"), probe.digitizer, peak_w, max_gain)
     return replace(mul2023(gate_delay_s, gate_width_s, gain_pmt1=m1, gain_pmt2=max_gain), name="mul2023 (designed)")

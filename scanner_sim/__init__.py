@@ -6,18 +6,36 @@ The Python API (``docs/python-api.md``)::
     config = scanner_sim.load_scene("cable_survey")
     result = scanner_sim.simulate_pass(config, scanner_sim.PassOptions(max_pulses=5000, progress=False))
     result.points.xyz, result.points.classification, result.summary["points"]
+
+The public names load on first use (a module ``__getattr__``), so that ``import scanner_sim`` and the command
+line's ``--help`` do not import the pipeline, the kernels or the ray tracer behind them.
 """
 
-from scanner_sim.config import ConfigError, SceneConfig, load_scene, parse_scene, shipped_scenes
-from scanner_sim.records.point_records import DropoutRecords, PointRecords
-from scanner_sim.studies.planning import SurveyPlan, plan_survey
-from scanner_sim.survey.pipeline import PassResult, run_pass, simulate_pass
-from scanner_sim.survey.setup import PassOptions, PassSetup
-from scanner_sim.version import __version__
-from scanner_sim.world.scene import Scene, build_scene
+from __future__ import annotations
 
-__all__ = [
-    "ConfigError", "DropoutRecords", "PassOptions", "PassResult", "PassSetup", "PointRecords", "Scene",
-    "SceneConfig", "SurveyPlan", "__version__", "build_scene", "load_scene", "parse_scene", "plan_survey", "run_pass",
-    "shipped_scenes", "simulate_pass",
-]
+import importlib
+
+#: public name -> the module that defines it.
+_WHERE = {
+    **dict.fromkeys(("ConfigError", "SceneConfig", "load_scene", "parse_scene", "shipped_scenes"), "scanner_sim.config"),
+    **dict.fromkeys(("DropoutRecords", "PointRecords"), "scanner_sim.records.point_records"),
+    **dict.fromkeys(("SurveyPlan", "plan_survey"), "scanner_sim.studies.planning"),
+    **dict.fromkeys(("PassResult", "run_pass", "simulate_pass"), "scanner_sim.survey.pipeline"),
+    **dict.fromkeys(("PassOptions", "PassSetup"), "scanner_sim.survey.setup"),
+    "__version__": "scanner_sim.version",
+    **dict.fromkeys(("Scene", "build_scene"), "scanner_sim.world.scene"),
+}
+
+__all__ = sorted(_WHERE, key=str.lower)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_WHERE[name]), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

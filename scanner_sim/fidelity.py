@@ -30,7 +30,7 @@ class FidelityLevel:
     variance and skewness, else one per sub-ray. deciding_only: synthesise and search in each record window only the
     channels that can decide a return (:mod:`muls.receiver.deciding_channels`). multiple_scattering: ``"table"`` (the Monte
     Carlo's water column and each echo's spread in time, :mod:`muls.optics.scattering`) or ``"none"`` (single scattering),
-    ``muls.optics.optical_model.MULTIPLE_SCATTERING``.
+    ``muls.water.properties.MULTIPLE_SCATTERING``.
     """
 
     name: str

@@ -39,8 +39,6 @@ import threading
 import time
 from pathlib import Path
 
-import numba
-
 #: The package every kernel's cache key includes (every kernel may compile in its helpers).
 PHYSICS_PACKAGE = "muls"
 #: [s] Caches of other source states left untouched this long are removed (a few MB each).
@@ -105,6 +103,8 @@ def _cache_dir(path: Path | None):
     if path is None or os.environ.get("NUMBA_CACHE_DIR"):
         yield
         return
+    import numba
+
     with _lock:
         before = numba.config.CACHE_DIR
         numba.config.CACHE_DIR = str(path)
@@ -117,6 +117,8 @@ def _cache_dir(path: Path | None):
 def kernel(function=None, /, **options):
     """``@kernel`` or ``@kernel(nogil=True, ...)``: ``numba.njit(cache=True, **options)``, its cache in the directory
     of the defining package's sources (:func:`kernel_cache_dir`)."""
+
+    import numba  # here, not at the top: the command lines' --help and validate import this module but no kernel
 
     def define(f):
         with _cache_dir(kernel_cache_dir(f.__module__.partition(".")[0])):

@@ -8,11 +8,12 @@ full angles theta_t (divergence) and theta_r (field of view).
   aperture for every point inside the union of the aperture points' fields of view.
 - ``finite_aperture`` (the default): each aperture point sees only what lies within its own field of view, a disc
   of radius rho = z tan(theta_r / 2) around its own axis. A point of the spot at distance s from the receiver
-  axis is seen by the share lens(r_ap, rho, s) / (pi r_ap^2) of the aperture (:func:`lens_area`: the
-  intersection of the aperture disc and the disc of radius rho around the point), and the overlap is that share
-  averaged over the uniformly lit spot. It is 0 up to (d - r1 - r_ap) / tan(theta_r / 2) and reaches Eq. 11's
-  plateau only where every aperture point sees the whole spot, about 3.6 m for the MUL instead of Eq. 11's
-  2.0 m. The Monte Carlo reference (:mod:`muls.montecarlo`) sees the same geometry.
+  axis is seen by the share lens(r_ap, rho, s) / (pi r_ap^2) of the aperture
+  (:func:`~muls.instrument.overlap_kernels.lens_area`: the intersection of the aperture disc and the disc of radius
+  rho around the point), and the overlap is that share averaged over the uniformly lit spot. It is 0 up to
+  (d - r1 - r_ap) / tan(theta_r / 2) and reaches Eq. 11's plateau only where every aperture point sees the
+  whole spot, about 3.6 m for the MUL instead of Eq. 11's 2.0 m. The Monte Carlo reference (:mod:`muls.montecarlo`)
+  sees the same geometry.
 """
 
 from __future__ import annotations
@@ -23,73 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..infra.errors import ParameterError, check_non_negative, check_positive
-from ..infra.runtime import kernel
 
 #: How the receiver's view of the beam is modelled: each aperture point's own field (default), or MULS Eq. 11.
 OVERLAP_MODELS = ("finite_aperture", "eq11")
 #: Points of the quadrature over the distance from the receiver axis in :meth:`TransceiverGeometry.overlap`'s
 #: finite-aperture integral (split at the integrand's kinks; 1e-5 of the plateau, checked in the tests).
 OVERLAP_QUADRATURE_POINTS = 64
-
-
-@kernel(inline="always")
-def lens_area(r1, r2, s):
-    """Area [m^2] of the intersection of two discs of radii ``r1``, ``r2`` [m] whose centres are ``s`` [m] apart."""
-    if s >= r1 + r2:
-        return 0.0
-    small = min(r1, r2)
-    if s <= abs(r1 - r2):
-        return math.pi * small * small
-    c1 = min(1.0, max(-1.0, (s * s + r1 * r1 - r2 * r2) / (2.0 * s * r1)))
-    c2 = min(1.0, max(-1.0, (s * s + r2 * r2 - r1 * r1) / (2.0 * s * r2)))
-    k = (-s + r1 + r2) * (s + r1 - r2) * (s - r1 + r2) * (s + r1 + r2)
-    return r1 * r1 * math.acos(c1) + r2 * r2 * math.acos(c2) - 0.5 * math.sqrt(max(k, 0.0))
-
-
-@kernel(inline="always")
-def aperture_share(aperture_radius_m, tan_half_fov, along_m, across_m):
-    """Share [-] of a circular aperture whose own field of view holds a point ``along_m`` [m] in front of the
-    aperture along the receiver axis and ``across_m`` [m] from that axis (0 behind the aperture)."""
-    if along_m <= 0.0:
-        return 0.0
-    return lens_area(aperture_radius_m, along_m * tan_half_fov, across_m) / (math.pi * aperture_radius_m**2)
-
-
-@kernel(nogil=True)
-def _finite_aperture_overlap(z, r0_beam, tan_beam, r_ap, tan_fov, d, nodes, weights):
-    """The finite-aperture overlap at ranges ``z`` (n,) [m]: the aperture share averaged over the spot, as an
-    integral over the distance s from the receiver axis (Gauss-Legendre ``nodes``, ``weights`` on [-1, 1], on each
-    piece between the integrand's kinks)."""
-    out = np.zeros(z.shape[0])
-    breaks = np.empty(6)
-    for i in range(z.shape[0]):
-        if z[i] <= 0.0:
-            continue
-        r1 = r0_beam + z[i] * tan_beam
-        rho = z[i] * tan_fov
-        lo, hi = max(0.0, d - r1), d + r1
-        # Kinks of the integrand in s: the spot's edge (|d - r1|, d + r1) and the lens's (|r_ap - rho|, r_ap + rho).
-        breaks[0], breaks[1], breaks[2], breaks[3], breaks[4], breaks[5] = (lo, abs(d - r1), abs(r_ap - rho),
-                                                                           r_ap + rho, hi, hi)
-        breaks.sort()
-        total = 0.0
-        for j in range(5):
-            a, b = max(lo, breaks[j]), min(hi, breaks[j + 1])
-            if b <= a:
-                continue
-            for k in range(nodes.shape[0]):
-                s = 0.5 * (b - a) * nodes[k] + 0.5 * (b + a)
-                if s <= 0.0:
-                    continue
-                # Share of the circle of radius s around the receiver axis inside the spot (arc / 2 pi s).
-                if d == 0.0 or s + d <= r1:
-                    arc = math.pi if s < r1 or d > 0.0 else 0.0
-                else:
-                    arc = math.acos(min(1.0, max(-1.0, (s * s + d * d - r1 * r1) / (2.0 * s * d))))
-                density = 2.0 * s * arc / (math.pi * r1 * r1)  # of s, for a uniform spot
-                total += 0.5 * (b - a) * weights[k] * density * lens_area(r_ap, rho, s)
-        out[i] = total / (math.pi * r_ap * r_ap)
-    return out
 
 
 @dataclass(frozen=True)
@@ -162,9 +102,11 @@ class TransceiverGeometry:
 
     def finite_aperture_overlap(self, z_m):
         """O(z) [-] with each aperture point seeing its own field of view (module doc) at ``z_m`` [m] (any shape)."""
+        from .overlap_kernels import finite_aperture_overlap  # numba: here, so that describing an instrument needs none
+
         z = np.asarray(z_m, dtype=float)
         nodes, weights = np.polynomial.legendre.leggauss(OVERLAP_QUADRATURE_POINTS)
-        flat = _finite_aperture_overlap(np.ascontiguousarray(z.ravel()), 0.5 * self.beam_diameter_m,
+        flat = finite_aperture_overlap(np.ascontiguousarray(z.ravel()), 0.5 * self.beam_diameter_m,
                                         math.tan(0.5 * self.beam_divergence_full_rad), self.aperture_radius_m,
                                         math.tan(0.5 * self.fov_full_rad), float(self.offset_m), nodes, weights)
         return np.clip(flat, 0.0, 1.0).reshape(z.shape)

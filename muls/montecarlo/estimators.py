@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 
 from ..infra.runtime import kernel
-from ..water.phase import cumulative_at, sample_angle, value_at
+from ..water.phase_kernels import cumulative_at, sample_angle, value_at
 from .layout import (
     APERTURE_RADIUS,
     APERTURE_X,

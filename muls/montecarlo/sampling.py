@@ -14,7 +14,7 @@ import numpy as np
 
 from ..infra.noise import GAMMA, splitmix64
 from ..infra.runtime import kernel
-from ..water.phase import sample_angle
+from ..water.phase_kernels import sample_angle
 
 #: Odd 64-bit constant separating the streams (0 beam, 1 receiver) and the streams of split copies.
 STREAM_KEY = np.uint64(0xD1B54A32D192ED03)

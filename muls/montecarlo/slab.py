@@ -48,7 +48,8 @@ import numpy as np
 
 from ..infra.errors import ParameterError, check_fraction, check_non_negative, check_positive
 from ..infra.runtime import kernel
-from ..water.phase import PhaseFunction, check_phase, cumulative_at, value_at
+from ..water.phase import PhaseFunction, check_phase
+from ..water.phase_kernels import cumulative_at, value_at
 from .run import BATCHES, check_packets, in_parts, seed_key, var_of_mean
 from .sampling import angle, batch_packets, free_path, packet_stream, turn, uniform
 

@@ -46,7 +46,7 @@ import numpy as np
 from ..infra.errors import ParameterError, check_fraction, check_non_negative, check_positive
 from ..infra.noise import splitmix64
 from ..infra.runtime import kernel
-from ..water.phase import sample_angle, value_at
+from ..water.phase_kernels import sample_angle, value_at
 from .estimators import column_estimate, cones, target_hit
 from .layout import (
     APERTURE_RADIUS,

@@ -34,16 +34,13 @@ from ..infra.runtime import kernel
 from ..instrument.channels import ChannelArrays
 from ..instrument.description import Instrument
 from ..instrument.shape_tables import ClipTable, FitTable
-from ..water.properties import Water
+from ..water.properties import MULTIPLE_SCATTERING, Water
 from .echo_spread import spread_echoes, spread_rows
 from .radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission, window_factor
 from .scattering import ScatteringTables
 
 #: Step of the column tables in two-way time [s]: 1/160 of the 4 ns pulse decay time.
 COLUMN_TABLE_STEP_S = 25e-12
-#: How an echo's multiple scattering is modelled: ``table`` (the Monte Carlo's column and spread in time, under the
-#: ``monte_carlo`` attenuation rule) or ``none`` (single scattering: Eq. 4's column, the echo on its straight path).
-MULTIPLE_SCATTERING = ("table", "none")
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,6 @@ from functools import lru_cache
 import numpy as np
 
 from ..infra.errors import ParameterError
-from ..infra.lookup import bracket
-from ..infra.runtime import kernel
 
 # Petzold's average particle phase function [1/sr], the values published in Mobley (1994), Light and Water,
 # Table 3.10, derived from Petzold (1972), SIO Ref. 72-78. Angles 10^(-1 + 0.1 i) deg for i = 0..20 (0.1 to
@@ -279,49 +277,6 @@ def phase_function(name: str, **params) -> PhaseFunction:
     raise ParameterError(f"phase function = {name!r}: must be one of {', '.join(PHASE_FUNCTIONS)}")
 
 
-# ----------------------------------------------------------------------------------------------------------
-# Compiled helpers: the kernels of muls.montecarlo call these with the tables above.
-
-
-@kernel(inline="always")
-def sample_angle(sample_theta, u):
-    """Scattering angle [rad] whose cumulative probability is ``u`` in [0, 1) (inverse CDF, linear)."""
-    x = u * (sample_theta.shape[0] - 1)
-    i = int(x)
-    return sample_theta[i] + (x - i) * (sample_theta[i + 1] - sample_theta[i])
-
-
-@kernel
-def cumulative_at(sample_theta, theta):
-    """Probability of a scattering angle below ``theta`` [rad]: the exact inverse of :func:`sample_angle`.
-
-    ``sample_angle(sample_theta, u * cumulative_at(sample_theta, theta))`` for u uniform in [0, 1) draws
-    an angle from p restricted to angles below theta.
-    """
-    m = sample_theta.shape[0] - 1
-    if theta >= sample_theta[m]:
-        return 1.0
-    if theta <= sample_theta[0]:
-        return 0.0
-    lo = bracket(theta, sample_theta)
-    return (lo + (theta - sample_theta[lo]) / (sample_theta[lo + 1] - sample_theta[lo])) / m
-
-
-@kernel(inline="always")
-def value_at(ln_p, ln_theta0, inv_step, theta):
-    """p(theta) [1/sr] from the ln p table (linear in ln theta; clamped to the grid's ends)."""
-    if theta <= 0.0:
-        return math.exp(ln_p[0])
-    x = (math.log(theta) - ln_theta0) * inv_step
-    if x <= 0.0:
-        return math.exp(ln_p[0])
-    i = int(x)
-    if i >= ln_p.shape[0] - 1:
-        return math.exp(ln_p[-1])
-    f = x - i
-    return math.exp(ln_p[i] + f * (ln_p[i + 1] - ln_p[i]))
-
-
 def check_phase(phase) -> PhaseFunction:
     """Accept a PhaseFunction or a name."""
     if isinstance(phase, PhaseFunction):
@@ -332,5 +287,5 @@ def check_phase(phase) -> PhaseFunction:
 
 
 __all__ = ["MOBLEY1993_PARTICLE_PER_SR", "PHASE_FUNCTIONS", "PETZOLD_ANGLES_DEG", "PETZOLD_VALUES_PER_SR",
-           "PhaseFunction", "check_phase", "cumulative_at", "fournier_forand", "henyey_greenstein",
-           "mobley1993_particle", "petzold", "phase_function", "rayleigh", "sample_angle", "value_at"]
+           "PhaseFunction", "check_phase", "fournier_forand", "henyey_greenstein",
+           "mobley1993_particle", "petzold", "phase_function", "rayleigh"]

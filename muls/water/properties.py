@@ -37,6 +37,9 @@ MAX_ATTENUATION_EXPONENT = 40.0
 #: forward scattering kept by the receiver's field of view, from the small-angle approximation (muls.water.smallangle);
 #: both depend on the range and the receiver. ``k_lidar``: MULS Eq. 6; ``c``: beam attenuation; ``kd``: diffuse.
 ATTENUATION_MODELS = ("monte_carlo", "k_lidar", "c", "kd", "small_angle")
+#: How an echo's multiple scattering is modelled: ``table`` (the Monte Carlo's column and spread in time, under the
+#: ``monte_carlo`` attenuation rule) or ``none`` (single scattering: Eq. 4's column, the echo on its straight path).
+MULTIPLE_SCATTERING = ("table", "none")
 #: The rules that depend on the range and the receiver (muls.optics.radiometry.lidar_attenuation_per_m evaluates them).
 RANGE_DEPENDENT_MODELS = ("monte_carlo", "small_angle")
 

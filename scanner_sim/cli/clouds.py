@@ -10,7 +10,6 @@ from muls.infra.command import (
     positive_float,
     positive_int,
 )
-from scanner_sim.cli.registry import subcommand
 
 # -- view ---------------------------------------------------------------------------------------------------
 #: ``--color`` name (also the point cloud's colouring, ``color_by``) -> the PointRecords field it shows ("depth": -z).
@@ -18,10 +17,7 @@ _VIEW_FIELDS = {"class": "classification", "depth": "xyz", "intensity": "intensi
                 "range_error": "range_error_m", "tvu": "tvu_m", "snr": "snr"}
 
 
-@subcommand("view")
-def _add_view(sub):
-    p = sub.add_parser("view", help="look at a pass's points over its scene.ply: an HTML page to turn in a browser "
-                       "(--html), a window, or a PNG without a display")
+def _add_view(p):
     p.add_argument("path", metavar="RUN_DIR", type=nonempty(),
                    help="a run folder of scanner-sim run (its points.las...) or a LAS file, e.g. out/cable_survey")
     p.add_argument("--html", metavar="OUT.html", nargs="?", const=True, type=output_file(),
@@ -128,9 +124,7 @@ def _write_html(args, path) -> int:
 
 
 # -- swath --------------------------------------------------------------------------------------------------
-@subcommand("swath")
-def _add_swath(sub):
-    p = sub.add_parser("swath", help="swath-to-swath consistency of overlapping survey lines (open3d extra)")
+def _add_swath(p):
     p.add_argument("path", type=nonempty(), help="a pass folder (points.las/laz or leg*_points.*) or one LAS/LAZ file")
     p.add_argument("--overlap-m", type=positive_float(), default=0.5,
                    help="largest nearest-neighbour distance [m] of a point in the overlap")
@@ -166,3 +160,7 @@ def _cmd_swath(args) -> int:
               f"{100 * r['c2c_median_m']:.1f} cm (p95 {100 * r['c2c_p95_m']:.1f} cm), vertical difference "
               f"{100 * r['dz_mean_m']:+.1f} cm mean, {100 * r['dz_rms_m']:.1f} cm RMS")
     return 0
+
+
+#: name -> the function that adds the subcommand's options to its parser and sets ``func``.
+BUILDERS = {"view": _add_view, "swath": _add_swath}

@@ -5,14 +5,10 @@ from __future__ import annotations
 import json
 
 from muls.infra.command import nonempty, output_dir
-from scanner_sim.cli.registry import subcommand
 from scanner_sim.cli.studies import _add_dask_arguments, _workers
 
 
-@subcommand("dataset")
-def _add_dataset(sub):
-    p = sub.add_parser("dataset", help="N labelled scenes drawn from a spec, run on Dask: point clouds, manifest, "
-                       "splits (docs/datasets.md)")
+def _add_dataset(p):
     p.add_argument("spec", metavar="SPEC.yaml", type=nonempty(), help="dataset spec (e.g. scenes/datasets/example.yaml)")
     p.add_argument("--out", type=output_dir(), help="output directory (default: out/datasets/NAME); a folder holding "
                    "the same spec is resumed")
@@ -51,3 +47,7 @@ def _cmd_dataset(args) -> int:
         print(f"{count} scene{'s' * (count != 1)}, {result['points']:,} points ({classes}); splits: {splits}")
     print(out / MANIFEST)
     return 0
+
+
+#: name -> the function that adds the subcommand's options to its parser and sets ``func``.
+BUILDERS = {"dataset": _add_dataset}

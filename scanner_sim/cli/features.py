@@ -6,16 +6,13 @@ from __future__ import annotations
 import json
 
 from muls.infra.command import nonempty, output_dir, positive_float, positive_int, seed
-from scanner_sim.cli.registry import subcommand
 from scanner_sim.fidelity import FIDELITY_LEVELS
 
 
-@subcommand("features")
-def _add_features(sub):
+def _add_features(p):
     from scanner_sim.metrics.coverage import CoverageSettings
     from scanner_sim.studies.features import DEFAULT_COUNT, DEFAULT_SIZES_M
 
-    p = sub.add_parser("features", help="feature detection: cubes placed across the swath, the share detected per size")
     p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--cubes-m", nargs="+", type=positive_float("cubes_m"), default=list(DEFAULT_SIZES_M), metavar="M",
                    help="cube edge sizes [m] (default: %(default)s, S-44's Exclusive, Special and 1a features)")
@@ -61,3 +58,7 @@ def _cmd_features(args) -> int:
         print(f"  {o['name']}: {o['valid_points']} valid soundings, {'detected' if o['detected'] else 'missed'}")
     print(out / "features.json")
     return 0
+
+
+#: name -> the function that adds the subcommand's options to its parser and sets ``func``.
+BUILDERS = {"features": _add_features}

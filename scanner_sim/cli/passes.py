@@ -15,31 +15,26 @@ from muls.infra.command import (
     positive_int,
     seed,
 )
-from scanner_sim.cli.registry import subcommand
 from scanner_sim.fidelity import FIDELITY_LEVELS
 
 
 # -- scenes -------------------------------------------------------------------------------------------------
-@subcommand("scenes")
-def _add_scenes(sub):
-    p = sub.add_parser("scenes", help="list the shipped scenes, one line each")
+def _add_scenes(p):
     p.set_defaults(func=_cmd_scenes)
 
 
 def _cmd_scenes(args) -> int:
-    from scanner_sim.config import load_scene, shipped_scenes
+    from scanner_sim.config.loading import parse_yaml_text, read_scene_text, shipped_scenes
 
-    for name in shipped_scenes():
-        cfg = load_scene(name)
-        first = cfg.description.strip().splitlines()[0] if cfg.description.strip() else ""
+    for name, path in shipped_scenes().items():  # each file's description alone: no raster or mesh opened to list it
+        description = str(parse_yaml_text(read_scene_text(path), path).get("description") or "").strip()
+        first = description.splitlines()[0] if description else ""
         print(f"{name:18s} {first}")
     return 0
 
 
 # -- validate -----------------------------------------------------------------------------------------------
-@subcommand("validate")
-def _add_validate(sub):
-    p = sub.add_parser("validate", help="check a scene file (shipped name or path); exit 2 when it is wrong")
+def _add_validate(p):
     p.add_argument("scene", type=nonempty(), help="shipped scene name (see `scanner-sim scenes`) or path to a YAML file")
     p.add_argument("--build", action="store_true", help="also build the meshes and the trajectory")
     p.set_defaults(func=_cmd_validate)
@@ -48,12 +43,13 @@ def _add_validate(sub):
 def _cmd_validate(args) -> int:
     from scanner_sim.config import load_scene
     from scanner_sim.config.raster_seabed import RasterSeabedConfig
-    from scanner_sim.world.raster import check_raster_frame, plan_bounds
 
     cfg = load_scene(args.scene)
     cfg.water_model()
     inst = cfg.instrument_model()
     if isinstance(cfg.seabed, RasterSeabedConfig):  # the same check, the same line, as `run`'s
+        from scanner_sim.world.raster import check_raster_frame, plan_bounds  # rasterio: only for a raster's header
+
         check_raster_frame(cfg.seabed, plan_bounds(cfg), cfg.crs)
     extra = ""
     if args.build:
@@ -81,9 +77,7 @@ def _no_seabed_note(summary: dict) -> str:
 
 
 # -- schema -------------------------------------------------------------------------------------------------
-@subcommand("schema")
-def _add_schema(sub):
-    p = sub.add_parser("schema", help="print the JSON Schema of scene files (editors validate and complete with it)")
+def _add_schema(p):
     p.add_argument("--out", metavar="FILE", type=output_file(),
                    help="write the schema to FILE (atomically) instead of printing it")
     p.set_defaults(func=_cmd_schema)
@@ -104,9 +98,7 @@ def _cmd_schema(args) -> int:
 
 
 # -- run ----------------------------------------------------------------------------------------------------
-@subcommand("run")
-def _add_run(sub):
-    p = sub.add_parser("run", help="simulate a survey pass: points.las, dropouts, summary, trajectory, render")
+def _add_run(p):
     p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--out", type=output_dir(), help="output directory (default: the scene's output.dir); an earlier "
                    "run there is replaced whole once this one is complete")
@@ -244,3 +236,7 @@ def _cmd_run(args) -> int:
                   f"(cells of {cov['cell_m']:g} m); gaps: {gaps}")
     print(out / "summary.json")
     return 0
+
+
+#: name -> the function that adds the subcommand's options to its parser and sets ``func``.
+BUILDERS = {"scenes": _add_scenes, "validate": _add_validate, "schema": _add_schema, "run": _add_run}

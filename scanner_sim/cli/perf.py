@@ -8,16 +8,12 @@ from muls.infra.command import (
     nonempty,
     positive_int,
 )
-from scanner_sim.cli.registry import subcommand
 from scanner_sim.fidelity import FIDELITY_LEVELS
 from scanner_sim.rays.beams import SUBRAY_COUNTS
 
 
 # -- bench --------------------------------------------------------------------------------------------------
-@subcommand("bench")
-def _add_bench(sub):
-    p = sub.add_parser("bench", help="end-to-end pulses/s per fidelity beside raw embreex on the same rays, with "
-                       "cores used and peak memory, and a two-million-triangle seabed")
+def _add_bench(p):
     p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--pulses", type=positive_int(), default=60000, help="pulses per fidelity level")
     p.add_argument("--repeat", type=positive_int(), default=5,
@@ -68,9 +64,7 @@ def _print_profile(args) -> int:
 
 
 # -- bench-rays ---------------------------------------------------------------------------------------------
-@subcommand("bench-rays")
-def _add_bench_rays(sub):
-    p = sub.add_parser("bench-rays", help="ray throughput: the pipeline's ray stage vs raw embreex, same rays")
+def _add_bench_rays(p):
     p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--pulses", type=positive_int(), default=20000, help="scan-ordered pulses in the chunk")
     p.add_argument("--subrays", type=positive_int(), choices=SUBRAY_COUNTS, default=19, metavar="N",
@@ -98,10 +92,7 @@ def _cmd_bench_rays(args) -> int:
 
 
 # -- bench-site ---------------------------------------------------------------------------------------------
-@subcommand("bench-site")
-def _add_bench_site(sub):
-    p = sub.add_parser("bench-site", help="a site-scale pass (1 km x 200 m at 0.25 m, 6.4 M triangles, tiled) beside "
-                       "a small scene's: set-up, peak memory, pulses/s, memory after 10 and 60 minutes of survey")
+def _add_bench_site(p):
     p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), default="balanced", help="fidelity level of both passes")
     p.add_argument("--minutes", type=positive_int(), default=60, help="minutes of survey of the site's pass")
     p.add_argument("--seabed", choices=["raster", "procedural"], default="raster",
@@ -127,3 +118,7 @@ def _cmd_bench_site(args) -> int:
                                                                for m, mb in result["rss_mb_by_minutes"].items()))
     print(result["subsampling"])
     return 0
+
+
+#: name -> the function that adds the subcommand's options to its parser and sets ``func``.
+BUILDERS = {"bench": _add_bench, "bench-rays": _add_bench_rays, "bench-site": _add_bench_site}

@@ -14,15 +14,12 @@ from muls.infra.command import (
     positive_int,
     seed,
 )
-from scanner_sim.cli.registry import subcommand
 from scanner_sim.fidelity import FIDELITY_LEVELS
 from scanner_sim.rays.beams import SUBRAY_COUNTS
 
 
 # -- overlap ------------------------------------------------------------------------------------------------
-@subcommand("overlap")
-def _add_overlap(sub):
-    p = sub.add_parser("overlap", help="ray-cast overlap on a perpendicular plate vs MULS Eq. 11")
+def _add_overlap(p):
     p.add_argument("--distances-m", type=positive_float(), nargs="+", default=[1, 1.5, 2, 2.5, 3, 4, 5, 6, 7, 8],
                    help="plate distances [m]")
     p.add_argument("--subrays", type=positive_int(), choices=SUBRAY_COUNTS, default=61, metavar="N",
@@ -77,12 +74,9 @@ def _cmd_overlap(args) -> int:
 
 
 # -- tradeoff -----------------------------------------------------------------------------------------------
-@subcommand("tradeoff")
-def _add_tradeoff(sub):
+def _add_tradeoff(p):
     from scanner_sim.studies.tradeoff import DEFAULT_PULSES, DEFAULT_REPEAT, DEFAULT_WAVEFORM_PULSES, KNOBS
 
-    p = sub.add_parser("tradeoff", help="speed against accuracy: each fidelity level and knob on the same pulses, "
-                       "against the truth and the reference level (chart, table, JSON)")
     p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--levels", nargs="+", choices=list(FIDELITY_LEVELS), default=list(FIDELITY_LEVELS),
                    metavar="LEVEL", help=f"levels to run, of {', '.join(FIDELITY_LEVELS)} (default: all)")
@@ -135,12 +129,10 @@ def _cmd_tradeoff(args) -> int:
 
 
 # -- coverage -----------------------------------------------------------------------------------------------
-@subcommand("coverage")
-def _add_coverage(sub):
+def _add_coverage(p):
     from scanner_sim.metrics.coverage import CoverageSettings
     from scanner_sim.studies.coverage_study import DEFAULT_INSTRUMENTS, DEFAULT_WATERS, GATE_MODES, INSTRUMENTS
 
-    p = sub.add_parser("coverage", help="mapping coverage per water type x altitude x instrument, with its report")
     p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--waters", nargs="+", default=list(DEFAULT_WATERS), metavar="WATER", type=nonempty(),
                    help="water presets, or 'scene' for the scene's own water (default: %(default)s)")
@@ -259,10 +251,7 @@ def _workers(args) -> int:
     return default_workers() if args.workers is None else args.workers
 
 
-@subcommand("campaign")
-def _add_campaign(sub):
-    p = sub.add_parser("campaign", help="one pass per combination of the swept scene keys, on Dask "
-                       "(docs/campaigns.md)")
+def _add_campaign(p):
     p.add_argument("campaign", metavar="CAMPAIGN.yaml", type=nonempty(),
                    help="campaign file (e.g. scenes/campaigns/example_campaign.yaml)")
     p.add_argument("--out", type=output_dir(), help="output directory (default: out/campaigns/NAME)")
@@ -294,14 +283,11 @@ def _cmd_campaign(args) -> int:
 
 
 # -- plan ---------------------------------------------------------------------------------------------------
-@subcommand("plan")
-def _add_plan(sub):
+def _add_plan(p):
     from scanner_sim.metrics.s44 import ORDER_NAMES
     from scanner_sim.studies.coverage_study import DEFAULT_WATERS
     from scanner_sim.studies.planning import DEFAULT_REQUIRED_SHARE
 
-    p = sub.add_parser("plan", help="the cheapest survey plan (altitude, speed, line spacing) meeting an IHO S-44 "
-                       "order at the scene's site, per water type (docs/planning.md)")
     p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path (a raster or procedural seabed)")
     p.add_argument("--order", required=True, type=nonempty(), metavar="ORDER",
                    help=f"IHO S-44 order, one of {', '.join(ORDER_NAMES)}")
@@ -353,3 +339,8 @@ def _cmd_plan(args) -> int:
         print(f"{data['sample_passes']} sample passes, {data['confirmation_passes']} confirmation passes")
     print(out / "plan.json")
     return 0
+
+
+#: name -> the function that adds the subcommand's options to its parser and sets ``func``.
+BUILDERS = {"tradeoff": _add_tradeoff, "coverage": _add_coverage, "plan": _add_plan, "overlap": _add_overlap,
+            "campaign": _add_campaign}

@@ -5,14 +5,10 @@ from __future__ import annotations
 import json
 
 from muls.infra.command import nonempty, output_file, positive_int, seed
-from scanner_sim.cli.registry import subcommand
 from scanner_sim.fidelity import FIDELITY_LEVELS
 
 
-@subcommand("uncertainty")
-def _add_uncertainty(sub):
-    p = sub.add_parser("uncertainty", help="simulate a pass in memory and check each point's THU and TVU (95 %%) "
-                       "against its true error: shares within, per channel and incidence band")
+def _add_uncertainty(p):
     p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--water", type=nonempty(), help="water preset instead of the scene's")
     p.add_argument("--seed", type=seed(), help="seed of the pass (default: the scene's survey.seed)")
@@ -85,3 +81,7 @@ def _m(value) -> str:
 
 def _share(value) -> str:
     return "-" if value is None else f"{value:.3f}"
+
+
+#: name -> the function that adds the subcommand's options to its parser and sets ``func``.
+BUILDERS = {"uncertainty": _add_uncertainty}

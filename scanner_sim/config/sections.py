@@ -11,12 +11,12 @@ from pydantic import BeforeValidator, model_validator
 
 from muls import WATER_PRESETS, instrument_preset, water_preset
 from muls.infra.errors import ParameterError
-from muls.optics.optical_model import MULTIPLE_SCATTERING
 from muls.water.phase_family import phase_from_spec
 from muls.water.properties import (
     ATTENUATION_MODELS,
     BACKSCATTER_MODELS,
     GROUP_INDEX_SEAWATER,
+    MULTIPLE_SCATTERING,
     Water,
 )
 from scanner_sim.config.base import (
@@ -314,7 +314,7 @@ class SurveyConfig(StrictModel):
     """Visibility rays from each hit to the receiver, overriding the fidelity level's choice."""
     multiple_scattering: Choice(*MULTIPLE_SCATTERING) | None = None
     """The echo's spread in time and the Monte Carlo's column (``table``) or neither (``none``), overriding the
-    fidelity level's choice (muls.optics.optical_model.MULTIPLE_SCATTERING)."""
+    fidelity level's choice (muls.water.properties.MULTIPLE_SCATTERING)."""
     start_s: NonNegative = 0.0
     """Start of the pass on the trajectory [s]."""
     duration_s: Positive | None = None

@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from muls.infra.runtime import kernel
-from muls.instrument.overlap import aperture_share
+from muls.instrument.overlap_kernels import aperture_share
 from scanner_sim.rays.echoes import echo_range_m
 
 
@@ -55,7 +55,8 @@ class SceneFaces(NamedTuple):
 
 class ReceiverView(NamedTuple):
     """How the receiver sees a hit: ``finite`` (each aperture point sees its own field of view: the share of the
-    aperture, :func:`muls.instrument.overlap.aperture_share`, of radius ``aperture_radius`` [m] and field ``tan_half_fov``) or,
+    aperture, :func:`muls.instrument.overlap_kernels.aperture_share`, of radius ``aperture_radius`` [m] and field
+    ``tan_half_fov``) or,
     for MULS Eq. 11, the cone around the union of the fields, its virtual apex ``apex_behind`` [m] behind the
     aperture and its half-angle cosine ``cos_half_fov``."""
 

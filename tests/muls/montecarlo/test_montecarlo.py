@@ -23,7 +23,8 @@ from muls.montecarlo import (
 )
 from muls.optics.radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission
 from muls.studies import multiscatter_waters_study
-from muls.water.phase import PHASE_FUNCTIONS, cumulative_at, phase_function, sample_angle
+from muls.water.phase import PHASE_FUNCTIONS, phase_function
+from muls.water.phase_kernels import cumulative_at, sample_angle
 from muls.water.properties import henyey_greenstein as hg_closed_form
 from muls.water.properties import hg_backward_fraction
 
