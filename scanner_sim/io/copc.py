@@ -105,19 +105,11 @@ class CopcWriter(LasWriter):
             self._discard(exc)
             raise
 
-    def write(self, records: PointRecords) -> None:
-        if self._spill is None:
-            raise ValueError(f"CopcWriter({str(self.path)!r}) is not open; use it as a context manager")
-        if not isinstance(records, PointRecords):
-            raise TypeError(f"CopcWriter.write: expected PointRecords, got {type(records).__name__}")
-        if len(records) == 0:
-            return
-        try:
-            self._spill.write(self._pack(records).array.tobytes())
-        except BaseException as exc:
-            self._discard(exc)
-            raise
-        self.point_count += len(records)
+    def _is_open(self) -> bool:
+        return self._spill is not None
+
+    def _append(self, packed) -> None:
+        self._spill.write(packed.array.tobytes())
 
     def close(self) -> None:
         """Build the octree, write every node through copclib, and move the file onto its final name."""

@@ -319,18 +319,26 @@ class LasWriter(StreamingWriter):
 
     def write(self, records: PointRecords) -> None:
         """Append one chunk of points. Raises ValueError on values LAS format 6 cannot hold."""
-        if self._writer is None:
-            raise ValueError(f"LasWriter({str(self.path)!r}) is not open; use it as a context manager")
+        name = type(self).__name__
+        if not self._is_open():
+            raise ValueError(f"{name}({str(self.path)!r}) is not open; use it as a context manager")
         if not isinstance(records, PointRecords):
-            raise TypeError(f"LasWriter.write: expected PointRecords, got {type(records).__name__}")
+            raise TypeError(f"{name}.write: expected PointRecords, got {type(records).__name__}")
         if len(records) == 0:
             return
         try:
-            self._writer.write_points(self._pack(records))
+            self._append(self._pack(records))
         except BaseException as exc:
             self._discard(exc)
             raise
         self.point_count += len(records)
+
+    def _is_open(self) -> bool:
+        return self._writer is not None
+
+    def _append(self, packed) -> None:
+        """Write one chunk's packed records (a laspy point record) where this writer keeps them."""
+        self._writer.write_points(packed)
 
     def close(self) -> None:
         """Finish the header (counts, bounds), fsync, and move the file onto its final name."""
