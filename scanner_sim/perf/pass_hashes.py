@@ -3,7 +3,7 @@
 Five shipped scenes x the four fidelity levels, each pass ``pulses`` pulses long with a fixed seed and 64 sampled
 waveform records. Each pass runs in a child process with ``PYTHONPATH`` set to the tree, through the tree's own
 ``scanner-sim run``, so an older checkout (``git worktree add /tmp/before COMMIT``) is hashed by its own code. The
-hash covers every point dimension of ``points.las`` (not its header, which holds the creation date and the
+hash covers every point dimension of ``points.las`` or ``points.laz`` (not its header, which holds the creation date and the
 software version), every array of ``dropouts.npz`` and of ``waveforms.npz``, by name, in sorted order.
 
     python -m scanner_sim.perf.pass_hashes /tmp/before .          # compare two trees, exit 1 on any difference
@@ -47,10 +47,10 @@ def _hash_las(path: Path, digest) -> None:
 def pass_hashes(run_dir: Path) -> dict[str, str]:
     """SHA-256 per product of one run folder: ``{"points": hex, "dropouts": hex, "waveforms": hex}``."""
     out = {}
-    for product, name, reader in (("points", "points.las", _hash_las), ("dropouts", "dropouts.npz", _hash_npz),
-                                  ("waveforms", "waveforms.npz", _hash_npz)):
-        path = run_dir / name
-        if path.exists():
+    for product, names, reader in (("points", ("points.las", "points.laz"), _hash_las),
+                                   ("dropouts", ("dropouts.npz",), _hash_npz),
+                                   ("waveforms", ("waveforms.npz",), _hash_npz)):
+        for path in (run_dir / name for name in names if (run_dir / name).exists()):
             digest = hashlib.sha256()
             reader(path, digest)
             out[product] = digest.hexdigest()
