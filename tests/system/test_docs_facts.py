@@ -1,6 +1,7 @@
 """The docs cannot go stale: every module of both packages is in docs/design.md's module map and every module there
-exists; every module, file or name of the packages that a page of docs/ or the README names exists; the table of
-shipped scenes in docs/scene-format.md states what the scene files, the built scenes and the pass estimate say."""
+exists; every module's tests can be found by path; every module, file or name of the packages that a page of docs/
+or the README names exists; the table of shipped scenes in docs/scene-format.md states what the scene files, the
+built scenes and the pass estimate say."""
 
 import importlib
 import re
@@ -34,6 +35,22 @@ def test_the_module_map_lists_every_module_and_nothing_else():
     modules = {str(p.relative_to(ROOT)) for pkg in ("muls", "scanner_sim") for p in (ROOT / pkg).rglob("*.py")}
     assert not modules - listed, f"modules missing from docs/design.md's module map: {sorted(modules - listed)}"
     assert not listed - modules, f"the module map names modules that do not exist: {sorted(listed - modules)}"
+
+
+def test_every_module_has_its_tests_findable_by_path():
+    """A module ``<package>/<stage>/<module>.py`` has ``tests/<package>/<stage>/test_<module>.py``, or its stage's
+    tests README names it and says where its tests are (tests/README.md's rule)."""
+    unplaced = []
+    for package in ("muls", "scanner_sim"):
+        for module in sorted((ROOT / package).rglob("*.py")):
+            if module.name in ("__init__.py", "__main__.py"):
+                continue
+            tests = ROOT / "tests" / module.relative_to(ROOT).parent
+            readme = tests / "README.md"
+            if not (tests / f"test_{module.stem}.py").exists() and not (
+                    readme.exists() and f"`{module.relative_to(ROOT)}`" in readme.read_text()):
+                unplaced.append(str(module.relative_to(ROOT)))
+    assert not unplaced, f"modules whose tests cannot be found by path: {unplaced}"
 
 
 def test_every_test_file_the_docs_name_exists():
