@@ -15,8 +15,8 @@ from scanner_sim.rays.auto import cast_auto
 from scanner_sim.rays.beams import beam_pattern
 from scanner_sim.rays.cast import CastScene, cast_beams
 from scanner_sim.rays.caster import RayCaster
-from scanner_sim.rays.collapse import simple_pulses, two_point_rule
-from scanner_sim.rays.echoes import ECHO_BIN_M, echo_energy
+from scanner_sim.rays.collapse import COLLAPSE_SPAN_M, simple_pulses, two_point_rule
+from scanner_sim.rays.echoes import echo_energy
 from scanner_sim.rays.hits import HIT_FIELDS, Hits
 from scanner_sim.rays.seabed_grid import seabed_grid
 from scanner_sim.survey.setup import PassOptions, PassSetup
@@ -43,7 +43,7 @@ def test_a_pulse_is_simple_only_when_all_its_sub_rays_meet_one_object_within_the
     spread just over the limit; 3 one sub-ray missing."""
     flat = list(5.0 + np.linspace(0, 0.01, M))
     pulse = [0] * M + [1] * M + [2] * M + [3] * (M - 1)
-    rng = flat + flat + list(5.0 + np.linspace(0, 1.01 * ECHO_BIN_M, M)) + flat[:-1]
+    rng = flat + flat + list(5.0 + np.linspace(0, 1.01 * COLLAPSE_SPAN_M, M)) + flat[:-1]
     obj = [1] * M + [1] * (M - 1) + [2] + [1] * (2 * M - 1)
     np.testing.assert_array_equal(simple_pulses(_hits(pulse, rng, obj, 4)), [True, False, False, False])
 
