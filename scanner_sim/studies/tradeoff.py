@@ -25,6 +25,7 @@ from scanner_sim.io.run_dir import hold_output
 from scanner_sim.records.point_records import PointRecords
 from scanner_sim.studies import accuracy
 from scanner_sim.survey import sinks
+from scanner_sim.survey.georeference import NO_OBJECT
 from scanner_sim.survey.pipeline import pass_chunks, stream_pass
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import build_scene
@@ -192,6 +193,14 @@ def _rounded(metrics: dict) -> dict:
     return {k: (None if v is None else round(float(v), 6)) for k, v in metrics.items()}
 
 
+def range_bias(points: PointRecords) -> float | None:
+    """[m] Median of measured minus true range of the returns an echo explains (signed: positive is long), None
+    without any: the bias :func:`scanner_sim.studies.accuracy.vs_truth`'s absolute errors leave out."""
+    error = points.range_error_m[points.object_id != NO_OBJECT].astype(np.float64)
+    error = error[np.isfinite(error)]
+    return float(np.median(error)) if error.size else None
+
+
 def level_metrics(run: LevelRun, reference: LevelRun) -> dict:
     """The JSON entry of one run: its settings, speed, and metrics against the truth and the reference."""
     fit = accuracy.WaveformFit.of(run.records, reference.records)
@@ -202,7 +211,8 @@ def level_metrics(run: LevelRun, reference: LevelRun) -> dict:
     entry = {"pulses_per_s": round(run.pulses_per_s, 1), "subrays": lv.subrays, "shadow_rays": lv.shadow_rays,
              "record_mode": lv.record_mode, "column_cut": lv.column_cut, "multiple_scattering": lv.multiple_scattering,
              "coverage": run.coverage,
-             "vs_truth": _rounded(accuracy.vs_truth(run.points, run.n_pulses, run.hidden)),
+             "vs_truth": _rounded({**accuracy.vs_truth(run.points, run.n_pulses, run.hidden),
+                                   "median_range_bias_m": range_bias(run.points)}),
              "vs_reference": _rounded(vs_ref)}
     if run.decisions is not None:
         entry["decisions"] = {k: round(v, 4) if isinstance(v, float) else v for k, v in run.decisions.items()}
@@ -276,6 +286,7 @@ def tradeoff(config: SceneConfig, levels=tuple(FIDELITY_LEVELS), knobs=tuple(KNO
 TABLE = [("pulses/s", None, "pulses_per_s", "{:,.0f}"),
          ("median abs err [m]", "vs_truth", "median_abs_range_error_m", "{:.4f}"),
          ("p95 abs err [m]", "vs_truth", "p95_abs_range_error_m", "{:.3f}"),
+         ("range bias [m]", "vs_truth", "median_range_bias_m", "{:+.4f}"),
          ("false alarms /pulse", "vs_truth", "false_alarms_per_pulse", "{:.4f}"),
          ("hidden pts /pulse", "vs_truth", "hidden_points_per_pulse", "{:.4f}"),
          ("missing /pulse", "vs_reference", "missing_per_pulse", "{:.4f}"),

@@ -56,6 +56,16 @@ def test_where_auto_falls_back_the_table_says_why(step_edges):
     assert "`auto` decided" in table and decisions["falls_back"] in table
 
 
+def test_the_range_bias_is_signed_and_no_larger_than_the_median_error(step_edges):
+    """The median signed range error (the bias auto must keep within balanced's) is bounded by the median absolute
+    error: at least half the errors lie beyond the median in magnitude. The table prints it."""
+    out, result = step_edges
+    for entry in result["levels"].values():
+        truth = entry["vs_truth"]
+        assert abs(truth["median_range_bias_m"]) <= truth["median_abs_range_error_m"] + 1e-6
+    assert "range bias [m]" in (out / "tradeoff.md").read_text()
+
+
 def test_more_timed_passes_change_only_the_speeds():
     """A seed fixes the points, so timing each run once or three times (round-robin, the fastest kept) gives the
     same metrics; only pulses_per_s may move, and the JSON says how many passes timed it."""
