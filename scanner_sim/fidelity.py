@@ -27,9 +27,10 @@ class FidelityLevel:
     ``muls.receiver.digitiser.RECORD_MODES``. column_cut: where the water column stops, one of :data:`COLUMN_CUTS`
     (:func:`scanner_sim.survey.handoff.column_cuts`). adaptive: decide per pulse (:mod:`scanner_sim.rays.auto`):
     where all ``subrays`` hit one surface within 0.10 m of range (:data:`scanner_sim.rays.collapse.COLLAPSE_SPAN_M`),
-    two echoes with their delays' energy, mean, variance and skewness, else one per sub-ray. deciding_only: synthesise and search in each record window only the
-    channels that can decide a return (:mod:`muls.receiver.deciding_channels`). multiple_scattering: ``"table"`` (the Monte
-    Carlo's water column and each echo's spread in time, :mod:`muls.optics.scattering`) or ``"none"`` (single scattering),
+    two echoes with their delays' energy, mean, variance and skewness, else one per sub-ray. deciding_only:
+    synthesise and search in each record window only the channels that can decide a return
+    (:mod:`muls.receiver.deciding_channels`). multiple_scattering: ``"table"`` (the Monte Carlo's water column and
+    each echo's spread in time, :mod:`muls.optics.scattering`) or ``"none"`` (single scattering),
     ``muls.water.properties.MULTIPLE_SCATTERING``.
     """
 
