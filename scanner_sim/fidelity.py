@@ -26,10 +26,11 @@ class FidelityLevel:
     record_mode: ``"windowed"`` (samples around the echoes) or ``"full"`` (every sample of every channel),
     ``muls.receiver.digitiser.RECORD_MODES``. column_cut: where the water column stops, one of :data:`COLUMN_CUTS`
     (:func:`scanner_sim.survey.handoff.column_cuts`). adaptive: decide per pulse (:mod:`scanner_sim.rays.auto`):
-    where all ``subrays`` hit one surface within 5 cm of range, two echoes with their delays' energy, mean,
-    variance and skewness, else one per sub-ray. deciding_only: synthesise and search in each record window only the
-    channels that can decide a return (:mod:`muls.receiver.deciding_channels`). multiple_scattering: ``"table"`` (the Monte
-    Carlo's water column and each echo's spread in time, :mod:`muls.optics.scattering`) or ``"none"`` (single scattering),
+    where all ``subrays`` hit one surface within 0.10 m of range (:data:`scanner_sim.rays.collapse.COLLAPSE_SPAN_M`),
+    two echoes with their delays' energy, mean, variance and skewness, else one per sub-ray. deciding_only:
+    synthesise and search in each record window only the channels that can decide a return
+    (:mod:`muls.receiver.deciding_channels`). multiple_scattering: ``"table"`` (the Monte Carlo's water column and
+    each echo's spread in time, :mod:`muls.optics.scattering`) or ``"none"`` (single scattering),
     ``muls.water.properties.MULTIPLE_SCATTERING``.
     """
 

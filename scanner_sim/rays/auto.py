@@ -17,9 +17,10 @@ import numpy as np
 
 from muls.infra.runtime import kernel
 from scanner_sim.rays.cast import BeamCast, CastScene, cast_beams, kernel_inputs
-from scanner_sim.rays.collapse import collapse_simple, emit_rows, pulse_figures
+from scanner_sim.rays.collapse import collapse_simple, emit_rows, pulse_figures, simple_pulses
 from scanner_sim.rays.hits import Hits, empty_columns, head
 from scanner_sim.rays.kernels import ShadowRays, clear_blocked, hit_block, subrays_local32
+from scanner_sim.rays.seabed_grid import no_grid_reason
 from scanner_sim.rays.seabed_kernels import analytic_block, unproven_shadows
 
 #: Sub-rays per block of :func:`cast_seabed_analytic`.
@@ -75,14 +76,16 @@ def _scratch(caster, prefix: str, n: int):
 
 
 def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
-                         shadow_rays: bool = True, collapse: bool = False) -> Hits:
+                         shadow_rays: bool = True, collapse: bool = False, census: dict | None = None) -> Hits:
     """:func:`scanner_sim.rays.cast.cast_beams`, with Embree casting only what it must: every pulse's axis, and
     the other sub-rays and shadow rays of the pulses :func:`scanner_sim.rays.seabed_kernels.analytic_block` cannot
     prove. A proven pulse's sub-rays meet the seabed triangles the height field puts under them, at the distance the
     ray-plane intersection gives (rounded to float32 as Embree's), and nothing can stand between its hits and the
     receiver. The hit rows are made by the same kernel as ``cast_beams``'s, so they differ from it by float32
     rounding of the distances at most. Same arguments and result; a scene without a height field is cast as
-    ``cast_beams`` casts it. ``collapse``: each block's hits go through :func:`collapse_simple` while in cache."""
+    ``cast_beams`` casts it. ``collapse``: each block's hits go through :func:`collapse_simple` while in cache.
+    ``census``: counts added to it, ``"proven"`` (pulses found analytically) and ``"axis_on_seabed"`` (pulses
+    whose axis met the height field first, the proof's precondition)."""
     grid, caster = target.seabed_grid, target.caster
     if grid is None:
         hits = cast_beams(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry, shadow_rays)
@@ -112,6 +115,10 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
         axis_prim, axis_tfar = caster.first_hits_raw(np.ascontiguousarray(o32[::m]), np.ascontiguousarray(d32[::m]))
         analytic = np.empty(p1 - p0, bool)
         analytic_block(o32, d32, axis_prim, axis_tfar, p0, rays.rx, grid, shadow_rays, prim, tfar, analytic)
+        if census is not None:
+            on_seabed = (axis_prim >= grid.face0) & (axis_prim < grid.face0 + grid.plane.shape[0])
+            census["proven"] = census.get("proven", 0) + int(analytic.sum())
+            census["axis_on_seabed"] = census.get("axis_on_seabed", 0) + int(on_seabed.sum())
         cast = np.flatnonzero(~analytic)
         if cast.size:
             at = (cast[:, None] * m + rest_sub).ravel()
@@ -147,6 +154,23 @@ def cast_auto(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx
                                 shadow_rays, collapse=True)
 
 
+def auto_decisions(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
+                   shadow_rays: bool = True) -> dict:
+    """What :func:`cast_auto` decides for these pulses (same arguments), counted: ``pulses``; ``proven``: hits
+    found on the height field and no shadow ray cast; ``axis_on_seabed``: axes that met the height field first
+    (the others, on an object or on nothing, are cast as ``balanced`` casts them); ``simple``: pulses whose echoes
+    are collapsed to two (:func:`~scanner_sim.rays.collapse.simple_pulses`); ``no_hit``: pulses none of whose
+    sub-rays met anything (no echo to model); ``no_grid``: why no pulse can be proven
+    (:func:`~scanner_sim.rays.seabed_grid.no_grid_reason`), None where the scene has its proof grid."""
+    counts = {"pulses": int(beam_origin.shape[0]), "proven": 0, "axis_on_seabed": 0}
+    hits = cast_seabed_analytic(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
+                                shadow_rays, census=counts)
+    counts["simple"] = int(simple_pulses(hits).sum())
+    counts["no_hit"] = int((np.bincount(hits.pulse_index, minlength=hits.n_pulses) == 0).sum())
+    counts["no_grid"] = None if target.seabed_grid is not None else no_grid_reason(target.scene)
+    return counts
+
+
 @dataclass(frozen=True)
 class AutoCast(BeamCast):
     """The ``auto`` level's ray stage bound to its pass (:func:`cast_auto`)."""
@@ -154,3 +178,8 @@ class AutoCast(BeamCast):
     def __call__(self, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir) -> Hits:
         return cast_auto(self.target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, self.pattern, self.geometry,
                          self.shadow_rays)
+
+    def decisions(self, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir) -> dict:
+        """:func:`auto_decisions` of these pulses."""
+        return auto_decisions(self.target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, self.pattern,
+                              self.geometry, self.shadow_rays)

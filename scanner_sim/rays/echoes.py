@@ -10,9 +10,9 @@ from __future__ import annotations
 from muls.infra.runtime import kernel
 
 #: [m] Sub-ray echoes closer than this in range count as one place: they share one water-column cut
-#: (survey.handoff.column_cuts), and a footprint whose echoes all lie within it is simple, its echoes collapsed to
-#: two (rays.collapse). Under half the 0.11 m of range one 1 ns sample spans and a twentieth of the 10 ns pulse's
-#: 1.1 m; measured on cable_survey, the per-sub-ray cut costs nothing over one cut per pulse at this bin.
+#: (survey.handoff.column_cuts). Under half the 0.11 m of range one 1 ns sample spans and a twentieth of the 10 ns
+#: pulse's 1.1 m; measured on cable_survey, the per-sub-ray cut costs nothing over one cut per pulse at this bin.
+#: (The ``auto`` level collapses a footprint's echoes to two within its own span, rays.collapse.COLLAPSE_SPAN_M.)
 ECHO_BIN_M = 0.05
 
 

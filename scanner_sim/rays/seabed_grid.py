@@ -22,19 +22,13 @@ def seabed_grid(scene, caster, z_top_m: float | None = None):
     none, as the whole scene has none), or its seabed faces are not the height field's own, in its order.
     ``z_top_m``: the highest local float32 z of the whole scene when ``scene`` is a window of it (default: the
     caster's own)."""
-    hf = scene.heightfield
-    seabeds = [o for o in scene.objects if o.kind == "seabed"]
-    if hf is None or hf.valid is not None or len(seabeds) != 1:  # a seabed with gaps (or a window of one): none
+    if no_grid_reason(scene) is not None:
         return None
-    sb = seabeds[0]
+    hf = scene.heightfield
+    sb = next(o for o in scene.objects if o.kind == "seabed")
     ny, nx = hf.shape
     cells = (nx - 1) * (ny - 1)
     faces = scene.faces[sb.face_start:sb.face_stop]
-    if faces.shape[0] != 2 * cells:
-        return None
-    _, expected = hf.mesh()
-    if not np.array_equal(faces - faces.min(), expected):
-        return None
     k = max(1, round(COARSE_CELL_M / hf.spacing_m))
     cy, cx = -(-(ny - 1) // k), -(-(nx - 1) // k)
 
@@ -60,6 +54,26 @@ def seabed_grid(scene, caster, z_top_m: float | None = None):
     return SeabedGrid(float(x0), float(y0), float(hf.spacing_m), int(nx), int(ny), int(sb.face_start), int(k),
                       gradient, seabed_top, object_top, z_top + 1e-3, plane,
                       int(sk), super_top, int(scene.face_object[sb.face_start]))
+
+
+def no_grid_reason(scene) -> str | None:
+    """Why :func:`seabed_grid` builds no proof grid for ``scene`` (one line, for the trade-off's report of where
+    ``auto`` falls back to casting every ray), or None where it builds one."""
+    hf = scene.heightfield
+    if hf is None:
+        return "no height-field seabed (a mesh seabed or none)"
+    if hf.valid is not None:  # a seabed with gaps (or a window of one)
+        return "the height field has gaps (no-data cells), which the proofs do not model"
+    seabeds = [o for o in scene.objects if o.kind == "seabed"]
+    if len(seabeds) != 1:
+        return f"{len(seabeds)} seabed objects, the proofs model one"
+    sb = seabeds[0]
+    ny, nx = hf.shape
+    faces = scene.faces[sb.face_start:sb.face_stop]
+    _, expected = hf.mesh()
+    if faces.shape[0] != 2 * (nx - 1) * (ny - 1) or not np.array_equal(faces - faces.min(), expected):
+        return "the seabed's faces are not the height field's own, in its order"
+    return None
 
 
 def _block_max(a: np.ndarray, k: int) -> np.ndarray:

@@ -25,6 +25,7 @@ from scanner_sim.io.run_dir import hold_output
 from scanner_sim.records.point_records import PointRecords
 from scanner_sim.studies import accuracy
 from scanner_sim.survey import sinks
+from scanner_sim.survey.georeference import NO_OBJECT
 from scanner_sim.survey.pipeline import pass_chunks, stream_pass
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import build_scene
@@ -63,7 +64,8 @@ RECORD_BYTES_PER_PULSE = 12_000
 class LevelRun:
     """One level's run: its speed [pulses/s], points, the coverage it reached (covered share of the reached
     seabed cells, or without a seabed the share of pulses with a point an echo explains), which points lie on a
-    surface the receiver cannot see, and the waveform records of the first pulses."""
+    surface the receiver cannot see, the waveform records of the first pulses, and for an adaptive level what it
+    decided (:func:`level_decisions`)."""
 
     level: FidelityLevel
     pulses_per_s: float
@@ -72,6 +74,7 @@ class LevelRun:
     coverage: float | None
     hidden: np.ndarray
     records: object
+    decisions: dict | None = None
 
 
 def knob_level(name: str) -> FidelityLevel:
@@ -143,7 +146,34 @@ def run_level(base: PassSetup, level: FidelityLevel, waveform_pulses: int) -> Le
         covered = np.unique(points.pulse_index[points.object_id >= 0]).size / max(n, 1)
     first = np.concatenate(slots)[:waveform_pulses]
     records = setup.simulate_chunk(first, whole_records=True).waveforms  # every sample, for the waveforms' R^2
-    return LevelRun(level, n / wall_s, n, points, covered, hidden_from_receiver(setup, points), records)
+    return LevelRun(level, n / wall_s, n, points, covered, hidden_from_receiver(setup, points), records,
+                    level_decisions(setup, slots, records))
+
+
+def level_decisions(setup: PassSetup, slots: list, records) -> dict | None:
+    """What an adaptive level (``auto``) decided on the pulses of ``slots`` (arrays of slots), after its timed
+    passes, as shares of the pulses: sub-ray hits found on the height field, no shadow ray cast (``proven``); axis
+    met the height field first (``axis_on_seabed``: the others are cast as ``balanced`` casts them); echoes
+    collapsed to two (``simple``); no sub-ray met anything (``no_hit``). Then the channels digitised per record
+    window of ``records`` (``channels_per_window`` of ``channels``) and ``falls_back``: why no pulse is proven
+    where that is so. None for a level that decides nothing, or whose ray stage cannot say (a site's windows)."""
+    decide = getattr(setup.rays, "decisions", None)
+    if not setup.level.adaptive or decide is None:
+        return None
+    counts = {"pulses": 0, "proven": 0, "axis_on_seabed": 0, "simple": 0, "no_hit": 0}
+    reason = None
+    for chunk in slots:
+        poses = setup.trajectory.poses(chunk / setup.scanner.pulse_rate_hz)
+        found = decide(*setup.scanner.world_rays(poses))
+        reason = found["no_grid"]
+        for key in counts:
+            counts[key] += found[key]
+    n = max(counts["pulses"], 1)
+    kept = records.synthesised
+    return {"proven": counts["proven"] / n, "axis_on_seabed": counts["axis_on_seabed"] / n,
+            "simple": counts["simple"] / n, "no_hit": counts["no_hit"] / n,
+            "channels_per_window": None if kept is None or kept.size == 0 else float(kept.sum(axis=1).mean()),
+            "channels": int(records.codes.shape[1]), "falls_back": reason}
 
 
 def best_speed(base: PassSetup, runs: dict, repeat: int) -> dict:
@@ -163,6 +193,14 @@ def _rounded(metrics: dict) -> dict:
     return {k: (None if v is None else round(float(v), 6)) for k, v in metrics.items()}
 
 
+def range_bias(points: PointRecords) -> float | None:
+    """[m] Median of measured minus true range of the returns an echo explains (signed: positive is long), None
+    without any: the bias :func:`scanner_sim.studies.accuracy.vs_truth`'s absolute errors leave out."""
+    error = points.range_error_m[points.object_id != NO_OBJECT].astype(np.float64)
+    error = error[np.isfinite(error)]
+    return float(np.median(error)) if error.size else None
+
+
 def level_metrics(run: LevelRun, reference: LevelRun) -> dict:
     """The JSON entry of one run: its settings, speed, and metrics against the truth and the reference."""
     fit = accuracy.WaveformFit.of(run.records, reference.records)
@@ -170,11 +208,15 @@ def level_metrics(run: LevelRun, reference: LevelRun) -> dict:
     vs_ref["coverage_diff"] = accuracy.coverage_difference(run.coverage, reference.coverage)
     vs_ref["waveform_r2"] = fit.r2
     lv = run.level
-    return {"pulses_per_s": round(run.pulses_per_s, 1), "subrays": lv.subrays, "shadow_rays": lv.shadow_rays,
-            "record_mode": lv.record_mode, "column_cut": lv.column_cut, "multiple_scattering": lv.multiple_scattering,
-            "coverage": run.coverage,
-            "vs_truth": _rounded(accuracy.vs_truth(run.points, run.n_pulses, run.hidden)),
-            "vs_reference": _rounded(vs_ref)}
+    entry = {"pulses_per_s": round(run.pulses_per_s, 1), "subrays": lv.subrays, "shadow_rays": lv.shadow_rays,
+             "record_mode": lv.record_mode, "column_cut": lv.column_cut, "multiple_scattering": lv.multiple_scattering,
+             "coverage": run.coverage,
+             "vs_truth": _rounded({**accuracy.vs_truth(run.points, run.n_pulses, run.hidden),
+                                   "median_range_bias_m": range_bias(run.points)}),
+             "vs_reference": _rounded(vs_ref)}
+    if run.decisions is not None:
+        entry["decisions"] = {k: round(v, 4) if isinstance(v, float) else v for k, v in run.decisions.items()}
+    return entry
 
 
 def run_plan(levels, knobs, convergence: bool) -> list[tuple[str, FidelityLevel]]:
@@ -244,6 +286,7 @@ def tradeoff(config: SceneConfig, levels=tuple(FIDELITY_LEVELS), knobs=tuple(KNO
 TABLE = [("pulses/s", None, "pulses_per_s", "{:,.0f}"),
          ("median abs err [m]", "vs_truth", "median_abs_range_error_m", "{:.4f}"),
          ("p95 abs err [m]", "vs_truth", "p95_abs_range_error_m", "{:.3f}"),
+         ("range bias [m]", "vs_truth", "median_range_bias_m", "{:+.4f}"),
          ("false alarms /pulse", "vs_truth", "false_alarms_per_pulse", "{:.4f}"),
          ("hidden pts /pulse", "vs_truth", "hidden_points_per_pulse", "{:.4f}"),
          ("missing /pulse", "vs_reference", "missing_per_pulse", "{:.4f}"),
@@ -266,7 +309,30 @@ def markdown_table(result: dict) -> str:
     for group in ("levels", "knobs"):
         for name, entry in result[group].items():
             rows.append(f"| {name} | " + " | ".join(_cell(entry, *spec[1:]) for spec in TABLE) + " |")
-    return "\n".join(rows) + "\n"
+    notes = [decisions_note(name, entry["decisions"]) for group in ("levels", "knobs")
+             for name, entry in result[group].items() if entry.get("decisions")]
+    return "\n".join(rows) + "\n" + "".join(f"\n{note}\n" for note in notes)
+
+
+def decisions_note(name: str, d: dict) -> str:
+    """One paragraph: what the adaptive level ``name`` decided (:func:`level_decisions`'s ``d``), and where it
+    falls back to ``balanced``'s way, why."""
+    cast = 1.0 - d["proven"]
+    text = (f"`{name}` decided: sub-ray hits found on the height field, no shadow ray cast, for {d['proven']:.1%} of "
+            f"pulses; ")
+    if d["falls_back"]:
+        text += f"the rest cast by Embree as `balanced` casts them, because {d['falls_back']}; "
+    elif cast > 0:
+        text += (f"the rest ({cast:.1%}) cast by Embree as `balanced` casts them: {1.0 - d['axis_on_seabed']:.1%} "
+                 f"whose axis met an object or nothing first, {d['axis_on_seabed'] - d['proven']:.1%} where "
+                 "something might stand in a sub-ray's or the receiver's way or the seabed rises more steeply than "
+                 "a ray; ")
+    text += (f"echoes collapsed to two for {d['simple']:.1%}, one echo per sub-ray kept for "
+             f"{1.0 - d['simple'] - d['no_hit']:.1%} (a footprint over an edge or two surfaces, or spread over more "
+             f"range than the collapse allows), and {d['no_hit']:.1%} met nothing")
+    if d["channels_per_window"] is not None:
+        text += f"; {d['channels_per_window']:.2f} of {d['channels']} channels digitised per record window"
+    return text + "."
 
 
 #: Columns of docs/fidelity.md's failure-scene table after the scene and the level: (section, key, format).

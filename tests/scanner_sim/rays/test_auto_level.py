@@ -15,10 +15,10 @@ from scanner_sim.rays.auto import cast_auto
 from scanner_sim.rays.beams import beam_pattern
 from scanner_sim.rays.cast import CastScene, cast_beams
 from scanner_sim.rays.caster import RayCaster
-from scanner_sim.rays.collapse import simple_pulses, two_point_rule
-from scanner_sim.rays.echoes import ECHO_BIN_M, echo_energy
+from scanner_sim.rays.collapse import COLLAPSE_SPAN_M, simple_pulses, two_point_rule
+from scanner_sim.rays.echoes import echo_energy
 from scanner_sim.rays.hits import HIT_FIELDS, Hits
-from scanner_sim.rays.seabed_grid import seabed_grid
+from scanner_sim.rays.seabed_grid import no_grid_reason, seabed_grid
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import LABELS, Part, Scene, panel_mesh, tube
 from scanner_sim.world.terrain import HeightField
@@ -43,7 +43,7 @@ def test_a_pulse_is_simple_only_when_all_its_sub_rays_meet_one_object_within_the
     spread just over the limit; 3 one sub-ray missing."""
     flat = list(5.0 + np.linspace(0, 0.01, M))
     pulse = [0] * M + [1] * M + [2] * M + [3] * (M - 1)
-    rng = flat + flat + list(5.0 + np.linspace(0, 1.01 * ECHO_BIN_M, M)) + flat[:-1]
+    rng = flat + flat + list(5.0 + np.linspace(0, 1.01 * COLLAPSE_SPAN_M, M)) + flat[:-1]
     obj = [1] * M + [1] * (M - 1) + [2] + [1] * (2 * M - 1)
     np.testing.assert_array_equal(simple_pulses(_hits(pulse, rng, obj, 4)), [True, False, False, False])
 
@@ -274,6 +274,38 @@ def test_a_scene_without_a_height_field_is_cast_as_balanced_casts_it():
     proven, embree, _ = _both(scene, pulses)
     for f in HIT_FIELDS:
         np.testing.assert_array_equal(getattr(proven, f.name), getattr(embree, f.name))
+
+
+def test_auto_decides_and_counts_what_it_proves_on_a_height_field():
+    """The counts the trade-off reports: on the plain rippled field most pulses are proven and collapsed, every
+    axis meets the seabed, and the scene has its proof grid (no fall-back reason)."""
+    scene = _seabed_scene()
+    caster = RayCaster.for_scene(scene)
+    d = auto_level.auto_decisions(CastScene(scene, caster, seabed_grid(scene, caster)), *_pulses(500, seed=5),
+                                  beam_pattern(19), GEOMETRY)
+    assert d["pulses"] == 500 and d["no_grid"] is None and d["no_hit"] == 0
+    assert d["axis_on_seabed"] == 500 and 400 < d["proven"] <= 500 and 400 < d["simple"] <= 500
+
+
+def test_a_height_field_with_gaps_falls_back_to_embree_and_says_why():
+    """A height field with no-data cells (as a surveyed raster has, real_site) gets no proof grid: the proofs
+    number the seabed's faces by cell, which the gaps break. auto then casts every sub-ray and shadow ray as
+    balanced does (the same hits), proves no pulse, and the reason is what the trade-off prints."""
+    hf = _field()
+    valid = np.ones((100, 100), bool)
+    valid[40:60, :] = False  # a no-data band across the middle
+    hf = HeightField(hf.x0_m, hf.y0_m, hf.spacing_m, hf.heights_m, valid=valid)
+    v, f = hf.mesh()
+    scene = Scene([Part("seabed", "seabed", v, f, LABELS["seabed"], 0.2)], heightfield=hf)
+    caster = RayCaster.for_scene(scene)
+    assert seabed_grid(scene, caster) is None
+    assert "gaps" in no_grid_reason(scene) and no_grid_reason(_seabed_scene()) is None
+    pulses = _pulses(300, seed=6)
+    d = auto_level.auto_decisions(CastScene(scene, caster, None), *pulses, beam_pattern(19), GEOMETRY)
+    assert d["proven"] == 0 and "gaps" in d["no_grid"] and 0 < d["no_hit"] < 300
+    proven, embree, _ = _both(scene, pulses)
+    for field in HIT_FIELDS:
+        np.testing.assert_array_equal(getattr(proven, field.name), getattr(embree, field.name))
 
 
 def test_the_seabed_bounds_hold_every_triangle():

@@ -43,6 +43,29 @@ def test_every_level_has_its_speed_and_both_sets_of_metrics(step_edges):
     assert "| subrays=1 |" in (out / "tradeoff.md").read_text()
 
 
+def test_where_auto_falls_back_the_table_says_why(step_edges):
+    """The step edges are panels, not a height-field seabed: auto can prove no pulse, casts them as balanced does,
+    and its decisions (in the JSON, and under the table) say so and why; it still collapses the footprints on one
+    flat step."""
+    out, result = step_edges
+    decisions = result["levels"]["auto"]["decisions"]
+    assert decisions["proven"] == 0 and "height-field" in decisions["falls_back"]
+    assert 0 < decisions["simple"] < 1 and 1 <= decisions["channels_per_window"] <= decisions["channels"]
+    assert all("decisions" not in result["levels"][n] for n in ("fast", "balanced", "reference"))
+    table = (out / "tradeoff.md").read_text()
+    assert "`auto` decided" in table and decisions["falls_back"] in table
+
+
+def test_the_range_bias_is_signed_and_no_larger_than_the_median_error(step_edges):
+    """The median signed range error (the bias auto must keep within balanced's) is bounded by the median absolute
+    error: at least half the errors lie beyond the median in magnitude. The table prints it."""
+    out, result = step_edges
+    for entry in result["levels"].values():
+        truth = entry["vs_truth"]
+        assert abs(truth["median_range_bias_m"]) <= truth["median_abs_range_error_m"] + 1e-6
+    assert "range bias [m]" in (out / "tradeoff.md").read_text()
+
+
 def test_more_timed_passes_change_only_the_speeds():
     """A seed fixes the points, so timing each run once or three times (round-robin, the fastest kept) gives the
     same metrics; only pulses_per_s may move, and the JSON says how many passes timed it."""
