@@ -14,8 +14,8 @@ package that builds on muls, such as the mission, registers its own sources by d
 :func:`kernel`): any change starts a fresh cache, and the first run after it compiles again.
 ``NUMBA_CACHE_DIR``, if set, wins.
 
-**Threads.** A pass runs chunks side by side, each on one thread, beside numba's parallel kernels (OpenMP
-threading layer). By default an OpenMP worker keeps spinning for a while after each parallel region and so takes a
+**Threads.** A pass runs chunks side by side, each on one thread, beside numba's parallel kernels (the Monte
+Carlo's; OpenMP threading layer). By default an OpenMP worker keeps spinning for a while after each parallel region and so takes a
 core from the threads beside it for nothing; with ``OMP_WAIT_POLICY=PASSIVE`` idle workers sleep at once.
 Measured on the 2-core machine (``fast`` on cable_survey, 200,000 pulses, the chunk loop alone): 112,000 and
 132,000 pulses/s spinning against 134,000 and 160,000 passive, at fewer cores used. The policy is read when OpenMP

@@ -85,7 +85,7 @@ def _spread_brackets(range_m, ranges):
     return lower, weight
 
 
-@kernel(nogil=True)
+@kernel(inline="always")
 def _spread_row(lo, w, direct, moments):
     """(direct share, mean delay of the scattered light [s], its variance [s^2]) at row ``lo`` + ``w`` of the way to
     the next: the node delays' mean and mean square in closed form (:func:`_spread_moments`)."""

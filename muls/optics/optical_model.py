@@ -342,7 +342,8 @@ def _sort_by_delay_within(offsets, delay, energy, source):
                     at = starts[bucket[i]]
                     starts[bucket[i]] += 1
                     moved_d[at], moved_e[at], moved_s[at] = delay[lo + i], energy[lo + i], source[lo + i]
-                delay[lo:hi], energy[lo:hi], source[lo:hi] = moved_d[:n], moved_e[:n], moved_s[:n]
+                for i in range(n):
+                    delay[lo + i], energy[lo + i], source[lo + i] = moved_d[i], moved_e[i], moved_s[i]
         for i in range(lo + 1, hi):
             d, e, s = delay[i], energy[i], source[i]
             j = i - 1
@@ -423,14 +424,32 @@ def _column_many(t, cut_tau, col):
 
 
 @kernel(inline="always")
-def optical_power(t, p, col, cuts, echoes, extent):
-    """Total received power [W] of batch pulse p at time t [s] (MULS Eq. 1): column, echoes, background."""
+def cut_column_power(t, p, col, cuts):
+    """Power [W] at time t [s] of batch pulse p's column as its targets cut it, plus background (MULS Eq. 1 less
+    the echoes, which :func:`add_pulse_steps` adds)."""
     power = cuts.background_w[p]
     for c in range(cuts.cut_tau_s.shape[1]):
         if cuts.cut_weight[p, c] != 0.0:
             power += cuts.cut_weight[p, c] * column_value(t, cuts.cut_tau_s[p, c], col)
-    for j in range(echoes.offsets[p], echoes.offsets[p + 1]):
-        u = t - echoes.delay_s[j]
-        if 0.0 <= u < extent:
-            power += echoes.energy_j[j] * pulse_value(u, col.basis)
     return power
+
+
+@kernel(inline="always")
+def add_pulse_steps(out, first, u, dt, scale, extent, basis, exact_u):
+    """out[j] += scale * :func:`pulse_value` (u_j) for j = first, first + 1, ... while u_j < ``extent`` [s] (an
+    echo's term of MULS Eq. 1 on samples ``dt`` [s] apart), the pulse basis's two exponentials stepped from sample
+    to sample by constant factors: four exps in all. u_j [s]: ``exact_u[j]`` where ``exact_u`` (len(out),) is
+    given (not empty), else ``u`` at ``first`` plus ``dt`` a step. u_first must be >= 0."""
+    if exact_u.shape[0] > 0:
+        u = exact_u[first]
+    ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
+    ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
+    for j in range(first, out.shape[0]):
+        if exact_u.shape[0] > 0:
+            u = exact_u[j]
+        if u >= extent:
+            return
+        out[j] += scale * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
+        u += dt
+        ea *= ra
+        eb *= rb

@@ -3,7 +3,6 @@ there among the echoes that can make a peak there, the way trimesh returns ``ind
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from ..infra.runtime import kernel
@@ -29,12 +28,12 @@ def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, shape) -> np.nda
     return out
 
 
-@kernel(parallel=True, nogil=True)
+@kernel(nogil=True)
 def _dominant(pulse, time_s, need_w, offsets, delay, energy, basis, extent, making):
     """Index into the echoes of the echo explaining each peak, -1 for none (see :func:`dominant_echo`); an echo
     can make a peak up to ``making`` [s] after its start."""
     out = np.full(pulse.shape[0], -1, np.int64)
-    for i in numba.prange(pulse.shape[0]):
+    for i in range(pulse.shape[0]):
         p = pulse[i]
         total, top, best = 0.0, 0.0, -1
         near, near_top, near_best = 0.0, 0.0, -1

@@ -1,6 +1,6 @@
 """Peaks in the digitised records, as the instrument finds them: runs over the local baseline, sub-sample
 refinement on the known pulse shape, ranges from the CH0 reference peak (MULS Eq. 14), and the echo behind
-each peak. One search, one compiled kernel with the helpers it calls, hence a module a little over the usual length.
+each peak (:mod:`.peak_echoes`), put in ranging's order (:mod:`.peak_order`).
 
 The baseline of each channel is the calibrated no-target record of the water (column backscatter plus
 background, as measured in open water), and its noise the dark noise plus the shot noise of that baseline:
@@ -20,15 +20,15 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
 from ..infra.lookup import bracket, interp_at, on_geometric_grid, on_log_grid, steps_per_log
 from ..infra.runtime import kernel
 from ..instrument.channels import processor_sigma_lsb
-from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, baseline_values, pulse_value
-from ..receiver.digitiser import WINDOW_BLOCK, Waveforms, sample_times
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, add_pulse_steps, baseline_values, pulse_value
+from ..receiver.digitiser import Waveforms, sample_times
 from .peak_echoes import dominant_echo
+from .peak_order import peak_order
 
 #: Most peaks kept per window and channel (more means noise, not echoes).
 MAX_PEAKS_PER_WINDOW = 8
@@ -141,52 +141,6 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoe
     return peaks, ref_time
 
 
-@kernel(nogil=True)
-def peak_order(pulse, channel, index, time_s):
-    """(m,) int64: the peaks to keep, in ranging's order: by pulse, then time, then channel and sample index, where
-    overlapping windows found one run twice (the same pulse, channel and index) the earlier one only.
-
-    ``pulse`` (n,) must not decrease (the kernel's slots are by window, and windows by pulse), so each pulse's few
-    peaks are sorted where they lie, and ``time_s`` is a function of pulse and index, so a run found twice has one
-    time. The result equals a stable lexsort by (pulse, channel, index), the duplicates dropped, then a stable
-    lexsort of that by (pulse, time)."""
-    n = pulse.shape[0]
-    order = np.arange(n)
-    kept = np.empty(n, np.int64)
-    m = 0
-    start = 0
-    while start < n:
-        end = start + 1
-        while end < n and pulse[end] == pulse[start]:
-            end += 1
-        for i in range(start + 1, end):  # insertion sort by (time, channel, index, slot)
-            j, o = i - 1, order[i]
-            while j >= start and _after(order[j], o, time_s, channel, index):
-                order[j + 1] = order[j]
-                j -= 1
-            order[j + 1] = o
-        for i in range(start, end):
-            o = order[i]
-            if i > start and channel[o] == channel[order[i - 1]] and index[o] == index[order[i - 1]]:
-                continue
-            kept[m] = o
-            m += 1
-        start = end
-    return kept[:m]
-
-
-@kernel(inline="always")
-def _after(a, b, time_s, channel, index):
-    """Peak ``a`` comes after peak ``b`` of the same pulse: by time, then channel, sample index and slot."""
-    if time_s[a] != time_s[b]:
-        return time_s[a] > time_s[b]
-    if channel[a] != channel[b]:
-        return channel[a] > channel[b]
-    if index[a] != index[b]:
-        return index[a] > index[b]
-    return a > b
-
-
 @kernel(inline="always")
 def _refine(y0, y1, y2, fit, table):
     """(offset of the peak from the middle sample [samples], middle sample over peak) from three samples."""
@@ -206,12 +160,12 @@ def _refine(y0, y1, y2, fit, table):
     return interp_at(d, j, table.feature, table.offset), interp_at(d, j, table.feature, table.centre)
 
 
-@kernel(parallel=True, nogil=True)
+@kernel(nogil=True)
 def _reference_peaks(reference, dark_mean, fit, table):
     """Sub-sample index of the CH0 peak of each pulse."""
     n_pulses, n_ref = reference.shape
     out = np.empty(n_pulses)
-    for p in numba.prange(n_pulses):
+    for p in range(n_pulses):
         best = 1
         for k in range(1, n_ref - 1):
             if reference[p, k] > reference[p, best]:
@@ -222,7 +176,7 @@ def _reference_peaks(reference, dark_mean, fit, table):
     return out
 
 
-@kernel(parallel=True, nogil=True)
+@kernel(nogil=True)
 def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
            clip_table, out, sparse):
     """The peak search over every window and channel (module doc), into ``out``. ``sparse``: records mostly 0 (full
@@ -233,136 +187,135 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
     basis = col.basis
     k_sigma, tail_tolerance, max_code = settings.k_sigma, settings.tail_tolerance, settings.max_code
     out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts = out
-    for block in numba.prange((n_windows + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
-        times, base_w = np.empty(n_samples), np.empty(n_samples)
-        resid, sigma = np.empty(n_samples), np.empty(n_samples)
-        echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
-        open_, blind = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_)
-        seg_first, seg_end = np.empty(n_samples // 2 + 1, np.int64), np.empty(n_samples // 2 + 1, np.int64)
-        for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
-            p = window_pulse[w]
-            first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
-            while first < n_chan and not _may_run(codes, synthesised, w, first, chans, k_sigma):
-                first += 1
-            if first == n_chan:
+    times, base_w = np.empty(n_samples), np.empty(n_samples)
+    resid, sigma = np.empty(n_samples), np.empty(n_samples)
+    echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
+    open_, blind = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_)
+    seg_first, seg_end = np.empty(n_samples // 2 + 1, np.int64), np.empty(n_samples // 2 + 1, np.int64)
+    for w in range(n_windows):
+        p = window_pulse[w]
+        first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed
+        while first < n_chan and not _may_run(codes, synthesised, w, first, chans, k_sigma):
+            first += 1
+        if first == n_chan:
+            continue
+        if not sparse:
+            sample_times(times, 0, n_samples, t0, dt, window_start[w], phase[p])
+            baseline_values(base_w, times, background[p], col)
+        for c in range(first, n_chan):
+            slot = w * n_chan + c
+            if c > first and not _may_run(codes, synthesised, w, c, chans, k_sigma):
                 continue
+            # The stretches of samples where a run may lie or the search may read: the whole window, or within a
+            # sample of a nonzero code (a code of 0 lies under every run's level, so no run holds one).
+            n_seg, seen = 1, 0
             if not sparse:
-                sample_times(times, 0, n_samples, t0, dt, window_start[w], phase[p])
-                baseline_values(base_w, times, background[p], col)
-            for c in range(first, n_chan):
-                slot = w * n_chan + c
-                if c > first and not _may_run(codes, synthesised, w, c, chans, k_sigma):
-                    continue
-                # The stretches of samples where a run may lie or the search may read: the whole window, or within a
-                # sample of a nonzero code (a code of 0 lies under every run's level, so no run holds one).
-                n_seg, seen = 1, 0
-                if not sparse:
-                    seg_first[0], seg_end[0] = 0, n_samples
-                    seen = _residuals(codes[w, c], times, base_w, chans, c, max_code, open_, blind, sigma, resid, echoes)
-                else:
-                    n_seg = _code_segments(codes[w, c], seg_first, seg_end)
-                    for g in range(n_seg):  # the same numbers as the whole window's, sample by sample
-                        a, b = seg_first[g], seg_end[g]
-                        sample_times(times, a, b, t0, dt, window_start[w], phase[p])
-                        baseline_values(base_w[a:b], times[a:b], background[p], col)
-                        seen += _residuals(codes[w, c, a:b], times[a:b], base_w[a:b], chans, c, max_code, open_[a:b],
-                                           blind[a:b], sigma[a:b], resid[a:b], echoes[a:b])
-                if seen == 0:
-                    continue  # blind wherever a run may lie: every residual there is zero
-                for g in range(n_seg):
-                    k, end = seg_first[g], seg_end[g]
-                    clip_start, clip_scale = 0.0, 0.0  # the last plateau's fitted pulse here: start [s], area [LSB s]
-                    clip_end = -1.0  # the last plateau's end here, where its fitted pulse falls through the clip [samples]
-                    while k < end:
-                        if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
-                            k += 1
+                seg_first[0], seg_end[0] = 0, n_samples
+                seen = _residuals(codes[w, c], times, base_w, chans, c, max_code, open_, blind, sigma, resid, echoes)
+            else:
+                n_seg = _code_segments(codes[w, c], seg_first, seg_end)
+                for g in range(n_seg):  # the same numbers as the whole window's, sample by sample
+                    a, b = seg_first[g], seg_end[g]
+                    sample_times(times, a, b, t0, dt, window_start[w], phase[p])
+                    baseline_values(base_w[a:b], times[a:b], background[p], col)
+                    seen += _residuals(codes[w, c, a:b], times[a:b], base_w[a:b], chans, c, max_code, open_[a:b],
+                                       blind[a:b], sigma[a:b], resid[a:b], echoes[a:b])
+            if seen == 0:
+                continue  # blind wherever a run may lie: every residual there is zero
+            for g in range(n_seg):
+                k, end = seg_first[g], seg_end[g]
+                clip_start, clip_scale = 0.0, 0.0  # the last plateau's fitted pulse here: start [s], area [LSB s]
+                clip_end = -1.0  # the last plateau's end here, where its fitted pulse falls through the clip [samples]
+                while k < end:
+                    if resid[k] - echoes[k] <= 0.5 * k_sigma * sigma[k]:
+                        k += 1
+                        continue
+                    start = k
+                    top = k
+                    clipped_first = -1
+                    clipped_last = -1
+                    while k < n_samples and resid[k] - echoes[k] > 0.5 * k_sigma * sigma[k]:
+                        # The run's first plateau: its clipped samples, across a single unclipped one (noise at the
+                        # top code); a later plateau is a later echo, found once this one's model is taken off.
+                        if codes[w, c, k] >= max_code and (clipped_last < 0 or k - clipped_last <= 2):
+                            if clipped_first < 0:
+                                clipped_first = k
+                            clipped_last = k
+                        if resid[k] - echoes[k] > resid[top] - echoes[top] and (clipped_first < 0 or k <= clipped_last):
+                            top = k
+                        k += 1
+                    # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
+                    # threshold there, over what the echoes already found leave if their shape is a little off.
+                    # A clipped run may run on past the window's end once its plateau has ended inside it: the
+                    # plateau and its two clip levels alone time it, whatever the tail does after.
+                    if start == 0 or (k >= n_samples and not (clipped_first >= 0 and clipped_last < n_samples - 1)):
+                        continue
+                    if clipped_first < 0 and (top == start or not open_[top - 1]):
+                        continue  # no rising edge inside the gate: a gate opening on a tail, not an echo
+                    if clipped_first >= 0:
+                        # The plateau may have begun before the run did (clipped samples with a small residual on a
+                        # high baseline): it must rise from a sample the channel sees, or its width is unknown.
+                        # A plateau that runs through samples the backscatter alone clips began in the column.
+                        through_blind = False
+                        while clipped_first > 0 and codes[w, c, clipped_first - 1] >= max_code:
+                            clipped_first -= 1
+                            through_blind = through_blind or blind[clipped_first]
+                        if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
                             continue
-                        start = k
-                        top = k
-                        clipped_first = -1
-                        clipped_last = -1
-                        while k < n_samples and resid[k] - echoes[k] > 0.5 * k_sigma * sigma[k]:
-                            # The run's first plateau: its clipped samples, across a single unclipped one (noise at the
-                            # top code); a later plateau is a later echo, found once this one's model is taken off.
-                            if codes[w, c, k] >= max_code and (clipped_last < 0 or k - clipped_last <= 2):
-                                if clipped_first < 0:
-                                    clipped_first = k
-                                clipped_last = k
-                            if resid[k] - echoes[k] > resid[top] - echoes[top] and (clipped_first < 0 or k <= clipped_last):
-                                top = k
-                            k += 1
-                        # Keep a run that lies inside the window, rises to its maximum inside the gate, and clears the
-                        # threshold there, over what the echoes already found leave if their shape is a little off.
-                        # A clipped run may run on past the window's end once its plateau has ended inside it: the
-                        # plateau and its two clip levels alone time it, whatever the tail does after.
-                        if start == 0 or (k >= n_samples and not (clipped_first >= 0 and clipped_last < n_samples - 1)):
+                        # A plateau that runs on into samples the backscatter alone clips ends there only in the
+                        # residual: its width, so its amplitude and time, are unknown (the blind-zone edge).
+                        if blind[clipped_last + 1] and codes[w, c, clipped_last + 1] >= max_code:
                             continue
-                        if clipped_first < 0 and (top == start or not open_[top - 1]):
-                            continue  # no rising edge inside the gate: a gate opening on a tail, not an echo
-                        if clipped_first >= 0:
-                            # The plateau may have begun before the run did (clipped samples with a small residual on a
-                            # high baseline): it must rise from a sample the channel sees, or its width is unknown.
-                            # A plateau that runs through samples the backscatter alone clips began in the column.
-                            through_blind = False
-                            while clipped_first > 0 and codes[w, c, clipped_first - 1] >= max_code:
-                                clipped_first -= 1
-                                through_blind = through_blind or blind[clipped_first]
-                            if through_blind or clipped_first == 0 or not open_[clipped_first - 1] or blind[clipped_first - 1]:
-                                continue
-                            # A plateau that runs on into samples the backscatter alone clips ends there only in the
-                            # residual: its width, so its amplitude and time, are unknown (the blind-zone edge).
-                            if blind[clipped_last + 1] and codes[w, c, clipped_last + 1] >= max_code:
-                                continue
-                        if blind[top - 1]:
+                    if blind[top - 1]:
+                        continue
+                    height = resid[top] - echoes[top]
+                    if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
+                        continue
+                    # Behind a plateau, over what its fitted pulse may be off by there too (CLIPPED_TAIL_TOLERANCE).
+                    if clipped_first < 0 and height <= k_sigma * sigma[top] + CLIPPED_TAIL_TOLERANCE * clip_scale \
+                            * pulse_value(times[top] - clip_start, basis):
+                        continue
+                    if counts[slot] >= cap:
+                        continue
+                    if clipped_first >= 0:
+                        # Clipped: the plateau and the clip levels at its ends (over a baseline that may slope) give
+                        # amplitude and peak time through the known pulse shape. A clip level that the echoes found
+                        # before already explain leaves the plateau's edge, so its width, unknown.
+                        level_first = resid[clipped_first] - echoes[clipped_first]
+                        level_last = resid[clipped_last] - echoes[clipped_last]
+                        if not (level_first > 0.0 and level_last > 0.0):
                             continue
-                        height = resid[top] - echoes[top]
-                        if clipped_first < 0 and height <= k_sigma * sigma[top] + tail_tolerance * echoes[top]:
+                        idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_table)
+                        idx += window_start[w]
+                        # Plain peak detection reports the first sample at the top code; the plateau's model
+                        # still places the echo that is taken off before the search goes on.
+                        found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
+                        k = clipped_last + 1  # look again behind the plateau once the echo's model is taken off
+                        clip_end = clipped_last + 0.5
+                        clip_start = t0 + idx * dt + phase[p] - settings.peak_delay_s
+                        clip_scale = amp / settings.peak_density
+                    else:
+                        d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
+                                           settings.fit, fit_table)
+                        idx = float(window_start[w] + top) + d
+                        # An echo that began before the last plateau ended rose inside it: its light is in the
+                        # plateau the single pulse was fitted to, so the fit and what it leaves are both off, and
+                        # this channel cannot time it (a lower-gain channel that does not clip can).
+                        if idx - window_start[w] - settings.peak_delay_s / dt < clip_end:
                             continue
-                        # Behind a plateau, over what its fitted pulse may be off by there too (CLIPPED_TAIL_TOLERANCE).
-                        if clipped_first < 0 and height <= k_sigma * sigma[top] + CLIPPED_TAIL_TOLERANCE * clip_scale \
-                                * pulse_value(times[top] - clip_start, basis):
-                            continue
-                        if counts[slot] >= cap:
-                            continue
-                        if clipped_first >= 0:
-                            # Clipped: the plateau and the clip levels at its ends (over a baseline that may slope) give
-                            # amplitude and peak time through the known pulse shape. A clip level that the echoes found
-                            # before already explain leaves the plateau's edge, so its width, unknown.
-                            level_first = resid[clipped_first] - echoes[clipped_first]
-                            level_last = resid[clipped_last] - echoes[clipped_last]
-                            if not (level_first > 0.0 and level_last > 0.0):
-                                continue
-                            idx, amp = _clipped_peak(clipped_first, clipped_last, level_first, level_last, clip_table)
-                            idx += window_start[w]
-                            # Plain peak detection reports the first sample at the top code; the plateau's model
-                            # still places the echo that is taken off before the search goes on.
-                            found = float(window_start[w] + clipped_first) if settings.fit == SAMPLE_MAXIMUM else idx
-                            k = clipped_last + 1  # look again behind the plateau once the echo's model is taken off
-                            clip_end = clipped_last + 0.5
-                            clip_start = t0 + idx * dt + phase[p] - settings.peak_delay_s
-                            clip_scale = amp / settings.peak_density
-                        else:
-                            d, ratio = _refine(resid[top - 1] - echoes[top - 1], height, resid[top + 1] - echoes[top + 1],
-                                               settings.fit, fit_table)
-                            idx = float(window_start[w] + top) + d
-                            # An echo that began before the last plateau ended rose inside it: its light is in the
-                            # plateau the single pulse was fitted to, so the fit and what it leaves are both off, and
-                            # this channel cannot time it (a lower-gain channel that does not clip can).
-                            if idx - window_start[w] - settings.peak_delay_s / dt < clip_end:
-                                continue
-                            found = idx
-                            amp = height / ratio
-                            k = top + 1  # look again behind this echo once its modelled shape is taken off
-                        u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
-                        _add_echo(echoes, top + 1, u, dt, amp / settings.peak_density, basis)
-                        j = slot * cap + counts[slot]
-                        out_w[j] = w
-                        out_c[j] = c
-                        out_idx[j] = found
-                        out_amp[j] = amp
-                        out_snr[j] = amp / sigma[top]
-                        out_sat[j] = clipped_first >= 0
-                        counts[slot] += 1
+                        found = idx
+                        amp = height / ratio
+                        k = top + 1  # look again behind this echo once its modelled shape is taken off
+                    u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
+                    _add_echo(echoes, top + 1, u, dt, amp / settings.peak_density, basis)
+                    j = slot * cap + counts[slot]
+                    out_w[j] = w
+                    out_c[j] = c
+                    out_idx[j] = found
+                    out_amp[j] = amp
+                    out_snr[j] = amp / sigma[top]
+                    out_sat[j] = clipped_first >= 0
+                    counts[slot] += 1
 
 
 @kernel(nogil=True)
@@ -403,7 +356,7 @@ def _may_run(codes, synthesised, w, c, chans, k_sigma):
     return highest - chans.dark_mean_lsb[c] > 0.5 * k_sigma * processor_sigma_lsb(chans, c, 0.0)
 
 
-@kernel(nogil=True)
+@kernel(inline="always")
 def _code_segments(row, seg_first, seg_end):
     """The stretches of ``row`` (n,) codes within a sample of a nonzero code, merged where they touch: their first
     samples and ends (exclusive) into ``seg_first``, ``seg_end``; returns how many. A run of the peak search lies
@@ -427,23 +380,17 @@ def _code_segments(row, seg_first, seg_end):
 
 @kernel(inline="always")
 def _add_echo(echoes, first, u, dt, scale, basis):
-    """echoes[first:] += scale * w(u + i dt): the pulse basis steps by constant factors, two exps in all."""
+    """echoes[first:] += scale * w(u + i dt) (:func:`~muls.optics.optical_model.add_pulse_steps`), from the first
+    sample at or after the echo's start."""
     if u < 0.0:  # the echo starts after this sample: first sample at or after its start
         skip = int(math.ceil(-u / dt))
         first += skip
         u += skip * dt
-    if first >= echoes.shape[0]:
-        return
-    ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
-    ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
-    for j in range(first, echoes.shape[0]):
-        echoes[j] += scale * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
-        u += dt
-        ea *= ra
-        eb *= rb
+    if first < echoes.shape[0]:
+        add_pulse_steps(echoes, first, u, dt, scale, math.inf, basis, echoes[:0])
 
 
-@kernel(nogil=True)
+@kernel(inline="always")
 def _clipped_peak(first, last, level_first, level_last, table):
     """(peak index [samples], amplitude) of an echo clipped from sample ``first`` to ``last``, where the clip
     level above the baseline was ``level_first`` and ``level_last`` (both > 0): the amplitude A whose pulse exceeds

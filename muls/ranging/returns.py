@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..infra.runtime import kernel
-from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, column_value, uncut_column_value
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, add_pulse_steps, cut_column_power, uncut_column_value
 from ..receiver.digitiser import Waveforms
 from .peaks import Peaks, find_peaks
 
@@ -199,8 +199,10 @@ def _span_terms(first, count, phase, sampling, pulses, col, cuts, echoes, extent
     column_peak, base_peak = np.zeros(n), np.zeros(n)
     clipped = np.zeros((n, n_chan), np.bool_)
     basis = col.basis
-    ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
-    times, echo = np.empty(count.max() if n else 0), np.empty(count.max() if n else 0)
+    most = 0  # a loop, not count.max(): numpy's max costs a second of compiling
+    for i in range(n):
+        most = max(most, count[i])
+    times, echo = np.empty(most), np.empty(most)
     for i in range(n):
         p = pulses[i]
         last = count[i]
@@ -215,14 +217,8 @@ def _span_terms(first, count, phase, sampling, pulses, col, cuts, echoes, extent
                 j += 1
             if j == last:
                 continue
-            u = times[j] - echoes.delay_s[e]
-            ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
-            while j < last and u < extent:  # MULS Eq. 1's echo term, pulse_value(u) stepped
-                echo[j] += echoes.energy_j[e] * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
-                j += 1
-                u += dt
-                ea *= ra
-                eb *= rb
+            add_pulse_steps(echo[:last], j, times[j] - echoes.delay_s[e], dt, echoes.energy_j[e], extent, basis,
+                            echo[:0])
         peak = 0
         for j in range(last):
             t = times[j]
@@ -236,25 +232,15 @@ def _span_terms(first, count, phase, sampling, pulses, col, cuts, echoes, extent
                     clipped[i, c] = True
                 decides = decides or (is_open and not clipped[i, c] and base + echo[j] >= top_w[c])
             if decides:
-                record = _cut_column(t, p, col, cuts) + echo[j]
+                record = cut_column_power(t, p, col, cuts) + echo[j]
                 for c in range(n_chan):
                     if (gate_open[c] <= t) & (t < gate_close[c]) and record >= top_w[c]:
                         clipped[i, c] = True
         t_peak[i] = times[peak]
         echo_peak[i] = echo[peak]
-        column_peak[i] = _cut_column(times[peak], p, col, cuts)
+        column_peak[i] = cut_column_power(times[peak], p, col, cuts)
         base_peak[i] = cuts.background_w[p] + uncut_column_value(times[peak], col)
     return t_peak, echo_peak, column_peak, base_peak, clipped
-
-
-@kernel(inline="always")
-def _cut_column(t, p, col, cuts):
-    """Pulse ``p``'s column at time ``t`` [s] as its targets cut it, plus background [W] (MULS Eq. 1 less echoes)."""
-    power = cuts.background_w[p]
-    for c in range(cuts.cut_tau_s.shape[1]):
-        if cuts.cut_weight[p, c] != 0.0:
-            power += cuts.cut_weight[p, c] * column_value(t, cuts.cut_tau_s[p, c], col)
-    return power
 
 
 def range_batch(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoes: Echoes | None = None) -> Ranging:

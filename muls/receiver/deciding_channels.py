@@ -131,7 +131,7 @@ def _surely_clipped(c, power, chans, max_code):
     return level_lsb(chans, c, power) - _noise_reach(chans, c, power) >= max_code
 
 
-@kernel(nogil=True)
+@kernel(inline="always")
 def _clipped_from_blindness(c, power, baseline, times, top, chans, max_code):
     """Channel c, which the baseline alone clips at some samples, surely stays clipped from its last such sample
     through the hump, which lies after all of them, with its gate open all along: the plateau at the hump then runs
@@ -150,7 +150,7 @@ def _clipped_from_blindness(c, power, baseline, times, top, chans, max_code):
     return True
 
 
-@kernel(nogil=True)
+@kernel(inline="always")
 def _snr_bounds(c, power, baseline, top, chans):
     """(least, most) SNR of channel c's peak at the hump: its amplitude over the baseline, less or plus the noise's
     reach, over the processor's noise there (dark, rounding and the baseline's shot noise, as muls.ranging.peaks has it)."""
@@ -160,7 +160,7 @@ def _snr_bounds(c, power, baseline, top, chans):
     return (amplitude - reach) / sigma, (amplitude + reach) / sigma
 
 
-@kernel(nogil=True)
+@kernel(inline="always")
 def _one_hump(power, baseline, top, tolerance):
     """The echo signal r = power - baseline has one hump, at ``top``: going out from it either way, r never rises
     by more than ``tolerance`` [W] over both its lowest value since the hump and zero (a rise below the baseline,

@@ -13,7 +13,6 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
 from ..infra.errors import check_choice
@@ -30,7 +29,7 @@ from ..infra.noise import (
 )
 from ..infra.runtime import kernel
 from ..instrument.channels import gate_open_at, level_lsb
-from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, baseline_values, column_integrals_at
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, add_pulse_steps, baseline_values, column_integrals_at
 from .channel_codes import channel_codes, quantise, ranging_codes
 from .deciding_channels import deciding_channels
 
@@ -203,11 +202,7 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
                    synthesised if deciding_only else None)
 
 
-#: Windows (or CH0 records) per block of the digitiser kernels: each block allocates its work arrays once.
-WINDOW_BLOCK = 64
-
-
-@kernel(parallel=True, nogil=True)
+@kernel(nogil=True)
 def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_mean, dark_std, max_code,
                noise_scale, peak_only):
     """The CH0 records (n_pulses, n_ref) from sample 0 (MULS Eqs. 2, 13 through the photodiode). ``peak_only``:
@@ -217,36 +212,34 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
     code whatever the draws, and so is 0."""
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
-    ra, rb = math.exp(-basis[0] * sampling.dt_s), math.exp(-basis[1] * sampling.dt_s)
     bound = noise_scale * dark_std * NORMAL_BOUND + 0.5
-    for block in numba.prange((n_pulses + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
-        normal, no_low, tails, levels = np.empty(n_ref), np.empty(0), np.empty(n_ref, np.uint64), np.empty(n_ref)
-        for p in range(block * WINDOW_BLOCK, min(n_pulses, (block + 1) * WINDOW_BLOCK)):
-            ea, eb = -1.0, -1.0  # the pulse basis's two exponentials at u, stepped by constant factors once u >= 0
+    normal, no_low, tails, levels = np.empty(n_ref), np.empty(0), np.empty(n_ref, np.uint64), np.empty(n_ref)
+    times = np.empty(n_ref)
+    for p in range(n_pulses):
+        # the filtered pulse (MULS Eq. 2) from emission, at each sample's own time
+        sample_times(times, 0, n_ref, sampling.t0_s, sampling.dt_s, 0, sampling.phase_s[p])
+        levels[:] = 0.0
+        start = 0
+        while start < n_ref and times[start] < 0.0:
+            start += 1
+        if start < n_ref:
+            add_pulse_steps(levels, start, 0.0, sampling.dt_s, lsb_per_density, extent, basis, times)
+        if keep:
             for k in range(n_ref):
-                u = sampling.t0_s + k * sampling.dt_s + sampling.phase_s[p]
-                levels[k] = 0.0
-                if 0.0 <= u < extent:  # the filtered pulse (MULS Eq. 2), as muls.optics.optical_model.pulse_value
-                    if ea < 0.0:
-                        ea, eb = math.exp(-basis[0] * u), math.exp(-basis[1] * u)
-                    levels[k] = lsb_per_density * ((basis[2] * u + basis[3]) * ea + basis[4] * eb)
-                    ea *= ra
-                    eb *= rb
-                if keep:
-                    clean[p, k] = levels[k] + dark_mean
-            first, last = 0, n_ref - 1
-            if peak_only:
-                first, last = _reference_span(levels, dark_mean, bound, max_code)
-                reference[p, :first] = 0
-                reference[p, last + 1:] = 0
-            fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM), first,
-                              normal[: last + 1 - first], no_low, tails)
-            for k in range(first, last + 1):
-                reference[p, k] = quantise(levels[k] + dark_mean + noise_scale * dark_std * normal[k - first],
-                                            max_code)
+                clean[p, k] = levels[k] + dark_mean
+        first, last = 0, n_ref - 1
+        if peak_only:
+            first, last = _reference_span(levels, dark_mean, bound, max_code)
+            reference[p, :first] = 0
+            reference[p, last + 1:] = 0
+        fill_normal_pairs(stream_base(sampling.key, sampling.pulse_id[p], REFERENCE_STREAM), first,
+                          normal[: last + 1 - first], no_low, tails)
+        for k in range(first, last + 1):
+            reference[p, k] = quantise(levels[k] + dark_mean + noise_scale * dark_std * normal[k - first],
+                                        max_code)
 
 
-@kernel(nogil=True)
+@kernel(inline="always")
 def _reference_span(levels, dark_mean, bound, max_code):
     """(first, last) samples of a CH0 record that can hold its highest code among samples 1 to n - 2 (where the peak
     search looks) or flank it, from the noise-free ``levels`` (n,) [LSB over the dark mean] and the most a code can lie
@@ -276,7 +269,7 @@ class DigitiserSettings(NamedTuple):
     read_samples_only: bool = False
 
 
-@kernel(parallel=True, nogil=True)
+@kernel(nogil=True)
 def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, col, cuts, echoes, chans, settings):
     n_windows, n_chan, n_samples = codes.shape
     n_pairs = (n_chan + 1) // 2
@@ -290,118 +283,117 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
     cut_tau, cut_w = cuts.cut_tau_s, cuts.cut_weight
     ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
     max_code, noise_scale = settings.max_code, settings.noise_scale
-    for block in numba.prange((n_windows + WINDOW_BLOCK - 1) // WINDOW_BLOCK):
-        dark_normal = np.empty((2 * n_pairs, n_samples))
-        shot_normal = np.empty((2 * n_shot_pairs, n_samples))
-        tails, no_low = np.empty(n_samples, np.uint64), np.empty(0)
-        shot_needed = np.empty(n_detectors, np.bool_)
-        deciding_scratch = np.empty((3, n_chan), np.bool_)
-        cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
-        times, power, baseline, uncut = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
-        hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
-        read, in_tail, listed = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
-        for w in range(block * WINDOW_BLOCK, min(n_windows, (block + 1) * WINDOW_BLOCK)):
-            p = window_pulse[w]
-            # Echoes of pulse p (by delay) as three running sums over those started by time t:
-            # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
-            # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
-            sa, s1, sb = 0.0, 0.0, 0.0
-            nxt = offsets[p]
-            # The column's cuts by two-way time (insertion sort: a handful). Before a cut its share of the beam
-            # sees the full column; from the cut on, its share is the module doc's tail of waveform.py, of the same
-            # form as an echo, so it joins the three sums; ``ahead[i]``: the share of cuts i and later.
-            n_cut = 0
-            for c in range(cut_tau.shape[1]):
-                if cut_w[p, c] != 0.0:
-                    i = n_cut
-                    while i > 0 and cut_t[i - 1] > cut_tau[p, c]:
-                        cut_t[i], cut_s[i] = cut_t[i - 1], cut_s[i - 1]
-                        i -= 1
-                    cut_t[i], cut_s[i] = cut_tau[p, c], cut_w[p, c]
-                    n_cut += 1
-            ahead[n_cut] = 0.0
-            for i in range(n_cut - 1, -1, -1):
-                ahead[i] = ahead[i + 1] + cut_s[i]
-            next_cut = 0
-            sample_times(times, 0, n_samples, sampling.t0_s, dt, window_start[w], sampling.phase_s[p])
-            # The uncut column, on SIMD lanes (uncut_column_value's numbers): where a cut is still ahead, and for the
-            # baseline wherever that is needed.
-            uncut_until = 0
-            if settings.deciding_only or settings.read_samples_only:
-                uncut_until = n_samples
-            elif n_cut > 0:
-                while uncut_until < n_samples and times[uncut_until] < cut_t[n_cut - 1]:
-                    uncut_until += 1
-            baseline_values(uncut[:uncut_until], times[:uncut_until], 0.0, col)
-            for k in range(n_samples):
-                t = times[k]
-                if k > 0:
-                    s1 = (s1 + dt * sa) * ra
-                    sa *= ra
-                    sb *= rb
-                while nxt < offsets[p + 1] and delay[nxt] <= t:
-                    u = t - delay[nxt]
-                    ea = energy[nxt] * math.exp(-basis[0] * u)
-                    sa += ea
-                    s1 += u * ea
-                    sb += energy[nxt] * math.exp(-basis[1] * u)
-                    nxt += 1
-                while next_cut < n_cut and cut_t[next_cut] <= t:
-                    u = t - cut_t[next_cut]
-                    v0a, v1a, v0b = column_integrals_at(max(cut_t[next_cut], 0.0), col)
-                    ea = cut_s[next_cut] * math.exp(-basis[0] * u)
-                    sa += v0a * ea
-                    s1 += (u * v0a + v1a) * ea
-                    sb += cut_s[next_cut] * v0b * math.exp(-basis[1] * u)
-                    next_cut += 1
-                power[k] = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
-                if next_cut < n_cut:
-                    power[k] += ahead[next_cut] * uncut[k]
-            if settings.deciding_only or settings.read_samples_only:
-                for k in range(n_samples):  # the processor's calibrated baseline, as baseline_values gives it
-                    baseline[k] = cuts.background_w[p] + uncut[k]
-            if settings.deciding_only:
-                first_echo, last_echo = np.inf, -np.inf
-                for j in range(offsets[p], offsets[p + 1]):
-                    if energy[j] > 0.0:
-                        first_echo, last_echo = min(first_echo, delay[j]), max(last_echo, delay[j])
-                deciding_channels(synthesised[w], power, baseline, times, chans, max_code, settings.k_sigma,
-                                  last_echo - first_echo, deciding_scratch)
-            else:
-                synthesised[w, :] = True
-            if keep:
-                for c in range(n_chan):
-                    for k in range(n_samples):
-                        clean[w, c, k] = level_lsb(chans, c, power[k] if gate_open_at(chans, c, times[k]) else 0.0)
-            # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per
-            # detector (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's
-            # current).
-            shot_needed[:] = False
+    dark_normal = np.empty((2 * n_pairs, n_samples))
+    shot_normal = np.empty((2 * n_shot_pairs, n_samples))
+    tails, no_low = np.empty(n_samples, np.uint64), np.empty(0)
+    shot_needed = np.empty(n_detectors, np.bool_)
+    deciding_scratch = np.empty((3, n_chan), np.bool_)
+    cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
+    times, power, baseline, uncut = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
+    hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
+    read, in_tail, listed = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
+    for w in range(n_windows):
+        p = window_pulse[w]
+        # Echoes of pulse p (by delay) as three running sums over those started by time t:
+        # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
+        # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
+        sa, s1, sb = 0.0, 0.0, 0.0
+        nxt = offsets[p]
+        # The column's cuts by two-way time (insertion sort: a handful). Before a cut its share of the beam
+        # sees the full column; from the cut on, its share is the module doc's tail of waveform.py, of the same
+        # form as an echo, so it joins the three sums; ``ahead[i]``: the share of cuts i and later.
+        n_cut = 0
+        for c in range(cut_tau.shape[1]):
+            if cut_w[p, c] != 0.0:
+                i = n_cut
+                while i > 0 and cut_t[i - 1] > cut_tau[p, c]:
+                    cut_t[i], cut_s[i] = cut_t[i - 1], cut_s[i - 1]
+                    i -= 1
+                cut_t[i], cut_s[i] = cut_tau[p, c], cut_w[p, c]
+                n_cut += 1
+        ahead[n_cut] = 0.0
+        for i in range(n_cut - 1, -1, -1):
+            ahead[i] = ahead[i + 1] + cut_s[i]
+        next_cut = 0
+        sample_times(times, 0, n_samples, sampling.t0_s, dt, window_start[w], sampling.phase_s[p])
+        # The uncut column, on SIMD lanes (uncut_column_value's numbers): where a cut is still ahead, and for the
+        # baseline wherever that is needed.
+        uncut_until = 0
+        if settings.deciding_only or settings.read_samples_only:
+            uncut_until = n_samples
+        elif n_cut > 0:
+            while uncut_until < n_samples and times[uncut_until] < cut_t[n_cut - 1]:
+                uncut_until += 1
+        baseline_values(uncut[:uncut_until], times[:uncut_until], 0.0, col)
+        for k in range(n_samples):
+            t = times[k]
+            if k > 0:
+                s1 = (s1 + dt * sa) * ra
+                sa *= ra
+                sb *= rb
+            while nxt < offsets[p + 1] and delay[nxt] <= t:
+                u = t - delay[nxt]
+                ea = energy[nxt] * math.exp(-basis[0] * u)
+                sa += ea
+                s1 += u * ea
+                sb += energy[nxt] * math.exp(-basis[1] * u)
+                nxt += 1
+            while next_cut < n_cut and cut_t[next_cut] <= t:
+                u = t - cut_t[next_cut]
+                v0a, v1a, v0b = column_integrals_at(max(cut_t[next_cut], 0.0), col)
+                ea = cut_s[next_cut] * math.exp(-basis[0] * u)
+                sa += v0a * ea
+                s1 += (u * v0a + v1a) * ea
+                sb += cut_s[next_cut] * v0b * math.exp(-basis[1] * u)
+                next_cut += 1
+            power[k] = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
+            if next_cut < n_cut:
+                power[k] += ahead[next_cut] * uncut[k]
+        if settings.deciding_only or settings.read_samples_only:
+            for k in range(n_samples):  # the processor's calibrated baseline, as baseline_values gives it
+                baseline[k] = cuts.background_w[p] + uncut[k]
+        if settings.deciding_only:
+            first_echo, last_echo = np.inf, -np.inf
+            for j in range(offsets[p], offsets[p + 1]):
+                if energy[j] > 0.0:
+                    first_echo, last_echo = min(first_echo, delay[j]), max(last_echo, delay[j])
+            deciding_channels(synthesised[w], power, baseline, times, chans, max_code, settings.k_sigma,
+                              last_echo - first_echo, deciding_scratch)
+        else:
+            synthesised[w, :] = True
+        if keep:
             for c in range(n_chan):
-                shot_needed[chans.detector[c]] |= synthesised[w, c]
-            first_index = window_start[w]
-            if settings.read_samples_only:
-                _hash_pairs(hashes[:n_pairs], synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index)
-                _hash_pairs(hashes[n_pairs:], shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index)
-                for c in range(n_chan):
-                    if synthesised[w, c]:
-                        d = chans.detector[c]
-                        ranging_codes(codes[w, c], power, baseline, times, hashes[c // 2], c % 2, hashes[n_pairs + d // 2],
-                                      d % 2, chans, c, max_code, noise_scale, settings.k_sigma, read, listed,
-                                      dark_normal[0], shot_normal[0], in_tail)
-                    else:
-                        codes[w, c, :] = 0
-                continue
-            # Every sample: drawn a window at once for the pairs a synthesised channel needs.
-            _draw_pairs(dark_normal, synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index, no_low, tails)
-            _draw_pairs(shot_normal, shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index, no_low,
-                        tails)
+                for k in range(n_samples):
+                    clean[w, c, k] = level_lsb(chans, c, power[k] if gate_open_at(chans, c, times[k]) else 0.0)
+        # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per
+        # detector (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's
+        # current).
+        shot_needed[:] = False
+        for c in range(n_chan):
+            shot_needed[chans.detector[c]] |= synthesised[w, c]
+        first_index = window_start[w]
+        if settings.read_samples_only:
+            _hash_pairs(hashes[:n_pairs], synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index)
+            _hash_pairs(hashes[n_pairs:], shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index)
             for c in range(n_chan):
                 if synthesised[w, c]:
-                    channel_codes(codes[w, c], power, times, dark_normal[c], shot_normal[chans.detector[c]], chans, c,
-                                  max_code, noise_scale)
+                    d = chans.detector[c]
+                    ranging_codes(codes[w, c], power, baseline, times, hashes[c // 2], c % 2, hashes[n_pairs + d // 2],
+                                  d % 2, chans, c, max_code, noise_scale, settings.k_sigma, read, listed,
+                                  dark_normal[0], shot_normal[0], in_tail)
                 else:
                     codes[w, c, :] = 0
+            continue
+        # Every sample: drawn a window at once for the pairs a synthesised channel needs.
+        _draw_pairs(dark_normal, synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index, no_low, tails)
+        _draw_pairs(shot_normal, shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index, no_low,
+                    tails)
+        for c in range(n_chan):
+            if synthesised[w, c]:
+                channel_codes(codes[w, c], power, times, dark_normal[c], shot_normal[chans.detector[c]], chans, c,
+                              max_code, noise_scale)
+            else:
+                codes[w, c, :] = 0
 
 
 @kernel(inline="always")

@@ -23,3 +23,27 @@ def test_echoes_are_sorted_by_delay_within_each_pulse_as_a_stable_sort_leaves_th
     np.testing.assert_array_equal(s, source[expected])
     np.testing.assert_array_equal(d, delay[expected])
     np.testing.assert_array_equal(e, energy[expected])
+
+
+def test_the_stepped_pulse_is_the_pulse_evaluated_at_each_sample_until_its_extent():
+    """add_pulse_steps steps the pulse basis's exponentials by constant factors: each sample it adds is, to
+    rounding, the scaled pulse evaluated directly there (pulse_value), from ``first`` on and only while the pulse
+    lasts; with the samples' own times (``exact_u``) it reads u from them instead of summing steps."""
+    from muls.optics.optical_model import add_pulse_steps, pulse_value
+    from muls.presets import mul2023
+
+    pulse = mul2023().pulse
+    basis = np.array(pulse.basis())
+    dt, first, u0, scale, extent = 1e-9, 3, 0.4e-9, 2.5, pulse.duration_s
+    out = np.zeros(80)
+    add_pulse_steps(out, first, u0, dt, scale, extent, basis, out[:0])
+    u = u0 + (np.arange(out.size) - first) * dt
+    expected = np.where((np.arange(out.size) >= first) & (u < extent),
+                        [scale * pulse_value(x, basis) for x in u], 0.0)
+    assert np.count_nonzero(out) > 10 and out[:first].tolist() == [0.0] * first
+    np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+    times = 1e-9 * np.arange(-5, 75) + 0.3e-9
+    exact = np.zeros(times.size)
+    add_pulse_steps(exact, 5, 0.0, dt, 1.0, extent, basis, times)
+    direct = np.where((times >= 0.0) & (times < extent), [pulse_value(x, basis) for x in times], 0.0)
+    np.testing.assert_allclose(exact, direct, rtol=1e-12, atol=1e-12 * np.abs(direct).max())

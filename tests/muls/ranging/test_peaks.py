@@ -31,29 +31,6 @@ def test_the_peak_fits_table_lookup_is_numpys_interp_bit_for_bit():
         np.testing.assert_array_equal(lookup(x, table.feature, values), np.interp(x, table.feature, values))
 
 
-
-def test_peak_order_is_the_two_stable_lexsorts_with_duplicates_dropped():
-    """``peak_order`` (one pass over each pulse's few peaks) against numpy: a stable lexsort by (pulse, channel, index),
-    repeats of (pulse, channel, index) dropped but the first, then a stable lexsort by (pulse, time); with runs found
-    twice by overlapping windows, equal times on different channels, and pulses without peaks between."""
-    from muls.ranging.peaks import peak_order
-
-    rng = np.random.default_rng(11)
-    pulse = np.sort(rng.choice(np.arange(0, 3000, 3), 4000))
-    channel = rng.integers(1, 4, pulse.size)
-    index = rng.integers(20, 30, pulse.size) + rng.choice([0.0, 0.25, 0.5], pulse.size)
-    time_s = np.floor(index) * 1e-9 + 1e-12 * (pulse % 7)  # a function of (pulse, index), with ties across both
-    order = np.lexsort((index, channel, pulse))
-    keep = np.ones(order.size, bool)
-    keep[1:] = ((pulse[order][1:] != pulse[order][:-1]) | (channel[order][1:] != channel[order][:-1])
-                | (index[order][1:] != index[order][:-1]))
-    order = order[keep]
-    expected = order[np.lexsort((time_s[order], pulse[order]))]
-    assert expected.size < pulse.size  # duplicates were there to drop
-    np.testing.assert_array_equal(peak_order(pulse, channel, index, time_s), expected)
-
-
-
 def test_each_return_keeps_the_peak_a_stable_lexsort_would_put_last():
     """``best_of_clusters`` (one pass over runs of peaks) against numpy: the last of a stable lexsort by (cluster,
     unsaturated, score) in each cluster; with saturated and unsaturated peaks mixed, tied scores and NaN."""
@@ -73,13 +50,11 @@ def test_each_return_keeps_the_peak_a_stable_lexsort_would_put_last():
     np.testing.assert_array_equal(best_of_clusters(new, saturated, score), np.sort(order[last]))
 
 
-
 def _prototype(model):
     from dataclasses import replace
 
     ins = model.instrument
     return OpticalModel.build(replace(ins, processing=replace(ins.processing, peak_fit="sample_maximum")), model.water)
-
 
 
 def test_sample_maximum_ranges_are_quantised_to_the_sample_interval():
@@ -101,7 +76,6 @@ def test_sample_maximum_ranges_are_quantised_to_the_sample_interval():
     # the pulse-shape fit of the same records is far finer
     _, fitted = simulate(_model(), batch, seed=5, noise=False)
     assert np.abs(fitted.returns.range_m - 15.0).max() < 0.01
-
 
 
 def test_sample_maximum_times_a_clipped_echo_at_its_first_clipped_sample():
