@@ -126,7 +126,7 @@ def panel_ranges_m(delays_s: np.ndarray, speed_m_s: float) -> tuple[float, ...]:
 
 
 def measure_ranging_precision(physics, instrument, ranges_m: tuple[float, ...]) -> RangingPrecision:
-    """Range the panels (module doc) with ``physics`` (:class:`scanner_sim.survey.setup.Physics`: a muls batch ->
+    """Range the panels (module doc) with ``physics`` (:class:`scanner_sim.survey.chunk.Physics`: a muls batch ->
     records and ranging) of ``instrument`` and tabulate the precision."""
     ranges = np.asarray(ranges_m, float)
     grid_r, grid_rho = np.meshgrid(ranges, np.asarray(REFLECTANCES), indexing="ij")
