@@ -28,6 +28,8 @@ def stages() -> dict[str, tuple]:
     from scanner_sim.survey.georeference import georeference
     from scanner_sim.survey.handoff import pulse_batch
     from scanner_sim.survey.sinks import CoverageSink, LasSink
+    from scanner_sim.survey.tpu_calibration import checked_errors
+    from scanner_sim.survey.uncertainty import TpuModel, with_uncertainty
 
     return {
         "rays (Embree)": (EmbreeCaster.first_hits_raw, EmbreeCaster.occluded_raw),
@@ -37,6 +39,7 @@ def stages() -> dict[str, tuple]:
         "ranging": (range_batch,),
         "truth": (lines_of_sight,),
         "georeference": (georeference,),
+        "uncertainty": (TpuModel.predict, with_uncertainty, checked_errors),
         "coverage": (CoverageSink.add,),
         "LAS": (LasSink.add,),
     }
