@@ -26,8 +26,8 @@ from scipy.ndimage import gaussian_filter1d
 
 from muls.infra.errors import ParameterError
 from muls.infra.filters import first_order_filter
+from scanner_sim.world.objects import compass_to_yaw_rad
 from scanner_sim.world.raster import lawnmower_area
-from scanner_sim.world.scene import compass_to_yaw_rad
 
 PATH_STEP_M = 0.05  # arc-length resolution of the precomputed path [m]
 

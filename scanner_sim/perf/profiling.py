@@ -24,10 +24,12 @@ def stages() -> dict[str, tuple]:
     from scanner_sim.rays.auto import cast_auto
     from scanner_sim.rays.cast import cast_beams
     from scanner_sim.rays.caster import EmbreeCaster
+    from scanner_sim.survey.chunk import lines_of_sight
     from scanner_sim.survey.georeference import georeference
     from scanner_sim.survey.handoff import pulse_batch
-    from scanner_sim.survey.setup import PassSetup
     from scanner_sim.survey.sinks import CoverageSink, LasSink
+    from scanner_sim.survey.tpu_calibration import checked_errors
+    from scanner_sim.survey.uncertainty import TpuModel, with_uncertainty
 
     return {
         "rays (Embree)": (EmbreeCaster.first_hits_raw, EmbreeCaster.occluded_raw),
@@ -35,8 +37,9 @@ def stages() -> dict[str, tuple]:
         "waveform input": (pulse_batch, OpticalModel.echoes),
         "digitise": (digitise,),
         "ranging": (range_batch,),
-        "truth": (PassSetup.lines_of_sight,),
+        "truth": (lines_of_sight,),
         "georeference": (georeference,),
+        "uncertainty": (TpuModel.predict, with_uncertainty, checked_errors),
         "coverage": (CoverageSink.add,),
         "LAS": (LasSink.add,),
     }

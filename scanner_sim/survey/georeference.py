@@ -1,8 +1,9 @@
 """Georeferencing: the instrument's ranged returns to world points with their ground truth attached.
 
-:func:`georeference` is a pure function of what the stages before it produced: the ranging of a chunk (each
-return carries the index of the echo that dominates it, :attr:`muls.ranging.returns.Peaks.echo_index`), the hits that
-made those echoes, and each pulse's line of sight as navigation estimates it, with the truth along it.
+:func:`georeference` (and :func:`dropout_records`, for the pulses that gave no point) is a pure function of what
+the stages before it produced: the ranging of a chunk (each return carries the index of the echo that dominates it,
+:attr:`muls.ranging.returns.Peaks.echo_index`), the hits that made those echoes, and each pulse's line of sight as
+navigation estimates it, with the truth along it.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 from muls.ranging.returns import Ranging
 from scanner_sim.config.materials import NOISE_CLASS
 from scanner_sim.rays.hits import Hits
-from scanner_sim.records.point_records import PointRecords
+from scanner_sim.records.point_records import DropoutRecords, PointRecords
 
 #: Intensity scale: log10 of the echo's peak optical power [W] from 1 nW (0) to 1 W (65535).
 INTENSITY_LOG10_RANGE_W = (-9.0, 0.0)
@@ -118,6 +119,14 @@ def georeference(ranging: Ranging, hits: Hits, sight: LinesOfSight) -> PointReco
         snr=r.snr, saturated=r.saturated, true_range_m=true_range, range_error_m=r.range_m - true_range,
         incidence_deg=np.degrees(of_hit(hits.incidence_rad, np.nan)), object_id=of_hit(hits.object_id, NO_OBJECT),
         leg=sight.leg[pulse], pulse_index=sight.slot[pulse])
+
+
+def dropout_records(ranging: Ranging, sight: LinesOfSight) -> DropoutRecords:
+    """The pulses of a chunk that gave no point (``Ranging.dropout_cause`` >= 0), each with its line of sight as
+    navigation estimates it (the beam a surveyor would look along for what was missed) and its cause."""
+    lost = ranging.dropout_cause >= 0
+    return DropoutRecords(pulse_index=sight.slot[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
+                          direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
 
 
 def ranged_normals(ranging: Ranging, hits: Hits) -> np.ndarray:

@@ -70,20 +70,23 @@ class RangingPrecision:
         between the two panels whose measured ranges bracket the point's (the end panels' beyond them): near the
         gate's opening, where part of an echo's rise is shut out, the bias grows by a few centimetres over a
         decimetre of range, more than a nearest panel's step allows."""
-        cell = (np.clip(np.asarray(channel, np.int64), 0, self.bias_m.shape[0] - 1)[:, None],
-                np.asarray(saturated, np.int64)[:, None], np.asarray(later, np.int64)[:, None],
-                np.arange(len(self.ranges_m))[None, :], snr_bin(self.snr_edges, snr)[:, None])
-        bias, std = self.bias_m[cell], self.std_m[cell]  # (n, panels)
+        channels, _, _, panels, bins = self.bias_m.shape
+        # Each return's cell at panel 0, as an index into the flattened (C-ordered) tables; panel i is i * bins on.
+        # One flat gather instead of five broadcast index arrays: the same values at a fraction of the cost.
+        first = ((np.clip(np.asarray(channel, np.int64), 0, channels - 1) * 2 + np.asarray(saturated, np.int64)) * 2
+                 + np.asarray(later, np.int64)) * (panels * bins) + snr_bin(self.snr_edges, snr)
+        cells = first[:, None] + bins * np.arange(panels)
+        bias, std = self.bias_m.reshape(-1)[cells], self.std_m.reshape(-1)[cells]  # (n, panels)
         measured = np.asarray(self.ranges_m, float)[None, :] + bias  # ascending: a farther panel's echo comes later
         rho = np.asarray(range_m, float)
-        if measured.shape[1] == 1:
+        if panels == 1:
             return bias[:, 0], std[:, 0]
-        rows = np.arange(rho.size)
-        lo = np.clip((measured <= rho[:, None]).sum(axis=1) - 1, 0, measured.shape[1] - 2)
-        gap = measured[rows, lo + 1] - measured[rows, lo]
-        w = np.clip((rho - measured[rows, lo]) / np.where(gap > 0, gap, np.inf), 0.0, 1.0)
-        return ((1 - w) * bias[rows, lo] + w * bias[rows, lo + 1],
-                (1 - w) * std[rows, lo] + w * std[rows, lo + 1])
+        lo = np.clip(np.count_nonzero(measured <= rho[:, None], axis=1) - 1, 0, panels - 2)
+        lo = np.arange(rho.size) * panels + lo  # flat index of each return's nearer bracketing panel
+        measured, bias, std = measured.reshape(-1), bias.reshape(-1), std.reshape(-1)
+        gap = measured[lo + 1] - measured[lo]
+        w = np.clip((rho - measured[lo]) / np.where(gap > 0, gap, np.inf), 0.0, 1.0)
+        return (1 - w) * bias[lo] + w * bias[lo + 1], (1 - w) * std[lo] + w * std[lo + 1]
 
     def as_dict(self) -> dict:
         """The table as JSON-ready lists (the summary's ``uncertainty.ranging``): per channel, state and panel range,
@@ -126,7 +129,7 @@ def panel_ranges_m(delays_s: np.ndarray, speed_m_s: float) -> tuple[float, ...]:
 
 
 def measure_ranging_precision(physics, instrument, ranges_m: tuple[float, ...]) -> RangingPrecision:
-    """Range the panels (module doc) with ``physics`` (:class:`scanner_sim.survey.setup.Physics`: a muls batch ->
+    """Range the panels (module doc) with ``physics`` (:class:`scanner_sim.survey.chunk.Physics`: a muls batch ->
     records and ranging) of ``instrument`` and tabulate the precision."""
     ranges = np.asarray(ranges_m, float)
     grid_r, grid_rho = np.meshgrid(ranges, np.asarray(REFLECTANCES), indexing="ij")

@@ -1,6 +1,7 @@
 """What a pass builds once, and its stages chosen once, the way pvlib's ModelChain picks its models: the scene
 and its ray caster, the trajectory and the scanner, the instrument in its water, and, from the fidelity level, the
-ray stage, the hand-off and the physics. The chunk loop (:mod:`scanner_sim.survey.pipeline`) only calls them.
+ray stage, the hand-off and the physics. A chunk goes through them in :mod:`scanner_sim.survey.chunk`; the chunk
+loop (:mod:`scanner_sim.survey.pipeline`) only calls that.
 
 :class:`PassPlan` is what the scene and the options decide before anything is built (the level, whether coverage
 is measured, the files a pass writes): the pass and the campaign's completeness check read the same plan.
@@ -17,32 +18,26 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from muls.infra.runtime import configure_process
-from muls.optics.optical_model import OpticalModel, PulseBatch
-from muls.ranging.returns import Ranging
-from muls.receiver.digitiser import Waveforms
-from muls.simulate import simulate
+from muls.optics.optical_model import OpticalModel
 from scanner_sim.config import SceneConfig
 from scanner_sim.config.unit_slips import warn_unit_slips
 from scanner_sim.fidelity import FidelityLevel
 from scanner_sim.io.rosbag import ROSBAG_NAME, bag_files
-from scanner_sim.metrics.coverage import CoverageSettings, Footprint, nominal_footprint
+from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.motion.scanner import Scanner
 from scanner_sim.motion.track_checks import build_trajectory
-from scanner_sim.motion.trajectory import Poses, Trajectory
+from scanner_sim.motion.trajectory import Trajectory
 from scanner_sim.rays.auto import AutoCast
 from scanner_sim.rays.beams import BeamPattern, beam_pattern
 from scanner_sim.rays.cast import BeamCast, CastScene
-from scanner_sim.rays.hits import Hits
 from scanner_sim.rays.tiles import TiledCast, TiledTarget
-from scanner_sim.records.point_records import DropoutRecords, PointRecords
+from scanner_sim.survey.chunk import CastChunk, Chunk, Physics, cast_chunk, simulate_chunk
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
-from scanner_sim.survey.georeference import LinesOfSight, georeference, ranged_normals
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.ranging_precision import measure_ranging_precision, panel_ranges_m
 from scanner_sim.survey.sizing import check_pass_budget
-from scanner_sim.survey.tpu_calibration import CheckedErrors, checked_errors
-from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel, with_uncertainty
+from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel
 from scanner_sim.world.scene import Scene, build_scene
 from scanner_sim.world.site import SiteScene
 
@@ -148,56 +143,6 @@ class PassPlan:
         if output.rosbag is not None and output.rosbag.dir is None:  # a bag elsewhere is no file of the folder
             files += bag_files(ROSBAG_NAME, output.rosbag.storage)
         return cls(level or config.survey.level, coverage, (*files, "summary.json"))
-
-
-class CastChunk(NamedTuple):
-    """A chunk after its ray stage: pulse slots (n,), the sub-ray hits, the muls input built from them, each
-    pulse's estimated line of sight with the truth along it, and the nominal footprint (None unless the pass
-    measures coverage)."""
-
-    slots: np.ndarray
-    hits: Hits
-    batch: PulseBatch
-    sight: LinesOfSight
-    footprint: Footprint | None
-
-
-class Chunk(NamedTuple):
-    """One chunk through the flow: its pulse slots (n,), points, dropouts, the muls digitised records of its pulses
-    (``waveforms``; as far as the ranging read them, None once dropped), the nominal beam footprint (None unless
-    the pass measures coverage), and the whole records of the pulses among its slots that the pass keeps
-    (``kept_waveforms``: slots (k,) and records; None when none), and its points' true errors against their THU and
-    TVU (``errors``, :func:`~scanner_sim.survey.tpu_calibration.checked_errors`)."""
-
-    slots: np.ndarray
-    points: PointRecords
-    dropouts: DropoutRecords
-    waveforms: Waveforms | None
-    footprint: Footprint | None
-    kept_waveforms: tuple[np.ndarray, Waveforms] | None = None
-    errors: CheckedErrors | None = None
-
-
-@dataclass(frozen=True)
-class Physics:
-    """The MULS stage bound to its pass: a chunk's muls input -> digitised records and ranging
-    (:func:`muls.simulate.simulate`, every draw keyed by ``seed`` and the pulse's slot)."""
-
-    model: OpticalModel
-    seed: int
-    record_mode: str
-    deciding_only: bool
-
-    def __call__(self, batch: PulseBatch, record_mode: str | None = None, every_channel: bool = False,
-                 whole_records: bool = False) -> tuple[Waveforms, Ranging]:
-        """``record_mode`` and ``every_channel`` override the level's record mode and its ``deciding_only`` (for
-        records kept whole, as waveforms.npz keeps them). Unless ``every_channel`` or ``whole_records``, only the
-        samples the ranging reads are synthesised (the same points, :func:`muls.receiver.digitiser.digitise`'s
-        ``ranging_only``): of each CH0 record the span of its peak, and of a full record the samples the peak
-        search may read."""
-        return simulate(self.model, batch, self.seed, record_mode or self.record_mode,
-                        deciding_only=self.deciding_only and not every_channel,
-                        ranging_only=not (every_channel or whole_records))
 
 
 def ray_stage(level: FidelityLevel, target: CastScene, pattern: BeamPattern, geometry) -> BeamCast:
@@ -390,59 +335,11 @@ class PassSetup:
                 return
 
     def cast_chunk(self, slots: np.ndarray) -> CastChunk:
-        """The ray stage of one chunk of pulse slots (n,): poses, mirror directions, beam sub-rays and their hits,
-        the muls input, each pulse's estimated line of sight with the truth along it, and (when the pass measures
-        coverage) the nominal beam footprint."""
-        poses = self.trajectory.poses(slots / self.scanner.pulse_rate_hz)
-        beam_o, beam_d, shaft, rx_o, rx_d = self.scanner.world_rays(poses)
-        hits = self.rays(beam_o, beam_d, shaft, rx_o, rx_d)
-        return CastChunk(slots, hits, self.handoff(hits, slots), self.lines_of_sight(slots, poses, hits, (beam_o, beam_d)),
-                         nominal_footprint(hits, beam_d) if self.plan.measures_coverage else None)
-
-    def finish_chunk(self, cast: CastChunk, record_mode: str | None = None, every_channel: bool = False,
-                     whole_records: bool = False) -> Chunk:
-        """The physics of a chunk after its ray stage: MULS waveforms and ranging, georeferencing, dropouts
-        (``record_mode``, ``every_channel``, ``whole_records``: as :class:`Physics`)."""
-        records, ranging = self.physics(cast.batch, record_mode, every_channel, whole_records)
-        sight, lost = cast.sight, ranging.dropout_cause >= 0
-        dropouts = DropoutRecords(pulse_index=cast.slots[lost], time_s=sight.time_s[lost], origin=sight.origin_m[lost],
-                                  direction=sight.direction[lost], cause=ranging.dropout_cause[lost].astype(np.uint8))
-        points = georeference(ranging, cast.hits, sight)
-        mean, var = self.tpu.predict(points, sight, ranged_normals(ranging, cast.hits))
-        points = with_uncertainty(points, mean, var)
-        return Chunk(cast.slots, points, dropouts, records, cast.footprint,
-                     errors=checked_errors(points, sight, mean, var, self.scene))
+        """The ray stage of one chunk of pulse slots (n,) (:func:`~scanner_sim.survey.chunk.cast_chunk`)."""
+        return cast_chunk(self, slots)
 
     def simulate_chunk(self, slots: np.ndarray, record_mode: str | None = None, every_channel: bool = False,
                        whole_records: bool = False) -> Chunk:
-        """One chunk of pulse slots (n,) through the whole flow (``record_mode``, ``every_channel``,
-        ``whole_records``: as :class:`Physics`)."""
-        return self.finish_chunk(self.cast_chunk(slots), record_mode, every_channel, whole_records)
-
-    def lines_of_sight(self, slots: np.ndarray, poses: Poses, hits: Hits,
-                       true_beam: tuple[np.ndarray, np.ndarray]) -> LinesOfSight:
-        """Each pulse's estimated beam, with the first truth surface along it. Without navigation noise the
-        estimated beam is the true beam axis (``true_beam``: its origins and directions (n, 3), as the ray stage
-        cast them from the true ``poses``), whose first hit the beam cast already holds (sub-ray 0 of every pattern is
-        the axis), so only a noisy navigation needs its estimated poses, its beam and a cast of its own."""
-        noisy, times = self.trajectory.has_navigation_noise, poses.time_s
-        estimate = self.trajectory.estimate_of(poses)
-        if noisy:
-            origin, direction = self.scanner.beam_rays(estimate)
-        else:
-            origin, direction = true_beam
-        axis = hits.subray_index == 0
-        axis_range, axis_surface = np.full(slots.size, np.nan), np.full(slots.size, -1)
-        axis_range[hits.pulse_index[axis]] = hits.range_m[axis]
-        axis_surface[hits.pulse_index[axis]] = hits.surface_id[axis]
-        if noisy:
-            true_range, first_surface = np.full(slots.size, np.nan), np.full(slots.size, -1)
-            ray, tri, dist = self.target.caster.first_hits((origin - self.scene.local_origin).astype(np.float32),
-                                                           direction.astype(np.float32))
-            true_range[ray], first_surface[ray] = dist, self.scene.face_surface[tri]
-        else:
-            true_range, first_surface = axis_range, axis_surface
-        return LinesOfSight(origin, direction, true_range, first_surface,
-                            np.degrees(self.scanner.scan_angle_rad(times)), times, slots, self.trajectory.leg(times),
-                            estimate.position, np.c_[estimate.roll_rad, estimate.pitch_rad, estimate.yaw_rad],
-                            *true_beam, axis_range)
+        """One chunk of pulse slots (n,) through the whole flow (:func:`~scanner_sim.survey.chunk.simulate_chunk`;
+        ``record_mode``, ``every_channel``, ``whole_records``: as :class:`~scanner_sim.survey.chunk.Physics`)."""
+        return simulate_chunk(self, slots, record_mode, every_channel, whole_records)

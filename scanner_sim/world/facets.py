@@ -1,5 +1,6 @@
 """Face normals and areas of a triangle mesh in one compiled pass: what the whole scene (scanner_sim.world.scene) and
-a site's windows (scanner_sim.world.site) compute alike, so a window's faces have the whole scene's normals to the bit.
+a site's windows (scanner_sim.world.site) compute alike, so a window's faces have the whole scene's normals to the bit;
+and the area test of a degenerate face (the scene drops them; a mesh file of nothing else is refused).
 """
 
 from __future__ import annotations
@@ -32,3 +33,18 @@ def face_geometry(vertices, faces):
         else:
             normal[i, 0], normal[i, 1], normal[i, 2] = np.nan, np.nan, np.nan
     return normal, area2
+
+
+#: A triangle with twice its area below this times the square of its mesh's size is degenerate.
+DEGENERATE_AREA = 1e-14
+
+
+def mesh_scale(v: np.ndarray) -> float:
+    """The size [m] of a mesh of vertices v (n, 3): its bounding box's longest side (1 for no vertices, at least 1e-12)."""
+    return max(1e-12, float(np.ptp(v, axis=0).max()) if len(v) else 1.0)
+
+
+def nondegenerate(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """(m,) bool: the faces f (m, 3) of vertices v (n, 3) that are not degenerate."""
+    return face_geometry(np.ascontiguousarray(v, np.float64), np.ascontiguousarray(f, np.int64))[1] > (
+        DEGENERATE_AREA * mesh_scale(v) ** 2)

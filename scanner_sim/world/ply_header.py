@@ -1,5 +1,5 @@
 """What a PLY file's header promises, read before trimesh loads the file: its element counts, so that a mesh
-object whose file would not fit is refused first (:func:`scanner_sim.world.scene.build_scene`)."""
+object whose file would not fit is refused first (:func:`scanner_sim.world.mesh_file.load_mesh_file`)."""
 
 from __future__ import annotations
 

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, MeshObject, load_scene
-from scanner_sim.world.scene import build_scene, load_mesh_file
+from scanner_sim.world.mesh_file import load_mesh_file
+from scanner_sim.world.scene import build_scene
 
 PROPERTY = settings(max_examples=60, derandomize=True, deadline=3000,
                     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])

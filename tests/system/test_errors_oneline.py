@@ -17,7 +17,7 @@ from scanner_sim.cli import main
 from scanner_sim.config import ConfigError, MeshObject, load_scene
 from scanner_sim.survey.pipeline import run_pass
 from scanner_sim.survey.setup import PassOptions
-from scanner_sim.world.scene import load_mesh_file
+from scanner_sim.world.mesh_file import load_mesh_file
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -34,7 +34,7 @@ def test_stage_profile_accounts_for_the_whole_chunk_loop():
     """Every stage of a pass over a seabed takes time, and the stages add up to the loop's CPU seconds."""
     result = stage_profile("cable_survey", "balanced", pulses=4000)
     stages = result["stages"]
-    assert set(stages) >= {"rays (Embree)", "digitise", "ranging", "truth", "georeference", "coverage", "LAS"}
+    assert set(stages) >= {"rays (Embree)", "digitise", "ranging", "truth", "georeference", "uncertainty", "coverage", "LAS"}
     assert all(r["cpu_s"] > 0 for name, r in stages.items() if name != "other")
     assert sum(r["cpu_s"] for r in stages.values()) == pytest.approx(result["cpu_s_one_thread"], abs=5e-3)
     assert result["pulses"] == 4000 and result["pass_cores_used"] > 0

@@ -20,7 +20,8 @@ from scanner_sim.rays.echoes import echo_energy
 from scanner_sim.rays.hits import HIT_FIELDS, Hits
 from scanner_sim.rays.seabed_grid import no_grid_reason, seabed_grid
 from scanner_sim.survey.setup import PassOptions, PassSetup
-from scanner_sim.world.scene import LABELS, Part, Scene, panel_mesh, tube
+from scanner_sim.world.objects import panel_mesh, tube
+from scanner_sim.world.scene import LABELS, Part, Scene
 from scanner_sim.world.terrain import HeightField
 
 FAILURES = Path(__file__).resolve().parents[3] / "scenes" / "failures"

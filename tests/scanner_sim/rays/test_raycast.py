@@ -10,7 +10,8 @@ from muls.presets import mul2023
 from scanner_sim.rays.beams import beam_pattern
 from scanner_sim.rays.cast import CastScene, cast_beams
 from scanner_sim.rays.caster import ray_caster
-from scanner_sim.world.scene import LABELS, Part, Scene, frustum, panel_mesh
+from scanner_sim.world.objects import frustum, panel_mesh
+from scanner_sim.world.scene import LABELS, Part, Scene
 
 GEOMETRY = mul2023().geometry
 FLOAT32_RANGE_TOL_M = 2e-6  # float32 spacing near 10 m is 1e-6 m

@@ -12,7 +12,8 @@ from scanner_sim.config import load_scene, parse_scene
 from scanner_sim.rays.hits import Hits
 from scanner_sim.survey.georeference import NO_OBJECT, NOISE_CLASS, LinesOfSight, georeference
 from scanner_sim.survey.setup import PassOptions, PassSetup
-from scanner_sim.world.scene import LABELS, Part, Scene, build_scene, frustum
+from scanner_sim.world.objects import frustum
+from scanner_sim.world.scene import LABELS, Part, Scene, build_scene
 
 STEP_M = 1.0
 UPPER_Z, LIDAR_Z = -5.0, -1.0

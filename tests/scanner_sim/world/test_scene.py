@@ -7,7 +7,8 @@ import yaml
 from scanner_sim.config import SCENES_DIR, load_scene, parse_scene
 from scanner_sim.config.materials import LABELS, MATERIALS
 from scanner_sim.rays.caster import RayCaster
-from scanner_sim.world.scene import build_scene, cable_centreline, tube
+from scanner_sim.world.objects import cable_centreline, tube
+from scanner_sim.world.scene import build_scene
 from scanner_sim.world.terrain import generate_heightfield
 
 
