@@ -10,7 +10,6 @@ import contextlib
 import errno
 import math
 import os
-import secrets
 import signal
 import sys
 import threading
@@ -309,21 +308,3 @@ def parse_guarded(parser: argparse.ArgumentParser, argv) -> tuple[argparse.Names
         return None, EXIT_USAGE
     except SystemExit as exc:  # --help, --version
         return None, int(exc.code or 0)
-
-
-def write_atomically(write, path) -> None:
-    """``write(tmp)`` into a hidden temporary file beside ``path`` (same suffix), then rename it onto ``path``:
-    an interrupted or failed write (a full disk) leaves nothing half-written under ``path``."""
-    final = Path(path)
-    tmp = final.with_name(f".{final.stem}.{secrets.token_hex(4)}.tmp{final.suffix}")
-    try:
-        write(str(tmp))
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, final)
-    except BaseException as exc:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError) and exc.filename is not None:
-            exc.filename = str(final)
-        raise
