@@ -15,6 +15,7 @@ import math
 from typing import NamedTuple
 
 from ..infra.errors import ParameterError
+from ..infra.roots import brentq
 from .phase import PHASE_FUNCTIONS, PhaseFunction, phase_function
 
 #: The model's phase function (muls.water.properties.PHASE_FUNCTION names the same).
@@ -88,8 +89,6 @@ def fournier_forand_for_backscatter(ratio: float) -> tuple[float, float]:
     if not (lo < ratio < hi):
         raise ParameterError(f"backscatter ratio = {ratio!r}: Fournier-Forand on Mobley, Sundman and Boss's line "
                              f"reaches {lo:.2g} to {hi:.2g}")
-    from scipy.optimize import brentq  # here: scipy.optimize costs every importer of the water 0.4 s
-
     mu = brentq(lambda m: fournier_forand_backscatter_ratio(n_of(m), m) - ratio, *FF_MU_SEARCH, xtol=1e-10)
     return n_of(mu), mu
 

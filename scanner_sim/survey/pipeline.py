@@ -32,6 +32,7 @@ from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.render import point_cloud
 from scanner_sim.render.worker import PictureWorker
 from scanner_sim.survey import pictures, provenance, sinks
+from scanner_sim.survey.fan_out import SinkThreads
 from scanner_sim.survey.gis_products import write_gis_products
 from scanner_sim.survey.setup import Chunk, PassOptions, PassPlan, PassSetup, check_pass_arguments
 from scanner_sim.survey.tpu_calibration import UncertaintySink, single_pass_note
@@ -247,8 +248,9 @@ def uncertainty_figures(setup: PassSetup, sink, pulses: int) -> dict:
 
 
 def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):
-    """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally.
-    Returns (stats, coverage sink or None, wall seconds)."""
+    """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally, each
+    sink on its own thread taking the chunks in order (:class:`~scanner_sim.survey.fan_out.SinkThreads`). Returns
+    (stats, coverage sink or None, wall seconds)."""
     coverage = None
     if setup.plan.measures_coverage:
         planned = planned_swath(setup.config, setup.trajectory, setup.scanner.pulse_rate_hz)
@@ -256,9 +258,10 @@ def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOption
     stats = sinks.PassStats(len(setup.model.instrument.channels), setup.scene.heightfield)
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
     started = time.perf_counter()
-    for chunk in chunks:
-        for sink in every:
-            sink.add(chunk)
+    with SinkThreads(every) as fan:  # each sink on its own thread, the chunks in order (survey/fan_out.py)
+        for chunk in chunks:
+            fan.add(chunk)
+        fan.finish()
     return stats, coverage, time.perf_counter() - started
 
 
