@@ -20,15 +20,20 @@ BACKLOG = 2
 
 class SinkThreads:
     """``add(chunk)`` hands the chunk to every sink, each on its own thread in the order given; :meth:`finish`
-    waits for them and raises the first error a sink raised. A context manager: leaving it waits for the sinks."""
+    waits for them and raises the first error a sink raised. A context manager: leaving it waits for the sinks.
+    A sink with a true ``thread_bound`` attribute (one whose writer serves only the thread that opened it, such as
+    sqlite3's) takes its chunks on the caller's thread instead."""
 
     def __init__(self, sinks: list):
-        self._sinks = sinks
-        self._threads = [ThreadPoolExecutor(1, thread_name_prefix="sink") for _ in sinks]
+        self._here = [sink for sink in sinks if getattr(sink, "thread_bound", False)]
+        self._sinks = [sink for sink in sinks if not getattr(sink, "thread_bound", False)]
+        self._threads = [ThreadPoolExecutor(1, thread_name_prefix="sink") for _ in self._sinks]
         self._pending: deque[list[Future]] = deque()
 
     def add(self, chunk) -> None:
         self._pending.append([thread.submit(sink.add, chunk) for sink, thread in zip(self._sinks, self._threads)])
+        for sink in self._here:
+            sink.add(chunk)
         while len(self._pending) > BACKLOG:
             _wait(self._pending.popleft())
 

@@ -161,6 +161,10 @@ class RosbagSink(RosbagWriter):
     :class:`~scanner_sim.motion.trajectory.Poses`, on the track from ``track_s`` (start, end) [s]; pulse_rate_hz:
     slot k fires at k / pulse_rate_hz."""
 
+    #: Fed on the thread that opened it (:class:`~scanner_sim.survey.fan_out.SinkThreads`): a bag's sqlite3 storage
+    #: serves only the thread that made its connection.
+    thread_bound = True
+
     def __init__(self, path: Path, settings, local_origin: np.ndarray, line_of, poses_at, track_s: tuple,
                  pulse_rate_hz: float, lidar_offset_m, metadata: dict | None = None):
         super().__init__(path, frame=settings.frame, storage=settings.storage, offset_m=local_origin,

@@ -43,3 +43,16 @@ def test_a_sinks_error_reaches_the_pass():
         for chunk in range(10):
             fan.add(chunk)
         fan.finish()
+
+
+def test_a_thread_bound_sink_takes_its_chunks_on_the_callers_thread():
+    """A ROS 2 bag's sqlite3 storage refuses a connection used from another thread than the one that opened it
+    (``sqlite3.ProgrammingError``): such a sink stays on the pass's thread, in order, beside the others."""
+    bound, free = Recorder(), Recorder()
+    bound.thread_bound = True
+    with SinkThreads([bound, free]) as fan:
+        for chunk in range(12):
+            fan.add(chunk)
+        fan.finish()
+    assert bound.seen == free.seen == list(range(12))
+    assert bound.threads == {threading.get_ident()} and free.threads != {threading.get_ident()}
