@@ -16,7 +16,8 @@ import argparse
 import importlib
 import json
 
-from ..infra.command import OneLineParser, checked_types, package_version, parse_guarded, run_guarded, write_atomically
+from ..infra.atomic import write_atomically
+from ..infra.command import OneLineParser, checked_types, package_version, parse_guarded, run_guarded
 from ..infra.runtime import configure_process
 from .registry import SUBCOMMANDS
 

@@ -12,6 +12,7 @@ import os
 from pathlib import Path
 
 from .. import montecarlo, studies
+from ..infra.atomic import write_atomically
 from ..infra.command import (
     fraction,
     non_negative_float,
@@ -21,7 +22,6 @@ from ..infra.command import (
     positive_float,
     positive_int,
     seed,
-    write_atomically,
 )
 from ..presets import WATER_PRESETS, water_preset
 from ..studies.common import check_pulse_memory

@@ -10,7 +10,6 @@ import contextlib
 import errno
 import math
 import os
-import secrets
 import signal
 import sys
 import threading
@@ -244,11 +243,12 @@ def _show_warning(prog: str):
     return show
 
 
-def run_guarded(prog: str, func, bad_input: tuple[type[BaseException], ...] = ()) -> int:
+def run_guarded(prog: str, func, bad_input=()) -> int:
     """``func()``'s exit code, with every way it can end as one line on stderr and no traceback: a bad value
-    (ValueError, or one of the ``bad_input`` types, such as a reader's error on a corrupt file) exit 2; a full
-    disk, a permission or another OS error, or too little memory exit 1; Ctrl-C 130 and SIGTERM 143 (the
-    ``finally`` blocks and atomic writers have removed the temporary files by then); anything else exit 1 as
+    (ValueError, or one of the ``bad_input`` types, such as a reader's error on a corrupt file; a tuple, or a
+    function returning it when an error is raised, so that a library is not imported only to name its errors)
+    exit 2; a full disk, a permission or another OS error, or too little memory exit 1; Ctrl-C 130 and SIGTERM 143
+    (the ``finally`` blocks and atomic writers have removed the temporary files by then); anything else exit 1 as
     an internal error (``MULS_TRACEBACK=1`` shows its traceback). Warnings print as one line each."""
     try:
         with _signals_as_exceptions(), warnings.catch_warnings():
@@ -256,10 +256,12 @@ def run_guarded(prog: str, func, bad_input: tuple[type[BaseException], ...] = ()
             warnings.showwarning = _show_warning(prog)
             try:
                 return int(func() or 0)
-            except bad_input as exc:
-                raise ValueError(_one_line(exc)) from None
-            except SystemError as exc:  # a signal raised while a compiled kernel returned: numba wraps it
-                raise _signal_behind(exc) or exc from None
+            except Exception as exc:
+                if isinstance(exc, bad_input() if callable(bad_input) else bad_input):
+                    raise ValueError(_one_line(exc)) from None
+                if isinstance(exc, SystemError):  # a signal raised while a compiled kernel returned: numba wraps it
+                    raise _signal_behind(exc) or exc from None
+                raise
     except KeyboardInterrupt:
         print(f"{prog}: interrupted (Ctrl-C); temporary files removed, earlier outputs kept", file=sys.stderr)
         return EXIT_SIGINT
@@ -309,21 +311,3 @@ def parse_guarded(parser: argparse.ArgumentParser, argv) -> tuple[argparse.Names
         return None, EXIT_USAGE
     except SystemExit as exc:  # --help, --version
         return None, int(exc.code or 0)
-
-
-def write_atomically(write, path) -> None:
-    """``write(tmp)`` into a hidden temporary file beside ``path`` (same suffix), then rename it onto ``path``:
-    an interrupted or failed write (a full disk) leaves nothing half-written under ``path``."""
-    final = Path(path)
-    tmp = final.with_name(f".{final.stem}.{secrets.token_hex(4)}.tmp{final.suffix}")
-    try:
-        write(str(tmp))
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, final)
-    except BaseException as exc:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError) and exc.filename is not None:
-            exc.filename = str(final)
-        raise

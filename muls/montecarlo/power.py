@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import fftconvolve
 
 from ..instrument.description import Instrument
 from ..optics import radiometry
@@ -40,6 +39,8 @@ def pulse_kernel(instrument: Instrument, time_step_s: float) -> np.ndarray:
 
 def to_power_w(energy_per_bin: np.ndarray, instrument: Instrument, time_step_s: float) -> np.ndarray:
     """Received optical power [W] at the bin centres from energy fractions per bin (..., n_t)."""
+    from scipy.signal import fftconvolve  # here: scipy.signal costs every importer of the tables 0.8 s
+
     e = np.asarray(energy_per_bin, float)
     if e.shape[-1] == 0:
         return e.copy()

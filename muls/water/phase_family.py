@@ -14,9 +14,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from scipy.optimize import brentq
-
 from ..infra.errors import ParameterError
+from ..infra.roots import brentq
 from .phase import PHASE_FUNCTIONS, PhaseFunction, phase_function
 
 #: The model's phase function (muls.water.properties.PHASE_FUNCTION names the same).

@@ -50,9 +50,11 @@ def main(argv=None) -> int:
     args, code = parse_guarded(build_parser(command), argv)
     if args is None:  # --help, --version (0) or a bad argument (2, one line printed)
         return code
-    import laspy
-    import yaml
+    return run_guarded(f"scanner-sim {args.command}", lambda: args.func(args), bad_input=corrupt_file_errors)
 
-    # a corrupt LAS or YAML file is bad input like a wrong scene key: exit 2
-    return run_guarded(f"scanner-sim {args.command}", lambda: args.func(args),
-                       bad_input=(laspy.LaspyException, yaml.YAMLError))
+
+def corrupt_file_errors() -> tuple[type[BaseException], ...]:
+    """The errors of a corrupt LAS or YAML file, bad input like a wrong scene key (exit 2): those of the readers the
+    command imported (no other can have raised one), so that ``validate`` need not import laspy to name its error."""
+    readers = (("laspy", "LaspyException"), ("yaml", "YAMLError"))
+    return tuple(getattr(sys.modules[name], error) for name, error in readers if name in sys.modules)

@@ -4,4 +4,5 @@ import sys
 
 from scanner_sim.cli import main
 
-sys.exit(main())
+if __name__ == "__main__":  # not when a child process (the pictures' worker) imports the parent's main module
+    sys.exit(main())

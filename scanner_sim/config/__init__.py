@@ -12,41 +12,36 @@ Modules: ``errors`` (ConfigError and the one-line messages), ``base`` (strict ba
 ``sections`` (water, instrument, platform, scanner, survey, output), ``geometry`` (seabed and objects),
 ``scene_config`` (the whole scene, overrides, JSON Schema), ``loading`` (YAML files and shipped scenes),
 ``crs`` (the scene's coordinate reference system).
+
+The public names below load on first use (a module ``__getattr__``): importing one submodule (``materials``,
+``loading``) does not import pydantic's models of every section, nor the physics presets behind them.
 """
 
-from scanner_sim.config.errors import ConfigError, build
-from scanner_sim.config.geometry import (
-    OBJECT_TYPES,
-    CableObject,
-    ConeMineObject,
-    CylinderMineObject,
-    MeshObject,
-    MooredMineObject,
-    PanelObject,
-    ReliefConfig,
-    RipplesConfig,
-    RocksConfig,
-    SeabedConfig,
-    reflectance_of,
-)
-from scanner_sim.config.loading import SCENES_DIR, load_scene, resolve_scene_path, shipped_scenes
-from scanner_sim.config.scene_config import FORMAT_VERSION, SceneConfig, parse_scene, scene_json_schema
-from scanner_sim.config.sections import (
-    AttitudeConfig,
-    InstrumentConfig,
-    LawnmowerConfig,
-    NavigationNoiseConfig,
-    OutputConfig,
-    PlatformConfig,
-    ScannerConfig,
-    SurveyConfig,
-    WaterConfig,
-)
+import importlib
 
-__all__ = [
-    "FORMAT_VERSION", "OBJECT_TYPES", "SCENES_DIR", "AttitudeConfig", "CableObject", "ConeMineObject", "ConfigError",
-    "CylinderMineObject", "InstrumentConfig", "LawnmowerConfig", "MeshObject", "MooredMineObject",
-    "NavigationNoiseConfig", "OutputConfig", "PanelObject", "PlatformConfig", "ReliefConfig", "RipplesConfig",
-    "RocksConfig", "ScannerConfig", "SceneConfig", "SeabedConfig", "SurveyConfig", "WaterConfig", "build",
-    "load_scene", "parse_scene", "reflectance_of", "resolve_scene_path", "scene_json_schema", "shipped_scenes",
-]
+#: public name -> the module that defines it.
+_WHERE = {
+    **dict.fromkeys(("ConfigError", "build"), "scanner_sim.config.errors"),
+    **dict.fromkeys(("OBJECT_TYPES", "CableObject", "ConeMineObject", "CylinderMineObject", "MeshObject",
+                     "MooredMineObject", "PanelObject", "ReliefConfig", "RipplesConfig", "RocksConfig", "SeabedConfig",
+                     "reflectance_of"), "scanner_sim.config.geometry"),
+    **dict.fromkeys(("SCENES_DIR", "load_scene", "resolve_scene_path", "shipped_scenes"), "scanner_sim.config.loading"),
+    **dict.fromkeys(("FORMAT_VERSION", "SceneConfig", "parse_scene", "scene_json_schema"),
+                    "scanner_sim.config.scene_config"),
+    **dict.fromkeys(("AttitudeConfig", "InstrumentConfig", "LawnmowerConfig", "NavigationNoiseConfig", "OutputConfig",
+                     "PlatformConfig", "ScannerConfig", "SurveyConfig", "WaterConfig"), "scanner_sim.config.sections"),
+}
+
+__all__ = sorted(_WHERE, key=str.lower)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_WHERE[name]), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

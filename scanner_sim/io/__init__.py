@@ -1,6 +1,6 @@
 """Writers and readers of a survey pass's output files (``docs/outputs.md``), one module per format.
 
-- :mod:`~scanner_sim.io.atomic`: :func:`atomic_path`, the atomic write every writer uses.
+- :func:`atomic_path` (:mod:`muls.infra.atomic`), the atomic write every writer uses.
 - :mod:`~scanner_sim.io.las`: ``points.las``, LAS 1.4 format 6 with extra dimensions, streamed by
   :class:`LasWriter`; the layout follows the :class:`~scanner_sim.records.point_records.PointRecords` declarations.
 - :mod:`~scanner_sim.io.dropouts`: ``dropouts.npz``, streamed by :class:`DropoutWriter`.
@@ -12,7 +12,7 @@
   (not re-exported: import it from its module).
 """
 
-from scanner_sim.io.atomic import atomic_path
+from muls.infra.atomic import atomic_path
 from scanner_sim.io.dropouts import DropoutWriter, read_dropouts_npz, write_dropouts_npz
 from scanner_sim.io.gis import write_cog, write_geojson
 from scanner_sim.io.las import (

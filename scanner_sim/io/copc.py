@@ -22,7 +22,7 @@ from pathlib import Path
 import laspy
 import numpy as np
 
-from scanner_sim.io.atomic import atomic_path
+from muls.infra.atomic import atomic_path
 from scanner_sim.io.las import LasWriter, _set_extra_bytes_ranges
 from scanner_sim.records.point_records import PointRecords
 

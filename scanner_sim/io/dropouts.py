@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from scanner_sim.io.atomic import PathLike, StreamingWriter, atomic_open, existing_parent
+from muls.infra.atomic import PathLike, StreamingWriter, atomic_open, existing_parent
 from scanner_sim.records.point_records import DROPOUT_CAUSES, DropoutRecords
 
 __all__ = ["DropoutWriter", "read_dropouts_npz", "write_dropouts_npz"]

@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from scanner_sim.io.atomic import PathLike, atomic_open, atomic_path
+from muls.infra.atomic import PathLike, atomic_open, atomic_path
 from scanner_sim.io.summary import jsonable
 
 __all__ = ["crs_member", "write_cog", "write_geojson"]

@@ -21,7 +21,7 @@ from typing import Any
 import laspy
 import numpy as np
 
-from scanner_sim.io.atomic import PathLike, StreamingWriter, atomic_path
+from muls.infra.atomic import PathLike, StreamingWriter, atomic_path
 from scanner_sim.io.summary import jsonable
 from scanner_sim.records.point_records import LasExtra, LasStandard, PointRecords
 
@@ -204,7 +204,7 @@ class LasWriter(StreamingWriter):
                 las.write(chunk)
 
     The file appears under its final name only when the context exits without an exception
-    (see :func:`~scanner_sim.io.atomic.atomic_path`); on an exception it is discarded.
+    (see :func:`~muls.infra.atomic.atomic_path`); on an exception it is discarded.
 
     Parameters
     ----------

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import plyfile
 
-from scanner_sim.io.atomic import PathLike, atomic_open
+from muls.infra.atomic import PathLike, atomic_open
 
 __all__ = ["read_scene_ply", "write_scene_ply"]
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scanner_sim.io.atomic import PathLike, StreamingWriter
+from muls.infra.atomic import PathLike, StreamingWriter
 from scanner_sim.io.las import LAS_SCALE_M
 from scanner_sim.io.run_dir import RunDirectory
 from scanner_sim.io.summary import jsonable

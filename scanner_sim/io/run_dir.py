@@ -37,7 +37,7 @@ import shutil
 import threading
 from pathlib import Path
 
-from scanner_sim.io.atomic import PathLike, fsync_dir
+from muls.infra.atomic import PathLike, fsync_dir
 
 try:
     import fcntl

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from scanner_sim.io.atomic import PathLike, atomic_open
+from muls.infra.atomic import PathLike, atomic_open
 
 __all__ = ["jsonable", "write_summary_json"]
 

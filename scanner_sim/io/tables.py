@@ -1,6 +1,6 @@
 """The small tables of a pass: trajectory.csv, waveforms.npz, coverage_grid.npz, and plain text files.
 
-Every writer is atomic (:mod:`scanner_sim.io.atomic`); formats in ``docs/outputs.md``.
+Every writer is atomic (:mod:`muls.infra.atomic`); formats in ``docs/outputs.md``.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from scanner_sim.io.atomic import PathLike, atomic_open
+from muls.infra.atomic import PathLike, atomic_open
 from scanner_sim.metrics.coverage import GAP_CAUSES
 
 __all__ = [

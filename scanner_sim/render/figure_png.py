@@ -1,8 +1,8 @@
-"""A matplotlib figure written to a PNG, atomically (:func:`scanner_sim.io.atomic_path`), nothing cut off."""
+"""A matplotlib figure written to a PNG, atomically (:func:`muls.infra.atomic.atomic_path`), nothing cut off."""
 
 from __future__ import annotations
 
-from scanner_sim.io import atomic_path
+from muls.infra.atomic import atomic_path
 
 
 def figure_to_png(fig, path_png) -> None:

@@ -8,8 +8,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from muls.infra.atomic import atomic_path
 from scanner_sim.config.materials import LABELS
-from scanner_sim.io import atomic_path
 from scanner_sim.render.point_colours import (
     HEIGHT_COLOUR_MAP,
     SCALAR_COLOUR_MAPS,

@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from scanner_sim.io import atomic_path
+from muls.infra.atomic import atomic_path
 from scanner_sim.render.point_colours import CHANNEL_COLOURS, categorical_rgb
 
 #: Points a page shows at most by default: 500,000 points make a page of about 21 MB that Chromium opens in seconds.

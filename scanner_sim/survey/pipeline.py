@@ -9,6 +9,7 @@ muls; navigation noise is a function of time), so a seed fixes a pass bit for bi
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import time
 from collections import deque
@@ -29,9 +30,11 @@ from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.metrics.planned_swath import planned_swath
 from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.render import point_cloud
-from scanner_sim.survey import provenance, sinks
+from scanner_sim.render.worker import PictureWorker
+from scanner_sim.survey import pictures, provenance, sinks
+from scanner_sim.survey.fan_out import SinkThreads
 from scanner_sim.survey.gis_products import write_gis_products
-from scanner_sim.survey.setup import Chunk, PassOptions, PassSetup, check_pass_arguments
+from scanner_sim.survey.setup import Chunk, PassOptions, PassPlan, PassSetup, check_pass_arguments
 from scanner_sim.survey.tpu_calibration import UncertaintySink, single_pass_note
 from scanner_sim.world.scene import Scene
 
@@ -81,12 +84,17 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
         raise TypeError(f"out_dir must be a folder path (str or Path) or None, not {type(out_dir).__name__} {out_dir!r}")
     check_pass_arguments(config, options, scene)
     check_bag_dir(config.output.rosbag, Path(out_dir or config.output_dir))  # before the slow set-up
-    t_setup = time.perf_counter()
-    setup = PassSetup.build(config, options, scene)
-    setup_s = time.perf_counter() - t_setup - setup.ranging_s
-    run_dir = RunDirectory(out_dir or setup.config.output_dir).open()  # locked; written in a hidden sibling
-    compile_s = setup.ranging_s + warm_up(setup, options)
-    summary = stream_to_files(setup, run_dir.path, pass_chunks(setup, options), options, setup_s, compile_s=compile_s)
+    with ExitStack() as stack:
+        worker = picture_worker(PassPlan.of(config, options))
+        if worker is not None:
+            stack.enter_context(worker)  # an unfinished pass stops it
+        t_setup = time.perf_counter()
+        setup = PassSetup.build(config, options, scene)
+        setup_s = time.perf_counter() - t_setup - setup.ranging_s
+        run_dir = RunDirectory(out_dir or setup.config.output_dir).open()  # locked; written in a hidden sibling
+        compile_s = setup.ranging_s + warm_up(setup, options)
+        summary = stream_to_files(setup, run_dir.path, pass_chunks(setup, options), options, setup_s,
+                                  compile_s=compile_s, worker=worker)
     return PassResult(summary, run_dir.commit())  # swapped in whole for the output folder (io/run_dir.py)
 
 
@@ -240,8 +248,9 @@ def uncertainty_figures(setup: PassSetup, sink, pulses: int) -> dict:
 
 
 def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):
-    """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally.
-    Returns (stats, coverage sink or None, wall seconds)."""
+    """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally, each
+    sink on its own thread taking the chunks in order (:class:`~scanner_sim.survey.fan_out.SinkThreads`). Returns
+    (stats, coverage sink or None, wall seconds)."""
     coverage = None
     if setup.plan.measures_coverage:
         planned = planned_swath(setup.config, setup.trajectory, setup.scanner.pulse_rate_hz)
@@ -249,9 +258,10 @@ def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOption
     stats = sinks.PassStats(len(setup.model.instrument.channels), setup.scene.heightfield)
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
     started = time.perf_counter()
-    for chunk in chunks:
-        for sink in every:
-            sink.add(chunk)
+    with SinkThreads(every) as fan:  # each sink on its own thread, the chunks in order (survey/fan_out.py)
+        for chunk in chunks:
+            fan.add(chunk)
+        fan.finish()
     return stats, coverage, time.perf_counter() - started
 
 
@@ -282,27 +292,35 @@ def bag_sinks(setup: PassSetup, out: Path, facts: sinks.PassFacts) -> list:
 
 
 def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, setup_s: float,
-                    earlier_wall_s: float = 0.0, compile_s: float = 0.0) -> dict:
+                    earlier_wall_s: float = 0.0, compile_s: float = 0.0, worker: PictureWorker | None = None) -> dict:
     """``chunks`` of the pass streamed into the files of its plan in ``out`` (what the scene's ``output`` asks
     for, dropouts, coverage grid, trajectory, scene, waveforms, pictures), summary.json last; returns the summary.
     ``earlier_wall_s``: seconds already spent simulating the chunks elsewhere (a pass split in segments), added to
-    ``wall_s``; ``compile_s``: seconds :func:`warm_up` took, reported apart."""
+    ``wall_s``; ``compile_s``: seconds :func:`warm_up` took, reported apart; ``worker``: the child process that draws
+    the pictures while this one writes the rest (:func:`picture_worker`; None: drawn here)."""
     facts, files, output = pass_facts(setup, options), setup.plan.files, setup.config.output
     render = "render.png" in files
+    draw = pictures.draw_here if worker is None else worker.draw
     with ExitStack() as stack:
         clouds = [stack.enter_context(sink) for sink in
                   sinks.point_cloud_sinks(output, out, setup.scene.local_origin, facts.metadata(), setup.scene.crs)]
         clouds += [stack.enter_context(sink) for sink in bag_sinks(setup, out, facts)]
         dropouts = stack.enter_context(sinks.DropoutSink(out / "dropouts.npz"))
         waveforms = sinks.WaveformSink(setup.model.instrument.digitizer, facts.channels)
-        sample, uncertainty = sinks.CloudSample(), UncertaintySink(setup.tpu)
+        sample, uncertainty = pictures.CloudSample(), UncertaintySink(setup.tpu)
         stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts, waveforms, uncertainty]
                                               + ([sample] if render else []), options)
+        if render:  # first: drawn beside the point clouds' closing and the files below
+            pictures.render_points(out / "render.png", sample, setup.scene, facts, options.render_size, draw)
     summary = sinks.pass_summary(facts, stats, stats.points, dropouts.counts_by_cause(), wall_s + earlier_wall_s,
                                  setup_s, compile_s)
     summary["uncertainty"] = uncertainty_figures(setup, uncertainty, stats.pulses)
     if coverage is not None:
         summary["coverage"] = coverage.write(out / "coverage_grid.npz")
+    if "coverage_map.png" in files:
+        pictures.render_coverage_map(out / "coverage_map.png", coverage, setup.scene, facts, summary["coverage"], draw)
+    if "s44_map.png" in files:
+        pictures.render_order_map(out / "s44_map.png", coverage, facts, summary["coverage"], draw)
     if "scene.ply" in files:
         scene = setup.scene
         io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
@@ -314,11 +332,17 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
         write_gis_products(out, crs, coverage, table, setup.trajectory.waypoints_xy_m)
     if "waveforms.npz" in files:
         waveforms.write(out / "waveforms.npz")
-    if render:
-        sinks.render_points(out / "render.png", sample, setup.scene, facts, options.render_size)
-    if "coverage_map.png" in files:
-        sinks.render_coverage_map(out / "coverage_map.png", coverage, setup.scene, facts, summary["coverage"])
-    if "s44_map.png" in files:
-        sinks.render_order_map(out / "s44_map.png", coverage, facts, summary["coverage"])
+    if worker is not None:
+        worker.finish()
     io.write_summary_json(out / "summary.json", summary)  # last: a complete pass is one with a summary
     return summary
+
+
+def picture_worker(plan: PassPlan) -> PictureWorker | None:
+    """A :class:`~scanner_sim.render.worker.PictureWorker` for the pictures of ``plan``, started now so that it
+    loads its libraries while the pass is set up; None when the plan has no picture, or when this process may
+    not start one (a daemonic process, such as a multiprocessing pool's worker: its pictures are drawn in it)."""
+    three_d = "render.png" in plan.files
+    if not (three_d or "coverage_map.png" in plan.files) or multiprocessing.current_process().daemon:
+        return None
+    return PictureWorker(three_d)

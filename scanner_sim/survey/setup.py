@@ -35,7 +35,8 @@ from scanner_sim.survey.chunk import CastChunk, Chunk, Physics, cast_chunk, simu
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
-from scanner_sim.survey.ranging_precision import measure_ranging_precision, panel_ranges_m
+from scanner_sim.survey.ranging_precision import panel_ranges_m
+from scanner_sim.survey.setup_cache import cached_ranging_precision
 from scanner_sim.survey.sizing import check_pass_budget
 from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel
 from scanner_sim.world.scene import Scene, build_scene
@@ -202,7 +203,7 @@ def tpu_model(config: SceneConfig, model: OpticalModel, physics: Physics, span) 
     when no sampled beam meets anything), its navigation noise, its beam and its pulse's rms length in range."""
     ranges = panel_ranges_m(span.delays_s, model.water.speed_m_s) if span.delays_s.size else (5.0,)
     geometry = model.instrument.geometry
-    return TpuModel(measure_ranging_precision(physics, model.instrument, ranges),
+    return TpuModel(cached_ranging_precision(physics, model.instrument, ranges),
                     NavigationSigmas.of(config.platform.navigation_noise), geometry.beam_diameter_m,
                     geometry.beam_divergence_full_rad, 0.5 * model.water.speed_m_s * model.instrument.pulse.rms_width_s)
 
@@ -278,7 +279,7 @@ class PassSetup:
         """This pass at fidelity ``level``: its plan, sub-ray pattern and stages chosen again (the built scene,
         trajectory and tables kept), its ranging precision measured again through the new physics."""
         stages = _stages(self.config, self.target, self.model, level)
-        tpu = dataclasses.replace(self.tpu, ranging=measure_ranging_precision(stages.physics, stages.model.instrument,
+        tpu = dataclasses.replace(self.tpu, ranging=cached_ranging_precision(stages.physics, stages.model.instrument,
                                                                               self.tpu.ranging.ranges_m))
         return dataclasses.replace(self, plan=dataclasses.replace(self.plan, level=level), **stages._asdict(), tpu=tpu)
 

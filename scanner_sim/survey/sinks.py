@@ -5,9 +5,9 @@ Chunk sinks have ``add(chunk)`` (a :class:`scanner_sim.survey.setup.Chunk`): :cl
 :class:`DropoutSink` and :class:`RosbagSink` (a ROS 2 bag, line by line) stream to disk (atomically: a file appears
 under its final name only when complete),
 :class:`PassStats` keeps the summary's running figures, :class:`CoverageSink` tallies coverage,
-:class:`WaveformSink` keeps the whole records of the pulses the pass keeps, :class:`CloudSample` a decimated copy
-of the points for the picture. After the chunks, :func:`pass_summary` assembles the summary from
-:class:`PassFacts`, and the writers below put the rest in files.
+:class:`WaveformSink` keeps the whole records of the pulses the pass keeps. After the chunks, :func:`pass_summary`
+assembles the summary from :class:`PassFacts`, and the writers below put the rest in files. The pictures, and the
+decimated copy of the points one of them shows, are :mod:`scanner_sim.survey.pictures`'.
 """
 
 from __future__ import annotations
@@ -22,10 +22,8 @@ from muls.ranging.returns import DROPOUT_CAUSES
 from scanner_sim import io
 from scanner_sim.io.copc import CopcWriter
 from scanner_sim.io.rosbag import RosbagWriter
-from scanner_sim.metrics.coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
+from scanner_sim.metrics.coverage import CoverageAccumulator
 from scanner_sim.records.point_records import DropoutRecords, PointRecords
-from scanner_sim.render.coverage_map import plot_coverage_map
-from scanner_sim.render.point_cloud import render_point_cloud
 from scanner_sim.survey.provenance import point_cloud_provenance
 from scanner_sim.version import __version__
 
@@ -36,9 +34,6 @@ RAY_BLOCK = 512
 #: Resolution and extent of the streaming |range error| histogram behind the summary's quantiles [m].
 ERROR_BIN_M = 5e-4
 ERROR_MAX_M = 20.0
-
-#: Points the picture of a pass shows at most (decimated evenly as the pass goes).
-RENDER_MAX_POINTS = 1_500_000
 
 
 @dataclass(frozen=True)
@@ -165,6 +160,10 @@ class RosbagSink(RosbagWriter):
     line_of: times (n,) [s] -> scan line (n,) int; poses_at: times (n,) [s] -> (true, estimated)
     :class:`~scanner_sim.motion.trajectory.Poses`, on the track from ``track_s`` (start, end) [s]; pulse_rate_hz:
     slot k fires at k / pulse_rate_hz."""
+
+    #: Fed on the thread that opened it (:class:`~scanner_sim.survey.fan_out.SinkThreads`): a bag's sqlite3 storage
+    #: serves only the thread that made its connection.
+    thread_bound = True
 
     def __init__(self, path: Path, settings, local_origin: np.ndarray, line_of, poses_at, track_s: tuple,
                  pulse_rate_hz: float, lidar_offset_m, metadata: dict | None = None):
@@ -375,37 +374,6 @@ class WaveformSink:
         io.write_waveforms_npz(path, np.concatenate(self._slots), np.concatenate(self._time_ns), channels)
 
 
-class CloudSample:
-    """An even sample of the pass's points, at most ``max_points`` (every k-th point, k doubling as the pass
-    grows): positions (n, 3) [m] and classes for the picture of the pass."""
-
-    def __init__(self, max_points: int = RENDER_MAX_POINTS):
-        self.max_points, self.stride, self._seen = max_points, 1, 0
-        self._xyz, self._classes = [], []
-
-    def add(self, chunk) -> None:
-        points = chunk.points
-        keep = (self._seen + np.arange(len(points))) % self.stride == 0
-        self._seen += len(points)
-        self._xyz.append(points.xyz[keep])
-        self._classes.append(points.classification[keep])
-        if sum(len(c) for c in self._classes) > self.max_points:
-            self.stride *= 2
-            first = 0
-            for i, part in enumerate(self._classes):  # keep every other kept point, in pass order
-                pick = (first + np.arange(len(part))) % 2 == 0
-                first += len(part)
-                self._xyz[i], self._classes[i] = self._xyz[i][pick], part[pick]
-
-    @property
-    def xyz(self) -> np.ndarray:
-        return np.concatenate(self._xyz) if self._xyz else np.zeros((0, 3))
-
-    @property
-    def classification(self) -> np.ndarray:
-        return np.concatenate(self._classes) if self._classes else np.zeros(0, np.uint8)
-
-
 def _valid_heights(heightfield) -> np.ndarray:
     """The heights [m] of the nodes at the corners of the seabed's cells that hold data (all nodes without gaps)."""
     h = heightfield.heights_m
@@ -464,53 +432,3 @@ def write_trajectory(out: Path, table: dict[str, np.ndarray], split_legs: bool) 
         io.write_trajectory_csv(out / name, table["time_s"][rows], table["position_m"][rows],
                                 table["attitude_deg"][rows], estimated_position_m=table["est_position_m"][rows],
                                 estimated_attitude=table["est_attitude_deg"][rows])
-
-
-def render_points(path: Path, sample: CloudSample, scene, facts: PassFacts, window_size=(1600, 1000)) -> None:
-    """render.png: the sampled points over the faded truth mesh of ``scene``; over a seabed, its points coloured by
-    height and hill-shaded by the seabed's normals under them, with a colour bar and a scale bar, the other classes'
-    points in their class colours; without one, every point by class."""
-    xyz = sample.xyz
-    shading = ({"color_by": "height", "normals": seabed_normals(scene.heightfield, xyz[:, 0], xyz[:, 1])}
-               if scene.heightfield is not None else {})
-    render_point_cloud(path, xyz, sample.classification, truth_vertices=scene.vertices, truth_faces=scene.faces,
-                       title=f"{facts.label}: {len(xyz):,} points ({facts.fidelity})", window_size=window_size,
-                       **shading)
-
-
-def seabed_normals(heightfield, x_m, y_m) -> np.ndarray:
-    """(n, 3) unit upward normals of ``heightfield`` at (x, y) (n,) [m]: its slope by central differences one node
-    spacing either side (the relief the grid resolves, not one triangle's facet)."""
-    h = heightfield.spacing_m
-    gx = (heightfield.height(x_m + h, y_m) - heightfield.height(x_m - h, y_m)) / (2.0 * h)
-    gy = (heightfield.height(x_m, y_m + h) - heightfield.height(x_m, y_m - h)) / (2.0 * h)
-    normal = np.c_[-gx, -gy, np.ones_like(gx)]
-    return normal / np.linalg.norm(normal, axis=1, keepdims=True)
-
-
-def render_coverage_map(path: Path, coverage: CoverageAccumulator, scene, facts: PassFacts, figures: dict) -> None:
-    """coverage_map.png: plan cells covered or missed by cause, cables drawn along, objects marked; ``figures``:
-    the coverage figures of the summary."""
-    lines = [(o.name, o.centreline[:, :2]) for o in scene.objects if o.centreline is not None]
-    markers = []
-    for o in scene.objects:
-        if o.kind not in BACKGROUND_KINDS and o.centreline is None:
-            corners = np.unique(scene.faces[o.face_start:o.face_stop].ravel())
-            markers.append((o.name, scene.vertices[corners, :2].mean(axis=0)))
-    fraction = figures["covered_fraction"]
-    title = (f"{facts.label}\ncovered {fraction:.1%} of {figures['reached_area_m2']:.0f} m² reached"
-             if fraction is not None else f"{facts.label}\nthe scan reaches no seabed cell")
-    plot_coverage_map(path, coverage.cell_states(), coverage.grid.extent_m, GAP_CAUSES, lines=lines,
-                      markers=markers, title=title, no_seabed=coverage.no_seabed)
-
-
-def render_order_map(path: Path, coverage: CoverageAccumulator, facts: PassFacts, figures: dict) -> None:
-    """s44_map.png: the strictest S-44 order each plan cell complies with, the planned swath outlined."""
-    from scanner_sim.metrics.s44 import ORDER_NAMES
-    from scanner_sim.render.s44_map import plot_order_map
-
-    planned = coverage.planned_cells()
-    plot_order_map(path, coverage.strictest_orders(), coverage.cell_states(),
-                   None if planned is None else planned.reshape(coverage.grid.shape), coverage.grid.extent_m,
-                   ORDER_NAMES, figures, title=f"{facts.label}\nIHO S-44 orders (Ed. 6.0.0), each judged on cells of "
-                   "its own size (legend): 95 % of a cell's soundings within the order's TVU and THU")

@@ -38,18 +38,6 @@ def test_dropout_records_concatenate_empty_and_cause_codes():
         DropoutRecords(**{**make_dropouts(2).as_dict(), "cause": np.array([0, 6])})
 
 
-def test_atomic_path_interrupt_removes_temp_and_keeps_old(tmp_path):
-    final = tmp_path / "summary.json"
-    final.write_text("old")
-    with pytest.raises(KeyboardInterrupt), io.atomic_path(final) as tmp:
-        tmp.write_text("half")
-        assert tmp.name.startswith(".summary.json.") and tmp.name.endswith(".tmp")
-        raise KeyboardInterrupt
-    assert final.read_text() == "old" and os.listdir(tmp_path) == ["summary.json"]
-    with pytest.raises(ValueError, match="does not exist"), io.atomic_path(tmp_path / "missing" / "x.json"):
-        pass
-
-
 def test_other_writers_are_atomic_on_error(tmp_path):
     with pytest.raises(ValueError, match="not JSON-serialisable"):
         io.write_summary_json(tmp_path / "summary.json", {"x": object()})

@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 
 from scanner_sim.render.plan_map import finish_plan_map
 from scanner_sim.render.point_cloud import scale_bar_m
-from scanner_sim.survey import sinks
+from scanner_sim.survey import pictures
 from scanner_sim.world.terrain import HeightField
 
 E0, N0 = 614_160.0, 4_494_750.0  # NAD83 / UTM 18N, where real_site lies
@@ -36,7 +36,7 @@ def test_seabed_render_shows_its_relief_in_colour(tmp_path):
     scene = SimpleNamespace(heightfield=field, vertices=vertices, faces=faces)
     sample = SimpleNamespace(xyz=xyz, classification=np.full(len(xyz), 40, np.uint8))
     path = tmp_path / "render.png"
-    sinks.render_points(path, sample, scene, SimpleNamespace(label="site", fidelity="fast"), window_size=(800, 500))
+    pictures.render_points(path, sample, scene, SimpleNamespace(label="site", fidelity="fast"), window_size=(800, 500))
     image = np.asarray(Image.open(path).convert("RGB")).astype(float)
     background = image[-1, -1]
     drawn = np.abs(image - background).sum(axis=2) > 60
@@ -50,7 +50,7 @@ def test_seabed_render_shows_its_relief_in_colour(tmp_path):
 def test_seabed_normals_are_the_height_fields_slope():
     """On a plane rising 1 in 2 eastwards the upward normal is (-1, 0, 2) / sqrt(5), by hand."""
     field = HeightField(0.0, 0.0, 0.5, np.tile(0.5 * np.arange(0.0, 10.0, 0.5), (20, 1)))
-    normal = sinks.seabed_normals(field, np.array([3.0, 4.2]), np.array([5.0, 2.7]))
+    normal = pictures.seabed_normals(field, np.array([3.0, 4.2]), np.array([5.0, 2.7]))
     assert normal == pytest.approx(np.tile(np.array([-1.0, 0.0, 2.0]) / np.sqrt(5.0), (2, 1)))
 
 

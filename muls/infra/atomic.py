@@ -1,4 +1,6 @@
-"""Atomic files: write a hidden temporary file beside the destination, fsync it, rename it into place.
+"""Atomic files: write a hidden temporary file beside the destination, fsync it, rename it into place, fsync the
+folder. Every file both packages write goes through :func:`atomic_path` (or :func:`write_atomically`, its form for
+writers that take a path).
 
 On any exception (KeyboardInterrupt, SIGTERM under the command line and a full disk included) the
 temporary file is removed and the final name keeps what it held: nothing, or the previous complete file.
@@ -15,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-__all__ = ["PathLike", "StreamingWriter", "atomic_open", "atomic_path", "existing_parent"]
+__all__ = ["PathLike", "StreamingWriter", "atomic_open", "atomic_path", "existing_parent", "fsync_dir", "write_atomically"]
 
 PathLike = str | os.PathLike
 
@@ -53,7 +55,7 @@ def existing_parent(final: Path) -> Path:
 
 
 @contextlib.contextmanager
-def atomic_path(final_path: PathLike) -> Iterator[Path]:
+def atomic_path(final_path: PathLike, keep_suffix: bool = False) -> Iterator[Path]:
     """Yield a temporary path beside ``final_path``; on success move it onto ``final_path``.
 
     The body writes the whole file to the yielded path (and closes it). On normal exit the file is
@@ -62,7 +64,8 @@ def atomic_path(final_path: PathLike) -> Iterator[Path]:
     temporary file is removed, ``final_path`` is untouched and the exception propagates.
 
     The temporary name is hidden and ends in ``.tmp`` (``.points.las.1a2b3c4d.tmp``), so a run
-    killed outright never leaves a file that looks complete.
+    killed outright never leaves a file that looks complete; with ``keep_suffix`` the final name's suffix follows
+    (``.plot.png.1a2b3c4d.tmp.png``), for a writer that picks its format by the suffix (matplotlib's ``savefig``).
 
     Raises ValueError if the parent directory of ``final_path`` does not exist or ``final_path`` is
     a directory.
@@ -71,7 +74,7 @@ def atomic_path(final_path: PathLike) -> Iterator[Path]:
     parent = existing_parent(final)
     if final.is_dir():
         raise ValueError(f"output path {str(final)!r} is a directory; give a file name")
-    tmp = final.with_name(f".{final.name}.{secrets.token_hex(4)}.tmp")
+    tmp = final.with_name(f".{final.name}.{secrets.token_hex(4)}.tmp{final.suffix if keep_suffix else ''}")
     try:
         yield tmp
         if not tmp.exists():
@@ -81,10 +84,17 @@ def atomic_path(final_path: PathLike) -> Iterator[Path]:
     except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
-        if isinstance(exc, OSError) and exc.filename is None:
-            exc.filename = str(final)  # a failed write (ENOSPC) names no file; say which
+        if isinstance(exc, OSError) and exc.filename in (None, str(tmp)):
+            exc.filename = str(final)  # a failed write (ENOSPC) names no file, or the hidden one; say which
         raise
     fsync_dir(parent)
+
+
+def write_atomically(write, path: PathLike) -> None:
+    """``write(tmp)`` (``tmp`` a str path ending in ``path``'s suffix) inside :func:`atomic_path`: for a writer that
+    takes a path rather than giving one."""
+    with atomic_path(path, keep_suffix=True) as tmp:
+        write(str(tmp))
 
 
 @contextlib.contextmanager

@@ -1,0 +1,58 @@
+"""A pass's sinks fed side by side (scanner_sim/survey/fan_out.py): each takes every chunk, in the pass's order,
+whatever the others do, and a sink's error reaches the pass."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from scanner_sim.survey.fan_out import SinkThreads
+
+
+class Recorder:
+    def __init__(self, delay_s: float = 0.0):
+        self.seen, self.threads, self.delay_s = [], set(), delay_s
+
+    def add(self, chunk) -> None:
+        time.sleep(self.delay_s * (chunk % 3))  # uneven: a sink running ahead of another must not reorder either
+        self.seen.append(chunk)
+        self.threads.add(threading.get_ident())
+
+
+def test_every_sink_takes_every_chunk_in_order_on_its_own_thread():
+    sinks = [Recorder(0.002), Recorder(), Recorder(0.001)]
+    with SinkThreads(sinks) as fan:
+        for chunk in range(40):
+            fan.add(chunk)
+        fan.finish()
+    assert all(s.seen == list(range(40)) for s in sinks)
+    assert all(len(s.threads) == 1 for s in sinks)
+    assert len(set().union(*(s.threads for s in sinks))) == 3
+    assert threading.get_ident() not in set().union(*(s.threads for s in sinks))
+
+
+def test_a_sinks_error_reaches_the_pass():
+    class Broken:
+        def add(self, chunk):
+            if chunk == 3:
+                raise OSError(28, "No space left on device")
+
+    with pytest.raises(OSError, match="No space"), SinkThreads([Recorder(), Broken()]) as fan:
+        for chunk in range(10):
+            fan.add(chunk)
+        fan.finish()
+
+
+def test_a_thread_bound_sink_takes_its_chunks_on_the_callers_thread():
+    """A ROS 2 bag's sqlite3 storage refuses a connection used from another thread than the one that opened it
+    (``sqlite3.ProgrammingError``): such a sink stays on the pass's thread, in order, beside the others."""
+    bound, free = Recorder(), Recorder()
+    bound.thread_bound = True
+    with SinkThreads([bound, free]) as fan:
+        for chunk in range(12):
+            fan.add(chunk)
+        fan.finish()
+    assert bound.seen == free.seen == list(range(12))
+    assert bound.threads == {threading.get_ident()} and free.threads != {threading.get_ident()}
