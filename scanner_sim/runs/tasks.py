@@ -25,8 +25,8 @@ from typing import NamedTuple
 
 from muls.infra.runtime import configure_process
 from scanner_sim.config import SceneConfig
-from scanner_sim.survey.pipeline import kept_slots, pass_chunk, run_pass, stream_to_files
 from scanner_sim.survey.chunk import Chunk
+from scanner_sim.survey.pipeline import kept_slots, pass_chunk, run_pass, stream_to_files
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import Scene, build_scene
 

@@ -32,9 +32,9 @@ from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.render import point_cloud
 from scanner_sim.render.worker import PictureWorker
 from scanner_sim.survey import pictures, provenance, sinks
+from scanner_sim.survey.chunk import Chunk
 from scanner_sim.survey.fan_out import SinkThreads
 from scanner_sim.survey.gis_products import write_gis_products
-from scanner_sim.survey.chunk import Chunk
 from scanner_sim.survey.setup import PassOptions, PassPlan, PassSetup, check_pass_arguments
 from scanner_sim.survey.tpu_calibration import UncertaintySink, single_pass_note
 from scanner_sim.world.scene import Scene
