@@ -5,7 +5,7 @@ line's ``--help`` do not import the kernels behind them."""
 
 from __future__ import annotations
 
-import importlib
+from .infra.lazy_names import lazy_names
 
 #: public name -> the module of this package that defines it.
 _WHERE = {
@@ -19,16 +19,4 @@ _WHERE = {
     "Water": ".water.properties",
 }
 
-__all__ = sorted(_WHERE, key=str.lower)
-
-
-def __getattr__(name: str):
-    if name not in _WHERE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_WHERE[name], __name__), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_names(__name__, _WHERE)

@@ -13,7 +13,7 @@ line's ``--help`` do not import the pipeline, the kernels or the ray tracer behi
 
 from __future__ import annotations
 
-import importlib
+from muls.infra.lazy_names import lazy_names
 
 #: public name -> the module that defines it.
 _WHERE = {
@@ -26,16 +26,4 @@ _WHERE = {
     **dict.fromkeys(("Scene", "build_scene"), "scanner_sim.world.scene"),
 }
 
-__all__ = sorted(_WHERE, key=str.lower)
-
-
-def __getattr__(name: str):
-    if name not in _WHERE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_WHERE[name]), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_names(__name__, _WHERE)

@@ -17,7 +17,7 @@ The public names below load on first use (a module ``__getattr__``): importing o
 ``loading``) does not import pydantic's models of every section, nor the physics presets behind them.
 """
 
-import importlib
+from muls.infra.lazy_names import lazy_names
 
 #: public name -> the module that defines it.
 _WHERE = {
@@ -32,16 +32,4 @@ _WHERE = {
                      "PlatformConfig", "ScannerConfig", "SurveyConfig", "WaterConfig"), "scanner_sim.config.sections"),
 }
 
-__all__ = sorted(_WHERE, key=str.lower)
-
-
-def __getattr__(name: str):
-    if name not in _WHERE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(_WHERE[name]), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_names(__name__, _WHERE)
