@@ -35,6 +35,13 @@ def site(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
+def turbid_passes(tmp_path_factory) -> Path:
+    """One folder for the plans over the turbid harbour at 2 and 3 m, 1 m/s: their sample passes are the same
+    passes (the same fingerprint), so the second plan finds them complete and runs only its own confirmations."""
+    return tmp_path_factory.mktemp("turbid_passes")
+
+
+@pytest.fixture(scope="module")
 def special(site, tmp_path_factory):
     out = tmp_path_factory.mktemp("special")
     return plan_survey(site, "special", ["clean_ocean"], [5.0], [1.0, 2.0], out_dir=out, **SAMPLES), out
@@ -71,12 +78,12 @@ def test_the_chosen_plan_meets_special_order_and_the_next_cheaper_falls_short(sp
 
 
 @pytest.mark.slow
-def test_the_chosen_spacing_follows_the_swath_each_water_measured(site, tmp_path):
+def test_the_chosen_spacing_follows_the_swath_each_water_measured(site, turbid_passes):
     """At 3 m, turbid harbour water narrows the swath that meets Special Order (backscatter masks the far beams) and
     its neighbours' poor far soundings spoil the overlap, where clean ocean water keeps the scan's geometric swath: the
     turbid plan drops to 2 m and a narrower line spacing than the clean one over the same site. Soundings alone
     (no cubes): at 2 m the top of a 1 m cube lies in the lidar's blind zone, which the next test shows."""
-    plan = plan_survey(site, "special", ["clean_ocean", "turbid_harbor"], [2.0, 3.0], [1.0], out_dir=tmp_path,
+    plan = plan_survey(site, "special", ["clean_ocean", "turbid_harbor"], [2.0, 3.0], [1.0], out_dir=turbid_passes,
                        feature_cubes=0, **SAMPLES)
     clean, turbid = plan.waters
     swath = {(p.water, p.altitude_m): p.swath_m(0.95) for p in plan.profiles}
@@ -87,11 +94,11 @@ def test_the_chosen_spacing_follows_the_swath_each_water_measured(site, tmp_path
 
 
 @pytest.mark.slow
-def test_cubes_in_the_blind_zone_make_a_water_not_achievable_and_say_why(site, tmp_path):
+def test_cubes_in_the_blind_zone_make_a_water_not_achievable_and_say_why(site, turbid_passes):
     """At 2 m altitude the top of Special Order's 1 m cube is 1 m from the lidar, inside the blind zone where beam and
     field of view do not yet overlap: the soundings meet the order (previous test) but the cubes are not detected,
     so turbid harbour water, which meets it at 2 m only, is not achievable, and the cause names the blind zone."""
-    plan = plan_survey(site, "special", ["turbid_harbor"], [2.0, 3.0], [1.0], out_dir=tmp_path, **SAMPLES)
+    plan = plan_survey(site, "special", ["turbid_harbor"], [2.0, 3.0], [1.0], out_dir=turbid_passes, **SAMPLES)
     turbid = plan.waters[0]
     assert not turbid.achievable
     assert "feature detection" in turbid.limiting_cause and "blind_zone" in turbid.limiting_cause
