@@ -73,3 +73,30 @@ def chromium() -> str:
             pytest.fail("MULS_REQUIRE_CHROMIUM=1 but no chromium on PATH")
         pytest.skip("no chromium on PATH (CI installs it)")
     return browser
+
+
+# Where the suite's time goes: ``--file-durations N`` adds a table of the N test files whose tests took longest, their
+# setup, call and teardown summed (module fixtures are counted in the setup of their file's first test), beside
+# pytest's own ``--durations`` per test. Under pytest-xdist the reports reach the controller, which sums them.
+_file_seconds: dict[str, float] = {}
+
+
+def pytest_addoption(parser):
+    parser.addoption("--file-durations", type=int, default=0, metavar="N",
+                     help="show the N test files whose tests took longest in all (setup, call and teardown)")
+
+
+def pytest_runtest_logreport(report):
+    path = report.nodeid.split("::", 1)[0]
+    _file_seconds[path] = _file_seconds.get(path, 0.0) + report.duration
+
+
+def pytest_terminal_summary(terminalreporter, config):
+    n = config.getoption("--file-durations")
+    if not n or not _file_seconds or hasattr(config, "workerinput"):  # an xdist worker: its controller reports
+        return
+    ranked = sorted(_file_seconds.items(), key=lambda item: -item[1])
+    terminalreporter.write_sep("=", f"slowest {min(n, len(ranked))} test files (of {len(ranked)}, "
+                                    f"{sum(_file_seconds.values()):.0f} s of tests in all)")
+    for path, seconds in ranked[:n]:
+        terminalreporter.write_line(f"{seconds:9.1f}s {path}")

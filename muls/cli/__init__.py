@@ -3,11 +3,12 @@ multiple-scattering Monte Carlo beside MULS (multiscatter, multiscatter-study, v
 benchmark (mobley1993).
 
 Subcommands are listed in :data:`~muls.cli.registry.SUBCOMMANDS` with the module that builds and runs each
-(:mod:`muls.cli.commands`), imported only for the subcommand being parsed. Each command runs one function of
-:mod:`muls.studies` or :mod:`muls.montecarlo`, prints its result as JSON with ``--json`` (otherwise a short table),
-and, except ``bench``, writes a picture (``--out``, a default name otherwise; ``--no-plot`` skips it). Bad arguments
-give one line on stderr naming the option and what is allowed, and exit code 2. The command-line plumbing it shares
-with ``scanner-sim`` (argument types, one-line errors, exit codes) is in :mod:`muls.infra.command`.
+(:mod:`muls.cli.studies`, :mod:`muls.cli.montecarlo`, :mod:`muls.cli.sensitivity`), imported only for the subcommand
+being parsed. Each command runs one function of :mod:`muls.studies` or :mod:`muls.montecarlo`, prints its result as
+JSON with ``--json`` (otherwise a short table), and, except ``bench``, writes a picture (``--out``, a default name
+otherwise; ``--no-plot`` skips it). Bad arguments give one line on stderr naming the option and what is allowed, and
+exit code 2. The command-line plumbing it shares with ``scanner-sim`` (argument types, one-line errors, exit codes)
+is in :mod:`muls.infra.command`.
 """
 
 from __future__ import annotations

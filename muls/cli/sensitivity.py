@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 
 from ..infra.command import fraction, nonempty, positive_float, positive_int, seed
-from .commands import _common, _water_name, _waters
+from .arguments import _common, _water_name, _waters
 
 DEFAULT_OUT = {"sensitivity": "sensitivity.png", "pond-unknowns": ""}
 FOLDER_OUTPUTS = ()

@@ -115,7 +115,7 @@ def test_help_imports_no_command_module():
 
     code = ("import sys\nfrom muls.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
             "print(sorted(m for m in sys.modules if m.startswith(('muls.montecarlo', 'muls.studies', 'muls.plots', "
-            "'muls.cli.commands', 'matplotlib'))))")
+            "'muls.cli.studies', 'muls.cli.montecarlo', 'muls.cli.sensitivity', 'matplotlib'))))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert "validate-pass" in proc.stdout and "mobley1993" in proc.stdout
     assert proc.stdout.strip().splitlines()[-1] == "[]"

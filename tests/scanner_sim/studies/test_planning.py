@@ -3,27 +3,14 @@
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 import yaml
 
 from muls.infra.errors import ParameterError
 from scanner_sim.config import load_scene
 from scanner_sim.io.tables import read_coverage_grid_npz
-from scanner_sim.studies import planning
-from scanner_sim.studies.planning import (
-    BIN_M,
-    Candidate,
-    Profile,
-    SiteArea,
-    area_cells,
-    judged,
-    plan_config,
-    plan_survey,
-    predicted_share,
-    spacing_ladder,
-    survey_time_s,
-)
+from scanner_sim.studies.planning import plan_survey
+from scanner_sim.studies.planning_confirmation import area_cells, judged, plan_config
 from scanner_sim.survey.pipeline import run_pass
 from scanner_sim.survey.setup import PassOptions
 
@@ -48,47 +35,16 @@ def site(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
+def turbid_passes(tmp_path_factory) -> Path:
+    """One folder for the plans over the turbid harbour at 2 and 3 m, 1 m/s: their sample passes are the same
+    passes (the same fingerprint), so the second plan finds them complete and runs only its own confirmations."""
+    return tmp_path_factory.mktemp("turbid_passes")
+
+
+@pytest.fixture(scope="module")
 def special(site, tmp_path_factory):
     out = tmp_path_factory.mktemp("special")
     return plan_survey(site, "special", ["clean_ocean"], [5.0], [1.0, 2.0], out_dir=out, **SAMPLES), out
-
-
-def flat_profile(width_m: float, reach_m: float) -> Profile:
-    """A line whose soundings comply within width/2 of it and fail beyond, out to reach_m, one sounding a cell."""
-    offsets = (np.arange(int(2 * reach_m / BIN_M)) + 0.5) * BIN_M - reach_m
-    cells = np.full(offsets.size, 10)
-    good = np.where(np.abs(offsets) < 0.5 * width_m, 10, 0)
-    return Profile("w", 1.0, 1.0, offsets, cells, good, cells, {}, np.array([good] * 5), cells.copy())
-
-
-def test_predicted_share_of_a_sharp_swath_is_its_width_over_the_spacing_without_overlap():
-    """Lines that reach no further than their compliant swath W: at a spacing s >= W the compliant share is W / s;
-    at s <= W every cell complies (each cell's soundings come from lines within W/2)."""
-    p = flat_profile(width_m=4.0, reach_m=2.0)
-    assert predicted_share(p, 8.0, 1.0) == pytest.approx(0.5)
-    assert predicted_share(p, 5.0, 1.0) == pytest.approx(0.8)
-    assert predicted_share(p, 4.0, 1.0) == pytest.approx(1.0)
-    # 200 %: at s = W a cell lies within reach of one line only (except exactly between two); at s = W / 2 of two
-    assert predicted_share(p, 4.0, 2.0) < 0.1
-    assert predicted_share(p, 2.0, 2.0) == pytest.approx(1.0)
-
-
-def test_a_far_reaching_poor_edge_spoils_cells_the_near_line_alone_would_make_comply():
-    """The same 4 m swath, but the scan reaches 6 m out with failing soundings: at 4 m spacing every cell also gets
-    the neighbours' failing soundings, so the share drops well below the 100 % of the sharp swath."""
-    sharp, wide = flat_profile(4.0, 2.0), flat_profile(4.0, 6.0)
-    assert predicted_share(sharp, 4.0, 1.0) == pytest.approx(1.0)
-    assert predicted_share(wide, 4.0, 1.0) < 0.6
-
-
-def test_survey_time_and_the_spacing_ladder_by_hand():
-    """24 x 16 m at 8 m spacing: 3 lines of 24 m and 2 legs of 8 m across, 88 m at 2 m/s = 44 s. The ladder spans the
-    width with one line fewer at each step: 16 / (n - 1)."""
-    area = SiteArea((0.0, 0.0), (24.0, 16.0), 90.0)
-    assert survey_time_s(area, 8.0, 2.0) == pytest.approx(44.0)
-    ladder = spacing_ladder(16.0, 4.0)
-    assert ladder.tolist() == pytest.approx([16 / 4, 16 / 3, 16 / 2, 16 / 1])
-    assert [planning.line_count(16.0, s) for s in ladder] == [5, 4, 3, 2]
 
 
 @pytest.mark.slow
@@ -122,12 +78,12 @@ def test_the_chosen_plan_meets_special_order_and_the_next_cheaper_falls_short(sp
 
 
 @pytest.mark.slow
-def test_the_chosen_spacing_follows_the_swath_each_water_measured(site, tmp_path):
+def test_the_chosen_spacing_follows_the_swath_each_water_measured(site, turbid_passes):
     """At 3 m, turbid harbour water narrows the swath that meets Special Order (backscatter masks the far beams) and
     its neighbours' poor far soundings spoil the overlap, where clean ocean water keeps the scan's geometric swath: the
     turbid plan drops to 2 m and a narrower line spacing than the clean one over the same site. Soundings alone
     (no cubes): at 2 m the top of a 1 m cube lies in the lidar's blind zone, which the next test shows."""
-    plan = plan_survey(site, "special", ["clean_ocean", "turbid_harbor"], [2.0, 3.0], [1.0], out_dir=tmp_path,
+    plan = plan_survey(site, "special", ["clean_ocean", "turbid_harbor"], [2.0, 3.0], [1.0], out_dir=turbid_passes,
                        feature_cubes=0, **SAMPLES)
     clean, turbid = plan.waters
     swath = {(p.water, p.altitude_m): p.swath_m(0.95) for p in plan.profiles}
@@ -138,11 +94,11 @@ def test_the_chosen_spacing_follows_the_swath_each_water_measured(site, tmp_path
 
 
 @pytest.mark.slow
-def test_cubes_in_the_blind_zone_make_a_water_not_achievable_and_say_why(site, tmp_path):
+def test_cubes_in_the_blind_zone_make_a_water_not_achievable_and_say_why(site, turbid_passes):
     """At 2 m altitude the top of Special Order's 1 m cube is 1 m from the lidar, inside the blind zone where beam and
     field of view do not yet overlap: the soundings meet the order (previous test) but the cubes are not detected,
     so turbid harbour water, which meets it at 2 m only, is not achievable, and the cause names the blind zone."""
-    plan = plan_survey(site, "special", ["turbid_harbor"], [2.0, 3.0], [1.0], out_dir=tmp_path, **SAMPLES)
+    plan = plan_survey(site, "special", ["turbid_harbor"], [2.0, 3.0], [1.0], out_dir=turbid_passes, **SAMPLES)
     turbid = plan.waters[0]
     assert not turbid.achievable
     assert "feature detection" in turbid.limiting_cause and "blind_zone" in turbid.limiting_cause
@@ -173,16 +129,3 @@ def test_cached_scene_over_a_raster_is_not_reused_for_another_plan():
     window = cached_scene(line).heightfield.extent_m
     assert window != whole_extent
     assert cached_scene(site).heightfield.extent_m == whole_extent
-
-
-def test_a_large_site_is_confirmed_over_a_centred_sample_that_fits_the_pulse_budget():
-    """72 x 52 m at 52/7 m spacing (8 lines), 2 m/s, 1,260 pulses/s: the whole plan is 314 s, 395,640 pulses. Under a
-    100,000-pulse budget the lines are cut to 20 m (not shorter), still (8 x 20 + 7 x 7.43) / 2 x 1,260 = 133,560
-    pulses; 6 lines fit ((6 x 20 + 5 x 7.43) / 2 x 1,260 = 99,000), so the sample is 20 x 37.1 m."""
-    area = SiteArea((0.0, 0.0), (72.0, 52.0), 90.0)
-    plan = Candidate(4.0, 2.0, 52 / 7, 7.0, 0.95, survey_time_s(area, 52 / 7, 2.0), 8 * 72.0, 8)
-    assert plan.survey_time_s * 1260 == pytest.approx(395_640)
-    assert planning.confirm_area(area, plan, 1260.0, 400_000) == area
-    sample = planning.confirm_area(area, plan, 1260.0, 100_000)
-    assert sample.size_m == pytest.approx((20.0, 5 * 52 / 7))
-    assert survey_time_s(sample, plan.spacing_m, 2.0) * 1260 <= 100_000
