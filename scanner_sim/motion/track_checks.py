@@ -129,8 +129,6 @@ def check_track(config, scene, trajectory: Trajectory) -> None:
 
 def _check_objects(config, scene, xyz: np.ndarray) -> None:
     """Refuse a track that passes through a closed mesh: an object's, or a rock's."""
-    import trimesh
-
     if scene is None:
         return
     first_object = len(scene.objects) - len(config.objects)  # the seabed and its rocks come first
@@ -143,6 +141,8 @@ def _check_objects(config, scene, xyz: np.ndarray) -> None:
         near = xyz[((xyz >= lo) & (xyz <= hi)).all(axis=1)]
         if not len(near):
             continue
+        import trimesh  # here: a track that comes near no object (most) never pays its import, about a second
+
         used, local = np.unique(faces, return_inverse=True)
         mesh = trimesh.Trimesh(scene.vertices[used] - scene.local_origin, local.reshape(-1, 3), process=False)
         if not mesh.is_watertight:  # an open surface (a panel) has no inside

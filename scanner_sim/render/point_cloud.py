@@ -159,11 +159,88 @@ def render_point_cloud(
         title=title, color_by=color_by, scalars=scalars, class_names=class_names, window_size=window_size,
         point_size=point_size, max_points=max_points,
     )
+    _screenshot_png(plotter, path_png)
+
+
+def _screenshot_png(plotter, path_png) -> None:
+    """Render ``plotter`` once, close it and write the picture to ``path_png``."""
     try:
         img = plotter.screenshot(return_img=True)
     finally:
         plotter.close()
     _write_png(path_png, np.ascontiguousarray(img[..., :3]))
+
+
+class PointCloudStage:
+    """The part of a point-cloud picture known before its points: an off-screen or on-screen ``pv.Plotter`` of
+    ``window_size`` (width, height) [px] with its background, and the truth mesh (``truth_vertices`` (n, 3) [m],
+    ``truth_faces`` (m, 3), or both None) added light grey at opacity 0.25, its points shifted to the picture's
+    centre once the points give it (:meth:`add_truth`). Built ahead, it leaves a picture's end only its points and its
+    render; :func:`render_prepared_point_cloud` draws on one."""
+
+    def __init__(self, truth_vertices, truth_faces, *, off_screen: bool, window_size: Sequence[int]):
+        if (truth_vertices is None) != (truth_faces is None):
+            raise ValueError("truth_vertices and truth_faces: give both or neither")
+        if len(window_size) != 2 or min(window_size) < 16:
+            raise ValueError(f"window_size: {window_size!r} is not allowed; expected (width, height) >= 16 pixels")
+        check_window_size("window_size", window_size)
+        if off_screen:
+            _prefer_headless_vtk()
+        import pyvista as pv
+
+        self.window_size = (int(window_size[0]), int(window_size[1]))
+        self.truth_vertices, self.truth = None, None
+        self.plotter = pv.Plotter(off_screen=off_screen, window_size=list(self.window_size))
+        try:
+            self.plotter.set_background(_BACKGROUND)
+            if truth_vertices is not None:
+                tv = np.asarray(truth_vertices, dtype=np.float64)
+                tf = np.asarray(truth_faces, dtype=np.int64)
+                if tv.ndim != 2 or tv.shape[1] != 3 or tf.ndim != 2 or tf.shape[1] != 3:
+                    raise ValueError(
+                        f"truth_vertices {tv.shape} / truth_faces {tf.shape}: expected (n_vertices, 3) and (n_faces, 3)"
+                    )
+                self.truth_vertices = tv
+                if len(tf):
+                    cells = np.column_stack([np.full(len(tf), 3, dtype=np.int64), tf]).ravel()
+                    self.truth = pv.PolyData(tv, cells)
+                    self.plotter.add_mesh(self.truth, color="lightgrey", opacity=0.25, smooth_shading=False,
+                                          show_edges=False)
+        except BaseException:
+            self.plotter.close()
+            raise
+
+    def add_truth(self, centre: np.ndarray) -> None:
+        """Shift the truth mesh's points by ``-centre`` (3,) [m]: VTK then gets coordinates near 0."""
+        if self.truth is not None:
+            self.truth.points = self.truth_vertices - centre
+
+
+#: The stage :func:`prepare_point_cloud` built in this process, for the next :func:`render_prepared_point_cloud`.
+_prepared: list[PointCloudStage] = []
+
+
+def prepare_point_cloud(truth_vertices=None, truth_faces=None, *, window_size: Sequence[int] = (1600, 1000)) -> None:
+    """Build, in this process, the :class:`PointCloudStage` (off-screen) of the next
+    :func:`render_prepared_point_cloud`: what a picture process does while the pass runs."""
+    while _prepared:
+        _prepared.pop().plotter.close()
+    _prepared.append(PointCloudStage(truth_vertices, truth_faces, off_screen=True, window_size=window_size))
+
+
+def render_prepared_point_cloud(path_png, xyz, classification=None, **options) -> None:
+    """:func:`render_point_cloud` on the stage :func:`prepare_point_cloud` built (its truth mesh and window size);
+    ``options``: the other keywords of :func:`render_point_cloud`. The same picture, to the byte."""
+    if not _prepared:
+        raise RuntimeError("render_prepared_point_cloud: no stage prepared in this process (prepare_point_cloud)")
+    stage = _prepared.pop()
+    try:
+        plotter = _point_cloud_plotter(xyz, classification, off_screen=True, truth_vertices=stage.truth_vertices,
+                                       truth_faces=None, window_size=stage.window_size, stage=stage, **options)
+    except BaseException:
+        stage.plotter.close()
+        raise
+    _screenshot_png(plotter, path_png)
 
 
 def show_point_cloud(
@@ -200,20 +277,22 @@ def _point_cloud_plotter(
     xyz,
     classification,
     *,
-    normals=None,
     off_screen: bool,
     truth_vertices,
     truth_faces,
-    title: str | None,
-    color_by: str,
-    scalars,
-    class_names: Mapping[int, str] | None,
+    title: str | None = None,
+    color_by: str = "class",
+    scalars=None,
+    class_names: Mapping[int, str] | None = None,
     window_size: Sequence[int],
-    point_size: float,
-    max_points: int,
+    point_size: float = 3.0,
+    max_points: int = 2_000_000,
+    normals=None,
+    stage: PointCloudStage | None = None,
 ):
     """A ``pv.Plotter`` holding the points, their colouring and legend or scalar bar, the truth mesh,
-    the title and the camera (parameters as :func:`render_point_cloud`). The caller closes it.
+    the title and the camera (parameters as :func:`render_point_cloud`), on ``stage`` when one was built ahead
+    (its plotter and truth mesh; ``truth_vertices`` then only frames an empty cloud). The caller closes it.
     """
     pts = np.asarray(xyz, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -240,18 +319,10 @@ def _point_cloud_plotter(
         name = "scalars"
     if values.shape != (n,):
         raise ValueError(f"{name}: shape {values.shape} is not allowed; expected ({n},)")
-    if (truth_vertices is None) != (truth_faces is None):
-        raise ValueError("truth_vertices and truth_faces: give both or neither")
-    if len(window_size) != 2 or min(window_size) < 16:
-        raise ValueError(f"window_size: {window_size!r} is not allowed; expected (width, height) >= 16 pixels")
-    check_window_size("window_size", window_size)
     if max_points < 1:
         raise ValueError(f"max_points: {max_points!r} is not allowed; expected >= 1")
     if not point_size > 0:
         raise ValueError(f"point_size: {point_size!r} is not allowed; expected > 0 pixels")
-
-    if off_screen:
-        _prefer_headless_vtk()
     import pyvista as pv
 
     if n > max_points:
@@ -271,20 +342,11 @@ def _point_cloud_plotter(
     centre = (lo + hi) / 2.0
     half = np.maximum((hi - lo) / 2.0, 0.5)
 
-    plotter = pv.Plotter(off_screen=off_screen, window_size=[int(window_size[0]), int(window_size[1])])
+    if stage is None:
+        stage = PointCloudStage(truth_vertices, truth_faces, off_screen=off_screen, window_size=window_size)
+    plotter = stage.plotter
     try:
-        plotter.set_background(_BACKGROUND)
-        if truth_vertices is not None:
-            tv = np.asarray(truth_vertices, dtype=np.float64) - centre
-            tf = np.asarray(truth_faces, dtype=np.int64)
-            if tv.ndim != 2 or tv.shape[1] != 3 or tf.ndim != 2 or tf.shape[1] != 3:
-                raise ValueError(
-                    f"truth_vertices {tv.shape} / truth_faces {tf.shape}: expected (n_vertices, 3) and (n_faces, 3)"
-                )
-            if len(tf):
-                cells = np.column_stack([np.full(len(tf), 3, dtype=np.int64), tf]).ravel()
-                plotter.add_mesh(pv.PolyData(tv, cells), color="lightgrey", opacity=0.25,
-                                 smooth_shading=False, show_edges=False)
+        stage.add_truth(centre)
         if len(pts):
             cloud = pv.PolyData(pts - centre)
             if color_by in ("class", "channel", "height"):  # categories: one colour each, named in a legend

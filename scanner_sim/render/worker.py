@@ -3,7 +3,9 @@
 A warm ``scanner-sim run`` of cable_survey spent about 3 s of its wall time after the pass on its three pictures, a
 second of it importing pyvista, VTK and matplotlib. The worker is started before the pass's set-up, whose Python
 runs on one core and leaves the other free: the child imports the drawing libraries and opens VTK's off-screen
-render window there, and the pictures are drawn in it at the pass's end while the parent writes the other files.
+render window there; while the pass runs it builds render.png's plotter and truth mesh
+(:func:`~scanner_sim.render.point_cloud.prepare_point_cloud`), and the pictures are drawn in it at the pass's end while
+the parent writes the other files.
 The child is spawned (not forked: the parent holds OpenMP and Embree threads), so it imports only what drawing
 needs. A picture's drawing function and its arguments are what the parent would have called: the PNGs are the same.
 """

@@ -12,7 +12,7 @@ import numpy as np
 from scanner_sim.metrics.coverage import BACKGROUND_KINDS, GAP_CAUSES, CoverageAccumulator
 from scanner_sim.metrics.s44 import ORDER_NAMES
 from scanner_sim.render.coverage_map import plot_coverage_map
-from scanner_sim.render.point_cloud import render_point_cloud
+from scanner_sim.render.point_cloud import prepare_point_cloud, render_point_cloud, render_prepared_point_cloud
 from scanner_sim.render.s44_map import plot_order_map
 
 
@@ -56,16 +56,28 @@ class CloudSample:
         return np.concatenate(self._classes) if self._classes else np.zeros(0, np.uint8)
 
 
-def render_points(path: Path, sample: CloudSample, scene, facts, window_size=(1600, 1000), draw=draw_here) -> None:
+def prepare_render(scene, window_size, draw) -> None:
+    """Build render.png's plotter and the truth mesh of ``scene`` ahead, in the process ``draw`` draws in (while
+    the pass runs), for :func:`render_points` with ``prepared``."""
+    draw(prepare_point_cloud, scene.vertices, scene.faces, window_size=window_size)
+
+
+def render_points(path: Path, sample: CloudSample, scene, facts, window_size=(1600, 1000), draw=draw_here,
+                  prepared: bool = False) -> None:
     """render.png: the sampled points over the faded truth mesh of ``scene``; over a seabed, its points coloured by
     height and hill-shaded by the seabed's normals under them, with a colour bar and a scale bar, the other classes'
     points in their class colours; without one, every point by class. ``facts``: the pass's
-    :class:`~scanner_sim.survey.sinks.PassFacts`."""
+    :class:`~scanner_sim.survey.sinks.PassFacts`; ``prepared``: :func:`prepare_render` built the plotter and mesh
+    in the drawing process (``window_size`` was given there)."""
     xyz = sample.xyz
     shading = ({"color_by": "height", "normals": seabed_normals(scene.heightfield, xyz[:, 0], xyz[:, 1])}
                if scene.heightfield is not None else {})
-    draw(render_point_cloud, path, xyz, sample.classification, truth_vertices=scene.vertices, truth_faces=scene.faces,
-         title=f"{facts.label}: {len(xyz):,} points ({facts.fidelity})", window_size=window_size, **shading)
+    title = f"{facts.label}: {len(xyz):,} points ({facts.fidelity})"
+    if prepared:
+        draw(render_prepared_point_cloud, path, xyz, sample.classification, title=title, **shading)
+    else:
+        draw(render_point_cloud, path, xyz, sample.classification, truth_vertices=scene.vertices,
+             truth_faces=scene.faces, title=title, window_size=window_size, **shading)
 
 
 def seabed_normals(heightfield, x_m, y_m) -> np.ndarray:

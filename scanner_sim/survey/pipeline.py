@@ -302,6 +302,8 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     facts, files, output = pass_facts(setup, options), setup.plan.files, setup.config.output
     render = "render.png" in files
     draw = pictures.draw_here if worker is None else worker.draw
+    if render and worker is not None:  # the child builds the plotter and the mesh while the pass runs
+        pictures.prepare_render(setup.scene, options.render_size, draw)
     with ExitStack() as stack:
         clouds = [stack.enter_context(sink) for sink in
                   sinks.point_cloud_sinks(output, out, setup.scene.local_origin, facts.metadata(), setup.scene.crs)]
@@ -312,7 +314,8 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
         stats, coverage, wall_s = stream_pass(setup, chunks, [*clouds, dropouts, waveforms, uncertainty]
                                               + ([sample] if render else []), options)
         if render:  # first: drawn beside the point clouds' closing and the files below
-            pictures.render_points(out / "render.png", sample, setup.scene, facts, options.render_size, draw)
+            pictures.render_points(out / "render.png", sample, setup.scene, facts, options.render_size, draw,
+                                   prepared=worker is not None)
     summary = sinks.pass_summary(facts, stats, stats.points, dropouts.counts_by_cause(), wall_s + earlier_wall_s,
                                  setup_s, compile_s)
     summary["uncertainty"] = uncertainty_figures(setup, uncertainty, stats.pulses)

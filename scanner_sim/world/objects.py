@@ -20,6 +20,7 @@ from scanner_sim.config import (
     MooredMineObject,
     PanelObject,
 )
+from scanner_sim.world.icosphere import icosphere
 from scanner_sim.world.mesh_file import load_mesh_file
 from scanner_sim.world.terrain import HeightField
 
@@ -185,14 +186,12 @@ def _moored_mine(obj: MooredMineObject, index: int, hf: HeightField | None) -> O
     """A sphere on a tether standing on the ground."""
     ground = _ground_z(obj.position_m, hf)
     x, y = obj.position_m[:2]
-    import trimesh  # here only: importing it takes about a second that other scenes need not pay
-
-    sphere = trimesh.creation.icosphere(subdivisions=3, radius=obj.radius_m)
-    sv = sphere.vertices + [x, y, ground + obj.height_m]
+    sphere_vertices, sphere_faces = icosphere(subdivisions=3, radius_m=obj.radius_m)
+    sv = sphere_vertices + [x, y, ground + obj.height_m]
     tv, tf = frustum(0.5 * obj.tether_diameter_m, 0.5 * obj.tether_diameter_m,
                      obj.height_m - obj.radius_m + 0.05, sections=8)
     tv = tv + [x, y, ground - 0.05]
-    return ObjectMesh(np.vstack([sv, tv]), np.vstack([sphere.faces, tf + len(sv)]))
+    return ObjectMesh(np.vstack([sv, tv]), np.vstack([sphere_faces, tf + len(sv)]))
 
 
 def _cylinder_mine(obj: CylinderMineObject, index: int, hf: HeightField | None) -> ObjectMesh:

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scanner_sim.world.icosphere import icosphere
+
 
 @dataclass(frozen=True)
 class HeightField:
@@ -134,18 +136,16 @@ def rock_meshes(heightfield: HeightField, count: int, radius_range_m: tuple[floa
     Each rock is an icosphere with radii drawn in ``radius_range_m`` [m], flattened vertically, its radius
     perturbed by 15 % smooth noise, and sunk by 40 % of its height. Returns a list of (vertices, faces).
     """
-    import trimesh
-
     if count == 0:
         return []
-    base = trimesh.creation.icosphere(subdivisions=subdivisions)
+    base_vertices, base_faces = icosphere(subdivisions)
     x_min, x_max, y_min, y_max = area if area is not None else heightfield.extent_m
     rocks = []
     for _ in range(count):  # a few dozen rocks at scene build time, not a hot path
         r = rng.uniform(*radius_range_m)
         scale = r * np.array([rng.uniform(0.8, 1.2), rng.uniform(0.8, 1.2), rng.uniform(0.45, 0.8)])
         bumps = rng.standard_normal(3)
-        v = base.vertices
+        v = base_vertices
         perturb = 1.0 + 0.15 * np.tanh(v @ bumps)
         verts = v * perturb[:, None] * scale
         yaw = rng.uniform(0.0, 2.0 * math.pi)
@@ -153,7 +153,7 @@ def rock_meshes(heightfield: HeightField, count: int, radius_range_m: tuple[floa
         verts = verts @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
         x, y = rng.uniform(x_min, x_max), rng.uniform(y_min, y_max)
         z = float(heightfield.height(x, y)) + 0.2 * scale[2]  # 40 % of the rock's height 2 r_z below the bed
-        rocks.append((verts + np.array([x, y, z]), base.faces.copy()))
+        rocks.append((verts + np.array([x, y, z]), base_faces.copy()))
     return rocks
 
 

@@ -114,3 +114,18 @@ def test_importing_scanner_sim_does_not_import_plotting_libraries():
         "assert not bad, bad\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_prepared_render_is_the_same_picture(tmp_path):
+    """The stage built before the points (plotter, truth mesh added at its own coordinates, shifted once the points
+    give the centre) draws the PNG of the one-call render byte for byte, height colouring and title included."""
+    xyz, cls, verts, faces = _scene(seed=2)
+    normals = np.tile([0.0, 0.0, 1.0], (len(xyz), 1))
+    options = {"title": "cable_survey: 7 points", "color_by": "height", "normals": normals}
+    point_cloud.render_point_cloud(tmp_path / "one.png", xyz, cls, truth_vertices=verts, truth_faces=faces,
+                                   window_size=(800, 500), **options)
+    point_cloud.prepare_point_cloud(verts, faces, window_size=(800, 500))
+    point_cloud.render_prepared_point_cloud(tmp_path / "prepared.png", xyz, cls, **options)
+    assert (tmp_path / "one.png").read_bytes() == (tmp_path / "prepared.png").read_bytes()
+    with pytest.raises(RuntimeError, match="no stage prepared"):
+        point_cloud.render_prepared_point_cloud(tmp_path / "again.png", xyz, cls, **options)
