@@ -1,4 +1,4 @@
-"""What the tests share: the repository's root, the two command lines run in process, and the waters and models
+"""What the tests share: the repository's root, the command lines run in process, a small scene in UTM coordinates, the waters and models
 of the muls detection tests, the Chromium of the browser tests. Test files import these by name
 (``from conftest import run_cli``).
 
@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 #: The repository's root.
 ROOT = Path(__file__).resolve().parent.parent
@@ -100,3 +101,19 @@ def pytest_terminal_summary(terminalreporter, config):
                                     f"{sum(_file_seconds.values()):.0f} s of tests in all)")
     for path, seconds in ranked[:n]:
         terminalreporter.write_line(f"{seconds:9.1f}s {path}")
+
+
+#: A small seabed scene placed in UTM zone 31N (eastings near 500 km, northings near 5,700 km).
+UTM_CENTRE = (500_000.0, 5_700_000.0)
+
+
+def utm_scene_data(crs="EPSG:32631") -> dict:
+    """The shipped seabed_lawnmower scene, made small and moved into UTM range, with ``crs``."""
+    data = yaml.safe_load((ROOT / "scenes" / "seabed_lawnmower.yaml").read_text())
+    data["seabed"].update(center_m=list(UTM_CENTRE), size_m=[24, 16], resolution_m=0.2)
+    data["seabed"]["rocks"]["count"] = 3
+    data["platform"]["lawnmower"].update(center_m=list(UTM_CENTRE), size_m=[12, 8], line_spacing_m=4)
+    data["output"] = {"laz": False, "las": True}
+    if crs is not None:
+        data["crs"] = crs
+    return data

@@ -5,25 +5,11 @@ import json
 
 import pytest
 import yaml
+from conftest import utm_scene_data
 
 from scanner_sim.cli import main
-from scanner_sim.config import SCENES_DIR, ConfigError, parse_scene
+from scanner_sim.config import ConfigError, parse_scene
 from scanner_sim.world.scene import build_scene
-
-#: A small seabed scene placed in UTM zone 31N (eastings near 500 km, northings near 5,700 km).
-UTM_CENTRE = (500_000.0, 5_700_000.0)
-
-
-def utm_scene_data(crs="EPSG:32631") -> dict:
-    """The shipped seabed_lawnmower scene, made small and moved into UTM range, with ``crs``."""
-    data = yaml.safe_load((SCENES_DIR / "seabed_lawnmower.yaml").read_text())
-    data["seabed"].update(center_m=list(UTM_CENTRE), size_m=[24, 16], resolution_m=0.2)
-    data["seabed"]["rocks"]["count"] = 3
-    data["platform"]["lawnmower"].update(center_m=list(UTM_CENTRE), size_m=[12, 8], line_spacing_m=4)
-    data["output"] = {"laz": False, "las": True}
-    if crs is not None:
-        data["crs"] = crs
-    return data
 
 
 def _error(crs) -> str:

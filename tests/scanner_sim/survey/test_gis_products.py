@@ -8,7 +8,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from test_scene_crs import UTM_CENTRE, utm_scene_data
+from conftest import UTM_CENTRE, utm_scene_data
 
 from scanner_sim.config import parse_scene
 from scanner_sim.io import read_coverage_grid_npz, read_las, read_trajectory_csv
