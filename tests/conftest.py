@@ -1,5 +1,5 @@
-"""What the tests share: the repository's root, the command lines run in process, a small scene in UTM coordinates, the waters and models
-of the muls detection tests, the Chromium of the browser tests. Test files import these by name
+"""What the tests share: the repository's root, the command lines run in process, a small scene in UTM coordinates,
+the waters and models of the muls detection tests, the Chromium of the browser tests. Test files import these by name
 (``from conftest import run_cli``).
 
 Where a test file goes: tests/muls/<stage>/ or tests/scanner_sim/<stage>/ for the module it tests, named
