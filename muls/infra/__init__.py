@@ -3,6 +3,6 @@
 Takes nothing from the other stages. Gives the process's runtime set-up and the compiled-kernel decorator
 (:mod:`.runtime`), the error hierarchy and value checks (:mod:`.errors`), the memory a command may plan on
 (:mod:`.memory`), the command-line plumbing both command lines share (:mod:`.command`), table lookups
-(:mod:`.lookup`), the first-order recursive filter (:mod:`.filters`) and counter-based random numbers keyed by
-(seed, pulse, stream, sample) (:mod:`.noise`).
+(:mod:`.lookup`), a batch's kernels in blocks on threads (:mod:`.blocks`), the first-order recursive filter
+(:mod:`.filters`) and counter-based random numbers keyed by (seed, pulse, stream, sample) (:mod:`.noise`).
 """
