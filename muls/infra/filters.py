@@ -15,7 +15,7 @@ from .runtime import kernel
 @kernel(nogil=True)
 def _filter_columns(x, r, b0, b1):
     n, m = x.shape
-    y = np.empty((n, m), np.float64)
+    y = np.empty((n, m))
     for j in range(m):
         state = 0.0  # lfilter's state: b1 x[n-1] + r y[n-1]
         for i in range(n):

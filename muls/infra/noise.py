@@ -153,7 +153,7 @@ def _upper_bounds():
     """(4096,) the normal of each cell's last value, plus 1e-6: more than the inverse CDF's approximation can wiggle
     (its relative error is 1.2e-9, |x| < 6.34), so each value bounds every normal of its cell from above."""
     cells = 1 << (32 - int(UPPER_BOUND_SHIFT))
-    out = np.empty(cells, np.float64)
+    out = np.empty(cells)
     for i in range(cells):
         out[i] = normal_of_bits(np.uint64((i + 1) << int(UPPER_BOUND_SHIFT)) - np.uint64(1)) + 1e-6
     return out
@@ -229,7 +229,7 @@ def fill_normals_of(hashes, half, at, out, tails):
 
 @kernel
 def _normals(key, pulse_id, stream, index):
-    out = np.empty(index.shape[0], np.float64)
+    out = np.empty(index.shape[0])
     for i in range(index.shape[0]):
         out[i] = normal_at(stream_base(key, pulse_id[i], stream), index[i])
     return out

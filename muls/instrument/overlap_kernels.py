@@ -39,8 +39,8 @@ def finite_aperture_overlap(z, r0_beam, tan_beam, r_ap, tan_fov, d, nodes, weigh
     """The finite-aperture overlap at ranges ``z`` (n,) [m]: the aperture share averaged over the spot, as an
     integral over the distance s from the receiver axis (Gauss-Legendre ``nodes``, ``weights`` on [-1, 1], on each
     piece between the integrand's kinks)."""
-    out = np.zeros(z.shape[0], np.float64)
-    breaks = np.empty(6, np.float64)
+    out = np.zeros(z.shape[0])
+    breaks = np.empty(6)
     for i in range(z.shape[0]):
         if z[i] <= 0.0:
             continue

@@ -49,8 +49,7 @@ def _spread_moments(direct, nodes):
     delay [s^2], and the cross and squared terms of the interval's change, so that a linear interpolation's mean
     and mean square are :func:`_spread_row`'s closed forms (node delays are linear in range between rows)."""
     k, q = nodes.shape
-    mean, square = np.zeros(k, np.float64), np.zeros(k, np.float64)
-    cross, change2 = np.zeros(k, np.float64), np.zeros(k, np.float64)
+    mean, square, cross, change2 = np.zeros(k), np.zeros(k), np.zeros(k), np.zeros(k)
     for i in range(k):
         j = min(i + 1, k - 1)
         for n in range(q):
@@ -67,7 +66,7 @@ def _spread_brackets(range_m, ranges):
     """(lower row (n,), weight of the upper row (n,)) of each range [m] among ``ranges`` (ascending), held outside
     them as ``np.interp`` holds its ends."""
     k = ranges.shape[0]
-    lower, weight = np.zeros(range_m.shape[0], np.int64), np.zeros(range_m.shape[0], np.float64)
+    lower, weight = np.zeros(range_m.shape[0], np.int64), np.zeros(range_m.shape[0])
     for i in range(range_m.shape[0]):
         r = range_m[i]
         if k == 1 or r <= ranges[0]:
@@ -118,7 +117,7 @@ def _spread_fill(lower, weight, delay, energy, offsets, direct, nodes, moments):
     (return index (m,), delay (m,) [s], energy (m,) [J]) at ``offsets`` (:func:`_spread_counts`' sums)."""
     q = nodes.shape[1]
     m = offsets[-1]
-    index, out_delay, out_energy = np.empty(m, np.int64), np.empty(m, np.float64), np.empty(m, np.float64)
+    index, out_delay, out_energy = np.empty(m, np.int64), np.empty(m), np.empty(m)
     for i in range(lower.shape[0]):
         lo, w = lower[i], weight[i]
         share, mean_delay, variance = _spread_row(lo, w, direct, moments)

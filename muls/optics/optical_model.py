@@ -321,7 +321,7 @@ def _sort_by_delay_within(offsets, delay, energy, source):
     for p in range(offsets.shape[0] - 1):
         most = max(most, offsets[p + 1] - offsets[p])
     bucket, starts = np.empty(most, np.int64), np.empty(most + 1, np.int64)
-    moved_d, moved_e, moved_s = np.empty(most, np.float64), np.empty(most, np.float64), np.empty(most, np.int64)
+    moved_d, moved_e, moved_s = np.empty(most), np.empty(most), np.empty(most, np.int64)
     for p in range(offsets.shape[0] - 1):
         lo, hi = offsets[p], offsets[p + 1]
         n = hi - lo
@@ -417,7 +417,7 @@ def column_value(t, cut_tau, col):
 
 @kernel(nogil=True)
 def _column_many(t, cut_tau, col):
-    out = np.empty(t.shape[0], np.float64)
+    out = np.empty(t.shape[0])
     for i in range(t.shape[0]):
         out[i] = column_value(t[i], cut_tau[i], col)
     return out

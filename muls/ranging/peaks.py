@@ -176,7 +176,7 @@ def _refine(y0, y1, y2, fit, table):
 def _reference_peaks(reference, dark_mean, fit, table):
     """Sub-sample index of the CH0 peak of each pulse."""
     n_pulses, n_ref = reference.shape
-    out = np.empty(n_pulses, np.float64)
+    out = np.empty(n_pulses)
     for p in range(n_pulses):
         best = 1
         for k in range(1, n_ref - 1):
@@ -199,9 +199,9 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
     basis = col.basis
     k_sigma, tail_tolerance, max_code = settings.k_sigma, settings.tail_tolerance, settings.max_code
     out_c, out_idx, out_amp, out_snr, out_sat, counts = out
-    times, base_w = np.empty(n_samples, np.float64), np.empty(n_samples, np.float64)
-    resid, sigma = np.empty(n_samples, np.float64), np.empty(n_samples, np.float64)
-    echoes = np.empty(n_samples, np.float64)  # model of the echoes found so far (known pulse shape)
+    times, base_w = np.empty(n_samples), np.empty(n_samples)
+    resid, sigma = np.empty(n_samples), np.empty(n_samples)
+    echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
     open_, blind = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_)
     seg_first, seg_end = np.empty(n_samples // 2 + 1, np.int64), np.empty(n_samples // 2 + 1, np.int64)
     for w in range(n_windows):

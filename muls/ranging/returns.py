@@ -195,14 +195,14 @@ def _span_terms(first, count, phase, sampling, pulses, col, cuts, echoes, extent
     n = pulses.shape[0]
     n_chan = top_w.shape[0]
     t0, dt = sampling
-    t_peak, echo_peak = np.full(n, np.nan), np.zeros(n, np.float64)
-    column_peak, base_peak = np.zeros(n, np.float64), np.zeros(n, np.float64)
+    t_peak, echo_peak = np.full(n, np.nan), np.zeros(n)
+    column_peak, base_peak = np.zeros(n), np.zeros(n)
     clipped = np.zeros((n, n_chan), np.bool_)
     basis = col.basis
     most = 0  # a loop, not count.max(): numpy's max costs a second of compiling
     for i in range(n):
         most = max(most, count[i])
-    times, echo = np.empty(most, np.float64), np.empty(most, np.float64)
+    times, echo = np.empty(most), np.empty(most)
     for i in range(n):
         p = pulses[i]
         last = count[i]

@@ -97,7 +97,7 @@ def sampling_phase_s(key: np.uint64, pulse_id: np.ndarray, sample_interval_s: fl
 
 @kernel(nogil=True)
 def _phases(key, pulse_id):
-    out = np.empty(pulse_id.shape[0], np.float64)
+    out = np.empty(pulse_id.shape[0])
     for i in range(pulse_id.shape[0]):
         out[i] = uniform_at(stream_base(key, pulse_id[i], PHASE_STREAM), 0)
     return out
@@ -224,9 +224,8 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
     bound = noise_scale * dark_std * NORMAL_BOUND + 0.5
-    normal, no_low, levels = np.empty(n_ref, np.float64), np.empty(0, np.float64), np.empty(n_ref, np.float64)
-    tails = np.empty(n_ref, np.uint64)
-    times = np.empty(n_ref, np.float64)
+    normal, no_low, tails, levels = np.empty(n_ref), np.empty(0), np.empty(n_ref, np.uint64), np.empty(n_ref)
+    times = np.empty(n_ref)
     for p in range(n_pulses):
         # the filtered pulse (MULS Eq. 2) from emission, at each sample's own time
         sample_times(times, 0, n_ref, sampling.t0_s, sampling.dt_s, 0, sampling.phase_s[p])
@@ -295,15 +294,13 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
     cut_tau, cut_w = cuts.cut_tau_s, cuts.cut_weight
     ra, rb = math.exp(-basis[0] * dt), math.exp(-basis[1] * dt)
     max_code, noise_scale = settings.max_code, settings.noise_scale
-    dark_normal = np.empty((2 * n_pairs, n_samples), np.float64)
-    shot_normal = np.empty((2 * n_shot_pairs, n_samples), np.float64)
-    tails, no_low = np.empty(n_samples, np.uint64), np.empty(0, np.float64)
+    dark_normal = np.empty((2 * n_pairs, n_samples))
+    shot_normal = np.empty((2 * n_shot_pairs, n_samples))
+    tails, no_low = np.empty(n_samples, np.uint64), np.empty(0)
     shot_needed = np.empty(n_detectors, np.bool_)
     deciding_scratch = np.empty((3, n_chan), np.bool_)
-    n_cuts = cut_tau.shape[1]
-    cut_t, cut_s, ahead = np.empty(n_cuts, np.float64), np.empty(n_cuts, np.float64), np.empty(n_cuts + 1, np.float64)
-    times, power = np.empty(n_samples, np.float64), np.empty(n_samples, np.float64)
-    baseline, uncut = np.empty(n_samples, np.float64), np.empty(n_samples, np.float64)
+    cut_t, cut_s, ahead = np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1]), np.empty(cut_tau.shape[1] + 1)
+    times, power, baseline, uncut = np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples)
     hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
     read, in_tail, listed = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
     for w in range(n_windows):
