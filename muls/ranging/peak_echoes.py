@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..infra.blocks import in_blocks
 from ..infra.runtime import kernel
 from ..optics.optical_model import Echoes, pulse_value
 
@@ -20,9 +21,10 @@ def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, shape) -> np.nda
     made it, however much power it still gives (a clipped echo's tail 10 ns on still gives more than a weak
     echo's peak). Where those echoes together give less than ``need_w``, the most powerful echo of all is
     taken."""
-    best = _dominant(np.asarray(pulse, np.int64), np.asarray(time_s, float), np.asarray(need_w, float),
-                     echoes.offsets, echoes.delay_s, echoes.energy_j, basis, shape.duration_s,
-                     shape.peak_delay_s + shape.fall_to_half_s)
+    pulse, time_s, need_w = np.asarray(pulse, np.int64), np.asarray(time_s, float), np.asarray(need_w, float)
+    best = np.concatenate(in_blocks(
+        lambda a, b: _dominant(pulse[a:b], time_s[a:b], need_w[a:b], echoes.offsets, echoes.delay_s, echoes.energy_j,
+                               basis, shape.duration_s, shape.peak_delay_s + shape.fall_to_half_s), pulse.shape[0]))
     out = np.full(best.shape, -1, np.int64)
     out[best >= 0] = echoes.source[best[best >= 0]]
     return out

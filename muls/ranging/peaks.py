@@ -22,6 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..infra.blocks import in_blocks
 from ..infra.lookup import bracket, interp_at, on_geometric_grid, on_log_grid, steps_per_log
 from ..infra.runtime import kernel
 from ..instrument.channels import processor_sigma_lsb
@@ -87,7 +88,6 @@ class PeakSettings(NamedTuple):
 class PeakSlots(NamedTuple):
     """Output slots of the peak kernel: ``MAX_PEAKS_PER_WINDOW`` per (window, channel), ``counts`` filled."""
 
-    window: np.ndarray
     channel: np.ndarray
     index: np.ndarray
     amplitude: np.ndarray
@@ -98,8 +98,13 @@ class PeakSlots(NamedTuple):
     @classmethod
     def empty(cls, n_slots: int) -> PeakSlots:
         cap = n_slots * MAX_PEAKS_PER_WINDOW
-        return cls(np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap), np.empty(cap), np.empty(cap),
-                   np.empty(cap, np.bool_), np.zeros(n_slots, np.int64))
+        return cls(np.empty(cap, np.int64), np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap, np.bool_),
+                   np.zeros(n_slots, np.int64))
+
+    def blocks(self, first: int, end: int, n_chan: int) -> PeakSlots:
+        """The slots of windows ``first:end`` of ``n_chan`` channels each (views)."""
+        a, b = first * n_chan, end * n_chan
+        return PeakSlots(*(f[a * MAX_PEAKS_PER_WINDOW:b * MAX_PEAKS_PER_WINDOW] for f in self[:-1]), self.counts[a:b])
 
 
 def find_peaks(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoes: Echoes) -> tuple[Peaks, np.ndarray]:
@@ -115,15 +120,22 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoe
     settings = PeakSettings(proc.threshold_sigma, proc.tail_tolerance, float(dig.max_code), fit,
                             ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)))
     synthesised = records.synthesised if records.synthesised is not None else np.ones((n_windows, n_chan), np.bool_)
-    _peaks(records.codes, synthesised, records.window_pulse, records.window_start, records.phase_s, -dig.pretrigger_s,
-           dig.sample_interval_s, model.column, batch.background_w, chans.signal(), settings, model.fit_table,
-           model.clip_table, out, records.mode == "full")
-    ref_index = _reference_peaks(records.reference, chans.dark_mean_lsb[0], fit, model.fit_table)
+    signal = chans.signal()
+
+    def windows(a, b):  # windows a:b into their slots; their pulses index the whole batch
+        _peaks(records.codes[a:b], synthesised[a:b], records.window_pulse[a:b], records.window_start[a:b],
+               records.phase_s, -dig.pretrigger_s, dig.sample_interval_s, model.column, batch.background_w, signal,
+               settings, model.fit_table, model.clip_table, out.blocks(a, b, n_chan), records.mode == "full")
+
+    in_blocks(windows, n_windows)
+    ref_index = np.concatenate(in_blocks(
+        lambda a, b: _reference_peaks(records.reference[a:b], chans.dark_mean_lsb[0], fit, model.fit_table),
+        batch.n_pulses))
     # Gather the filled slots: slot s holds counts[s] peaks from position s * MAX_PEAKS_PER_WINDOW.
     counts = out.counts
     first = np.repeat(np.arange(counts.size) * MAX_PEAKS_PER_WINDOW - (np.cumsum(counts) - counts), counts)
     slot = first + np.arange(first.size)
-    w, c, idx = out.window[slot], out.channel[slot] + 1, out.index[slot]
+    w, c, idx = slot // (MAX_PEAKS_PER_WINDOW * n_chan), out.channel[slot] + 1, out.index[slot]
     pulse = records.window_pulse[w]
     phase = records.phase_s
     time_s = -dig.pretrigger_s + idx * dig.sample_interval_s + phase[pulse]
@@ -183,10 +195,10 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
     records coded where the search reads, :func:`muls.receiver.channel_codes.ranging_codes`): a channel's residuals are
     computed, and its runs looked for, only within a sample of its nonzero codes (:func:`_code_segments`)."""
     n_windows, n_chan, n_samples = codes.shape
-    cap = out.window.shape[0] // max(1, n_windows * n_chan)
+    cap = out.index.shape[0] // max(1, n_windows * n_chan)
     basis = col.basis
     k_sigma, tail_tolerance, max_code = settings.k_sigma, settings.tail_tolerance, settings.max_code
-    out_w, out_c, out_idx, out_amp, out_snr, out_sat, counts = out
+    out_c, out_idx, out_amp, out_snr, out_sat, counts = out
     times, base_w = np.empty(n_samples), np.empty(n_samples)
     resid, sigma = np.empty(n_samples), np.empty(n_samples)
     echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
@@ -309,7 +321,6 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
                     u = times[top + 1] - (t0 + idx * dt + phase[p]) + settings.peak_delay_s
                     _add_echo(echoes, top + 1, u, dt, amp / settings.peak_density, basis)
                     j = slot * cap + counts[slot]
-                    out_w[j] = w
                     out_c[j] = c
                     out_idx[j] = found
                     out_amp[j] = amp

@@ -15,6 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..infra.blocks import in_blocks
 from ..infra.errors import check_choice
 from ..infra.noise import (
     FIRST_SIGNAL_STREAM,
@@ -173,7 +174,8 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     the others 0: of each CH0 record the samples around its peak (:func:`_reference`), and of ``full`` records
     the samples where a run of the peak search may start or go on or a code may clip, and those beside them
     (:func:`muls.receiver.channel_codes.ranging_codes`; windows are mostly echo, and draw faster whole). The same peaks and
-    ranges, the records not whole.
+    ranges, the records not whole. A large batch is digitised in blocks on numba's thread count
+    (:mod:`muls.infra.blocks`), the same bytes as in one.
     """
     ins = model.instrument
     dig = ins.digitizer
@@ -192,11 +194,20 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     synthesised = np.empty(shape[:2], np.bool_)
     settings = DigitiserSettings(float(dig.max_code), 1.0 if noise else 0.0, deciding_only,
                                  ins.processing.threshold_sigma, ranging_only and noise and mode == "full")
-    _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, model.column, model.cuts(batch),
-              echoes, chans.signal(), settings)
-    _reference(reference, ref_clean, sampling, model.basis, pulse.duration_s,
-               ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s)), chans.dark_mean_lsb[0],
-               chans.dark_std_lsb[0], settings.max_code, settings.noise_scale, ranging_only)
+    cuts, signal = model.cuts(batch), chans.signal()
+    lsb_per_density = ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s))
+
+    def windows(a, b):  # windows a:b; their pulses index the whole batch
+        _digitise(codes[a:b], clean[a:b], synthesised[a:b], window_pulse[a:b], window_start[a:b], sampling,
+                  model.column, cuts, echoes, signal, settings)
+
+    def references(a, b):  # the CH0 records of pulses a:b
+        _reference(reference[a:b], ref_clean[a:b], sampling._replace(phase_s=phase[a:b], pulse_id=sampling.pulse_id[a:b]),
+                   model.basis, pulse.duration_s, lsb_per_density, chans.dark_mean_lsb[0], chans.dark_std_lsb[0],
+                   settings.max_code, settings.noise_scale, ranging_only)
+
+    in_blocks(windows, shape[0])
+    in_blocks(references, batch.n_pulses)
     return Waveforms(reference, codes, window_pulse, window_start, phase, mode,
                    clean if keep_noise_free else None, ref_clean if keep_noise_free else None,
                    synthesised if deciding_only else None)
