@@ -173,20 +173,20 @@ def _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, n, foot_x, foot_y, foot
 
 
 @kernel(inline="always", error_model="numpy")
-def _rising_segment(x, y, z, tx, ty, tz, s, hx, hy, hz, z_end, wx, wy, rise):
-    """Segment ``s`` of a bundle for :func:`_bundle_clear`: from the seabed point (x, y, z) straight up to the point
-    (tx, ty, tz) [m] (a receiver aperture). False, and nothing written, where that point is not above it."""
+def _rising_toward(x, y, z, tx, ty, tz):
+    """The segment from the seabed point (x, y, z) straight up to the point (tx, ty, tz) [m] (a receiver aperture)
+    as :func:`_bundle_clear` takes it: (above, rise, wx, wy), ``above`` False where that point is not above the
+    seabed point (the rest then meaningless); rise inf, (wx, wy) = 0 when it is straight above. Scalars in and out:
+    a kernel that writes the bundle's arrays itself costs several times more per segment."""
     up = tz - z
     if not up > 0.0:
-        return False
-    h2 = (tx - x) ** 2 + (ty - y) ** 2
-    hx[s], hy[s], hz[s], z_end[s] = x, y, z, tz
+        return False, 0.0, 0.0, 0.0
+    ex, ey = tx - x, ty - y
+    h2 = ex ** 2 + ey ** 2
     if h2 > 0.0:
         inv_h = 1.0 / math.sqrt(h2)
-        rise[s], wx[s], wy[s] = up * inv_h, (tx - x) * inv_h, (ty - y) * inv_h
-    else:
-        rise[s], wx[s], wy[s] = np.inf, 0.0, 0.0
-    return True
+        return True, up * inv_h, ex * inv_h, ey * inv_h
+    return True, np.inf, 0.0, 0.0
 
 
 @kernel(nogil=True, error_model="numpy")
@@ -258,17 +258,21 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
             z_end[j] = oz
         if ok:
             fx, fy = hx[0], hy[0]
-            reach, zmin = 0.0, np.inf
+            reach2, zmin = 0.0, np.inf  # the farthest hit's squared distance: one square root (it is monotone)
             for j in range(m):
-                reach = max(reach, math.sqrt((hx[j] - fx) ** 2 + (hy[j] - fy) ** 2))
+                reach2 = max(reach2, (hx[j] - fx) ** 2 + (hy[j] - fy) ** 2)
                 zmin = min(zmin, hz[j])
+            reach = math.sqrt(reach2)
             segments = m
             if shadow:  # one test for both bundles: they leave the footprint for nearly the same place
                 rx, ry, rz = rx_local[p0 + q, 0], rx_local[p0 + q, 1], rx_local[p0 + q, 2]
                 for j in range(m):
-                    if not _rising_segment(hx[j], hy[j], hz[j], rx, ry, rz, m + j, hx, hy, hz, z_end, wx, wy, rise):
+                    above, rise_j, wx_j, wy_j = _rising_toward(hx[j], hy[j], hz[j], rx, ry, rz)
+                    if not above:
                         ok = False
                         break
+                    s = m + j
+                    hx[s], hy[s], hz[s], z_end[s], rise[s], wx[s], wy[s] = hx[j], hy[j], hz[j], rz, rise_j, wx_j, wy_j
                 segments = 2 * m
             if ok:
                 ok = _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, segments, fx, fy, reach, zmin)
@@ -322,9 +326,11 @@ def shadows_to_cast(grid, rows, local_origin, rx_local, sh_len, first, count, m,
             for j in range(n):
                 i = first + rows_of[j]
                 x, y, z = point[i, 0] - local_origin[0], point[i, 1] - local_origin[1], point[i, 2] - local_origin[2]
-                if not _rising_segment(x, y, z, rx, ry, rz, j, hx, hy, hz, z_end, wx, wy, rise):
+                above, rise_j, wx_j, wy_j = _rising_toward(x, y, z, rx, ry, rz)
+                if not above:
                     proven = False
                     break
+                hx[j], hy[j], hz[j], z_end[j], rise[j], wx[j], wy[j] = x, y, z, rz, rise_j, wx_j, wy_j
                 reach = max(reach, math.sqrt((x - fx) ** 2 + (y - fy) ** 2))
                 zmin = min(zmin, z)
             proven = proven and _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, n, fx, fy, reach, zmin)
