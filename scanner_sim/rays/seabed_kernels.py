@@ -67,20 +67,21 @@ def rasterise_tops(vertices, faces, first, stop, x0, y0, size, top):
 
 
 @kernel(inline="always")
-def seabed_face_at(grid, x, y):
-    """The height field's face under local (x, y), numbered from ``grid.face0`` (terrain.HeightField.height's choice
-    of triangle), -1 off the height field."""
-    inv_spacing = 1.0 / grid.spacing
-    fx = (x - grid.x0) * inv_spacing
-    fy = (y - grid.y0) * inv_spacing
+def seabed_face_at(x0, y0, spacing, nx, ny, x, y):
+    """The face under local (x, y) of the height field of ``nx`` x ``ny`` nodes ``spacing`` [m] apart from (x0, y0)
+    (:class:`SeabedGrid`'s), numbered from its ``face0`` (terrain.HeightField.height's choice of triangle), -1 off
+    it. Scalars only: a kernel handed the grid's arrays costs several times more per call."""
+    inv_spacing = 1.0 / spacing
+    fx = (x - x0) * inv_spacing
+    fy = (y - y0) * inv_spacing
     if not (fx >= 0.0 and fy >= 0.0):
         return -1
     j, i = int(fx), int(fy)
-    if j > grid.nx - 2 or i > grid.ny - 2:
+    if j > nx - 2 or i > ny - 2:
         return -1
-    f = i * (grid.nx - 1) + j
+    f = i * (nx - 1) + j
     if fy - i > fx - j:  # upper triangle (a, d, c): v > u
-        f += (grid.nx - 1) * (grid.ny - 1)
+        f += (nx - 1) * (ny - 1)
     return f
 
 
@@ -208,7 +209,8 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
     n = axis_prim.shape[0]
     m = origins.shape[0] // n
     plane, face0 = grid.plane, grid.face0
-    cells = (grid.nx - 1) * (grid.ny - 1)
+    x0, y0, spacing, nx, ny = grid.x0, grid.y0, grid.spacing, grid.nx, grid.ny
+    cells = (nx - 1) * (ny - 1)
     # Segments to test: the m sub-rays back up from their hits, then (shadow) the m hits up to the receiver.
     hx, hy, hz = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
     z_end, wx, wy, rise = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
@@ -234,7 +236,7 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
                 for _ in range(8):
                     t = (plane[f, 3] - (plane[f, 0] * ox + plane[f, 1] * oy + plane[f, 2] * oz)) / (
                         plane[f, 0] * dx + plane[f, 1] * dy + plane[f, 2] * dz)
-                    g = seabed_face_at(grid, ox + t * dx, oy + t * dy) if t > 0.0 else -1
+                    g = seabed_face_at(x0, y0, spacing, nx, ny, ox + t * dx, oy + t * dy) if t > 0.0 else -1
                     if g < 0:
                         break
                     if g == f:
