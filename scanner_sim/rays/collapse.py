@@ -151,15 +151,17 @@ def emit_rows(start, stop, rows, angles, out, o, beam, rho_mean, cosine, mean_ra
         o += 1
         if not simple:
             continue
-        out.weight[o - 1] = 0.0
+        axis = o - 1
+        out.weight[axis] = 0.0
         if beam == 0.0:
             continue
-        for c in range(2):  # the footprint's two echoes, built on its axis hit
-            _copy_row(rows, r, angles, out, o)
+        incidence = math.acos(cosine)
+        for c in range(2):  # the footprint's two echoes, built on its axis hit (copied as written: in radians)
+            _copy_row(out, axis, True, out, o)
             out.subray_index[o] = c + 1
             out.weight[o] = beam * share[c]
             out.reflectance[o] = rho_mean
-            out.incidence_rad[o] = math.acos(cosine)
+            out.incidence_rad[o] = incidence
             out.receiver_weight[o] = 1.0
             out.range_m[o] = mean_range
             # Out along the footprint's mean range (where the water column is cut), back along the return leg

@@ -67,20 +67,21 @@ def rasterise_tops(vertices, faces, first, stop, x0, y0, size, top):
 
 
 @kernel(inline="always")
-def seabed_face_at(grid, x, y):
-    """The height field's face under local (x, y), numbered from ``grid.face0`` (terrain.HeightField.height's choice
-    of triangle), -1 off the height field."""
-    inv_spacing = 1.0 / grid.spacing
-    fx = (x - grid.x0) * inv_spacing
-    fy = (y - grid.y0) * inv_spacing
+def seabed_face_at(x0, y0, spacing, nx, ny, x, y):
+    """The face under local (x, y) of the height field of ``nx`` x ``ny`` nodes ``spacing`` [m] apart from (x0, y0)
+    (:class:`SeabedGrid`'s), numbered from its ``face0`` (terrain.HeightField.height's choice of triangle), -1 off
+    it. Scalars only: a kernel handed the grid's arrays costs several times more per call."""
+    inv_spacing = 1.0 / spacing
+    fx = (x - x0) * inv_spacing
+    fy = (y - y0) * inv_spacing
     if not (fx >= 0.0 and fy >= 0.0):
         return -1
     j, i = int(fx), int(fy)
-    if j > grid.nx - 2 or i > grid.ny - 2:
+    if j > nx - 2 or i > ny - 2:
         return -1
-    f = i * (grid.nx - 1) + j
+    f = i * (nx - 1) + j
     if fy - i > fx - j:  # upper triangle (a, d, c): v > u
-        f += (grid.nx - 1) * (grid.ny - 1)
+        f += (nx - 1) * (ny - 1)
     return f
 
 
@@ -173,20 +174,20 @@ def _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, n, foot_x, foot_y, foot
 
 
 @kernel(inline="always", error_model="numpy")
-def _rising_segment(x, y, z, tx, ty, tz, s, hx, hy, hz, z_end, wx, wy, rise):
-    """Segment ``s`` of a bundle for :func:`_bundle_clear`: from the seabed point (x, y, z) straight up to the point
-    (tx, ty, tz) [m] (a receiver aperture). False, and nothing written, where that point is not above it."""
+def _rising_toward(x, y, z, tx, ty, tz):
+    """The segment from the seabed point (x, y, z) straight up to the point (tx, ty, tz) [m] (a receiver aperture)
+    as :func:`_bundle_clear` takes it: (above, rise, wx, wy), ``above`` False where that point is not above the
+    seabed point (the rest then meaningless); rise inf, (wx, wy) = 0 when it is straight above. Scalars in and out:
+    a kernel that writes the bundle's arrays itself costs several times more per segment."""
     up = tz - z
     if not up > 0.0:
-        return False
-    h2 = (tx - x) ** 2 + (ty - y) ** 2
-    hx[s], hy[s], hz[s], z_end[s] = x, y, z, tz
+        return False, 0.0, 0.0, 0.0
+    ex, ey = tx - x, ty - y
+    h2 = ex ** 2 + ey ** 2
     if h2 > 0.0:
         inv_h = 1.0 / math.sqrt(h2)
-        rise[s], wx[s], wy[s] = up * inv_h, (tx - x) * inv_h, (ty - y) * inv_h
-    else:
-        rise[s], wx[s], wy[s] = np.inf, 0.0, 0.0
-    return True
+        return True, up * inv_h, ex * inv_h, ey * inv_h
+    return True, np.inf, 0.0, 0.0
 
 
 @kernel(nogil=True, error_model="numpy")
@@ -208,7 +209,8 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
     n = axis_prim.shape[0]
     m = origins.shape[0] // n
     plane, face0 = grid.plane, grid.face0
-    cells = (grid.nx - 1) * (grid.ny - 1)
+    x0, y0, spacing, nx, ny = grid.x0, grid.y0, grid.spacing, grid.nx, grid.ny
+    cells = (nx - 1) * (ny - 1)
     # Segments to test: the m sub-rays back up from their hits, then (shadow) the m hits up to the receiver.
     hx, hy, hz = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
     z_end, wx, wy, rise = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
@@ -234,7 +236,7 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
                 for _ in range(8):
                     t = (plane[f, 3] - (plane[f, 0] * ox + plane[f, 1] * oy + plane[f, 2] * oz)) / (
                         plane[f, 0] * dx + plane[f, 1] * dy + plane[f, 2] * dz)
-                    g = seabed_face_at(grid, ox + t * dx, oy + t * dy) if t > 0.0 else -1
+                    g = seabed_face_at(x0, y0, spacing, nx, ny, ox + t * dx, oy + t * dy) if t > 0.0 else -1
                     if g < 0:
                         break
                     if g == f:
@@ -258,17 +260,21 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
             z_end[j] = oz
         if ok:
             fx, fy = hx[0], hy[0]
-            reach, zmin = 0.0, np.inf
+            reach2, zmin = 0.0, np.inf  # the farthest hit's squared distance: one square root (it is monotone)
             for j in range(m):
-                reach = max(reach, math.sqrt((hx[j] - fx) ** 2 + (hy[j] - fy) ** 2))
+                reach2 = max(reach2, (hx[j] - fx) ** 2 + (hy[j] - fy) ** 2)
                 zmin = min(zmin, hz[j])
+            reach = math.sqrt(reach2)
             segments = m
             if shadow:  # one test for both bundles: they leave the footprint for nearly the same place
                 rx, ry, rz = rx_local[p0 + q, 0], rx_local[p0 + q, 1], rx_local[p0 + q, 2]
                 for j in range(m):
-                    if not _rising_segment(hx[j], hy[j], hz[j], rx, ry, rz, m + j, hx, hy, hz, z_end, wx, wy, rise):
+                    above, rise_j, wx_j, wy_j = _rising_toward(hx[j], hy[j], hz[j], rx, ry, rz)
+                    if not above:
                         ok = False
                         break
+                    s = m + j
+                    hx[s], hy[s], hz[s], z_end[s], rise[s], wx[s], wy[s] = hx[j], hy[j], hz[j], rz, rise_j, wx_j, wy_j
                 segments = 2 * m
             if ok:
                 ok = _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, segments, fx, fy, reach, zmin)
@@ -322,9 +328,11 @@ def shadows_to_cast(grid, rows, local_origin, rx_local, sh_len, first, count, m,
             for j in range(n):
                 i = first + rows_of[j]
                 x, y, z = point[i, 0] - local_origin[0], point[i, 1] - local_origin[1], point[i, 2] - local_origin[2]
-                if not _rising_segment(x, y, z, rx, ry, rz, j, hx, hy, hz, z_end, wx, wy, rise):
+                above, rise_j, wx_j, wy_j = _rising_toward(x, y, z, rx, ry, rz)
+                if not above:
                     proven = False
                     break
+                hx[j], hy[j], hz[j], z_end[j], rise[j], wx[j], wy[j] = x, y, z, rz, rise_j, wx_j, wy_j
                 reach = max(reach, math.sqrt((x - fx) ** 2 + (y - fy) ** 2))
                 zmin = min(zmin, z)
             proven = proven and _bundle_clear(grid, hx, hy, hz, z_end, wx, wy, rise, n, fx, fy, reach, zmin)
