@@ -75,7 +75,7 @@ def stage_profile(scene_name: str = "cable_survey", fidelity: str = "balanced", 
                 f"{out}/points.las", setup.scene.local_origin, pass_facts(setup, options).metadata()) as las:
             profile = cProfile.Profile(time.process_time)
             profile.enable()
-            stream_pass(setup, chunks, [las], options)
+            stream_pass(setup, chunks, [las], options, sink_threads=False)  # the sinks' CPU on this thread
             profile.disable()
     finally:
         numba.set_num_threads(threads)

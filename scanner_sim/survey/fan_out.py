@@ -22,11 +22,15 @@ class SinkThreads:
     """``add(chunk)`` hands the chunk to every sink, each on its own thread in the order given; :meth:`finish`
     waits for them and raises the first error a sink raised. A context manager: leaving it waits for the sinks.
     A sink with a true ``thread_bound`` attribute (one whose writer serves only the thread that opened it, such as
-    sqlite3's) takes its chunks on the caller's thread instead."""
+    sqlite3's) takes its chunks on the caller's thread instead; with ``threads=False`` every sink does (a profile of
+    the caller's thread then sees the sinks' work)."""
 
-    def __init__(self, sinks: list):
-        self._here = [sink for sink in sinks if getattr(sink, "thread_bound", False)]
-        self._sinks = [sink for sink in sinks if not getattr(sink, "thread_bound", False)]
+    def __init__(self, sinks: list, threads: bool = True):
+        def here(sink) -> bool:
+            return not threads or getattr(sink, "thread_bound", False)
+
+        self._here = [sink for sink in sinks if here(sink)]
+        self._sinks = [sink for sink in sinks if not here(sink)]
         self._threads = [ThreadPoolExecutor(1, thread_name_prefix="sink") for _ in self._sinks]
         self._pending: deque[list[Future]] = deque()
 

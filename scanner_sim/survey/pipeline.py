@@ -248,10 +248,11 @@ def uncertainty_figures(setup: PassSetup, sink, pulses: int) -> dict:
     return figures
 
 
-def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions):
+def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions, sink_threads: bool = True):
     """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally, each
-    sink on its own thread taking the chunks in order (:class:`~scanner_sim.survey.fan_out.SinkThreads`). Returns
-    (stats, coverage sink or None, wall seconds)."""
+    sink on its own thread taking the chunks in order (:class:`~scanner_sim.survey.fan_out.SinkThreads`; with
+    ``sink_threads=False`` all on the caller's thread, for a profile of it). Returns (stats, coverage sink or None,
+    wall seconds)."""
     coverage = None
     if setup.plan.measures_coverage:
         planned = planned_swath(setup.config, setup.trajectory, setup.scanner.pulse_rate_hz)
@@ -259,7 +260,7 @@ def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOption
     stats = sinks.PassStats(len(setup.model.instrument.channels), setup.scene.heightfield)
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
     started = time.perf_counter()
-    with SinkThreads(every) as fan:  # each sink on its own thread, the chunks in order (survey/fan_out.py)
+    with SinkThreads(every, threads=sink_threads) as fan:  # each sink on its own thread, the chunks in order (survey/fan_out.py)
         for chunk in chunks:
             fan.add(chunk)
         fan.finish()

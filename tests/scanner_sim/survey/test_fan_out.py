@@ -56,3 +56,15 @@ def test_a_thread_bound_sink_takes_its_chunks_on_the_callers_thread():
         fan.finish()
     assert bound.seen == free.seen == list(range(12))
     assert bound.threads == {threading.get_ident()} and free.threads != {threading.get_ident()}
+
+
+def test_profile_sees_the_sinks_when_they_run_on_the_callers_thread():
+    """``bench --profile`` read 0 s for the coverage and LAS stages once the sinks moved to threads of their own:
+    cProfile sees only the thread that enabled it. With ``threads=False`` every sink takes its chunks, in order, on
+    the caller's thread."""
+    sinks = [Recorder(), Recorder(0.001)]
+    with SinkThreads(sinks, threads=False) as fan:
+        for chunk in range(12):
+            fan.add(chunk)
+        fan.finish()
+    assert all(s.seen == list(range(12)) and s.threads == {threading.get_ident()} for s in sinks)
