@@ -220,6 +220,13 @@ def last_cut(chunks, parts: int):
         yield from (part for part in np.array_split(current, parts) if part.size)
 
 
+#: Chunk workers from which a pass's sinks take their chunks on threads of their own. With fewer, the chunks keep
+#: every core busy and the sinks' threads only take cores from them: on 2 cores, sinks on threads made ``fast`` 7 %
+#: and ``balanced`` 3 % slower in pulses/s than sinks on the pass's thread (``scanner-sim bench --json``, the two
+#: alternated twice); from about 4 cores their serial time starts to bound the pass (docs/performance.md, "Cores").
+SINK_THREADS_FROM_WORKERS = 4
+
+
 def chunk_workers() -> int:
     """Chunks a pass runs side by side: numba's thread count (the cores, unless ``NUMBA_NUM_THREADS`` or
     ``numba.set_num_threads`` says fewer)."""
@@ -248,19 +255,21 @@ def uncertainty_figures(setup: PassSetup, sink, pulses: int) -> dict:
     return figures
 
 
-def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions, sink_threads: bool = True):
-    """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally, each
-    sink on its own thread taking the chunks in order (:class:`~scanner_sim.survey.fan_out.SinkThreads`; with
-    ``sink_threads=False`` all on the caller's thread, for a profile of it). Returns (stats, coverage sink or None,
-    wall seconds)."""
+def stream_pass(setup: PassSetup, chunks, chunk_sinks: list, options: PassOptions, sink_threads: bool | None = None):
+    """``chunks`` into ``chunk_sinks``, plus the running figures and, when the pass measures coverage, its tally, in
+    the pass's order (:class:`~scanner_sim.survey.fan_out.SinkThreads`): each sink on its own thread when
+    ``sink_threads`` is true, all on the caller's thread when false (for a profile of it); by default on threads from
+    :data:`SINK_THREADS_FROM_WORKERS` chunk workers. Returns (stats, coverage sink or None, wall seconds)."""
     coverage = None
     if setup.plan.measures_coverage:
         planned = planned_swath(setup.config, setup.trajectory, setup.scanner.pulse_rate_hz)
         coverage = sinks.CoverageSink(setup.scene, options.coverage, planned)
     stats = sinks.PassStats(len(setup.model.instrument.channels), setup.scene.heightfield)
     every = [*chunk_sinks, stats] + ([coverage] if coverage is not None else [])
+    if sink_threads is None:
+        sink_threads = chunk_workers() >= SINK_THREADS_FROM_WORKERS
     started = time.perf_counter()
-    with SinkThreads(every, threads=sink_threads) as fan:  # each sink on its own thread, the chunks in order (survey/fan_out.py)
+    with SinkThreads(every, threads=sink_threads) as fan:
         for chunk in chunks:
             fan.add(chunk)
         fan.finish()

@@ -68,3 +68,24 @@ def test_profile_sees_the_sinks_when_they_run_on_the_callers_thread():
             fan.add(chunk)
         fan.finish()
     assert all(s.seen == list(range(12)) and s.threads == {threading.get_ident()} for s in sinks)
+
+
+def test_a_pass_gives_the_same_bytes_with_its_sinks_on_threads_or_on_its_own(tmp_path, monkeypatch):
+    """Sinks take their chunks on threads of their own from SINK_THREADS_FROM_WORKERS chunk workers, else on the
+    pass's thread (on 2 cores their threads only took cores from the chunks): either way every file holds the same
+    bits and the summary the same figures."""
+    from scanner_sim.config import load_scene
+    from scanner_sim.perf.pass_hashes import pass_hashes
+    from scanner_sim.survey import pipeline
+    from scanner_sim.survey.setup import PassOptions
+
+    options = PassOptions(max_pulses=3000, waveforms=8, progress=False, render=False, write_scene=False)
+    results = {}
+    for threads_from in (1, 10**6):  # always on threads, never
+        monkeypatch.setattr(pipeline, "SINK_THREADS_FROM_WORKERS", threads_from)
+        out = tmp_path / str(threads_from)
+        summary = pipeline.run_pass(load_scene("cable_survey"), out, options).summary
+        figures = {k: v for k, v in summary.items() if not k.endswith("_s") and k not in ("pulses_per_s", "created")}
+        results[threads_from] = pass_hashes(out), figures
+    assert results[1] == results[10**6]
+    assert set(results[1][0]) == {"points", "dropouts", "waveforms"}
