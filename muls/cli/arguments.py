@@ -10,10 +10,15 @@ from ..infra.command import output_file
 from ..presets import WATER_PRESETS
 
 
-def _water_name(name: str) -> str:
-    if name not in WATER_PRESETS:
-        raise ValueError(f"--water {name!r}: must be one of {', '.join(sorted(WATER_PRESETS))}")
+def _one_of(option: str, name: str, allowed) -> str:
+    """``name`` if it is in ``allowed``, else ValueError naming ``option``, the value and the names allowed."""
+    if name not in allowed:
+        raise ValueError(f"{option} {name!r}: must be one of {', '.join(allowed)}")
     return name
+
+
+def _water_name(name: str) -> str:
+    return _one_of("--water", name, sorted(WATER_PRESETS))
 
 
 def _positive(option: str, value: float) -> float:
@@ -31,9 +36,7 @@ def _count(option: str, value: int) -> int:
 def _attenuation(name: str) -> str:
     from ..water.properties import ATTENUATION_MODELS
 
-    if name not in ATTENUATION_MODELS:
-        raise ValueError(f"--attenuation {name!r}: must be one of {', '.join(ATTENUATION_MODELS)}")
-    return name
+    return _one_of("--attenuation", name, ATTENUATION_MODELS)
 
 
 def _fmt(v, digits: int = 3) -> str:

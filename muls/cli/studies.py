@@ -22,7 +22,7 @@ from ..infra.command import (
     seed,
 )
 from ..studies.common import check_pulse_memory
-from .arguments import _attenuation, _common, _count, _fmt, _positive, _water_name, _waters
+from .arguments import _attenuation, _common, _count, _fmt, _one_of, _positive, _water_name, _waters
 
 
 def _shots(option: str, value: int, per_shot: int, what: str, unit: str = "shots", mode: str = "windowed") -> int:
@@ -158,17 +158,13 @@ def _cmd_edge_bias(args):
 def _experiment_name(name: str) -> str:
     from ..experiments import EXPERIMENTS
 
-    if name not in EXPERIMENTS:
-        raise ValueError(f"experiment {name!r}: must be one of {', '.join(EXPERIMENTS)}")
-    return name
+    return _one_of("experiment", name, EXPERIMENTS)
 
 
 def _ranging(name: str) -> str:
     from ..experiments import RANGING
 
-    if name not in RANGING:
-        raise ValueError(f"--ranging {name!r}: must be one of {', '.join(RANGING)}")
-    return name
+    return _one_of("--ranging", name, RANGING)
 
 
 #: The keys ``muls experiment --json`` prints (the study also returns the waveforms, for the picture).
