@@ -5,5 +5,6 @@ pulse meets (echo ranges and weights, where the column is cut). Gives the power 
 Eqs. 3, 4, 7-10 (:mod:`.radiometry`), the Monte Carlo's multiple-scattering tables per water and receiver
 (:mod:`.scattering`), an echo spread in time by them (:mod:`.echo_spread`) and the
 :class:`~.optical_model.OpticalModel` with its :class:`~.optical_model.PulseBatch` and echoes
-(:mod:`.optical_model`): the noise-free optical waveform of a batch, in watts.
+(:mod:`.optical_model`): the noise-free optical waveform of a batch, in watts, whose values at a sample are
+compiled in :mod:`.sample_kernels`.
 """

@@ -7,7 +7,8 @@ import numpy as np
 
 from ..infra.blocks import in_blocks
 from ..infra.runtime import kernel
-from ..optics.optical_model import Echoes, pulse_value
+from ..optics.optical_model import Echoes
+from ..optics.sample_kernels import pulse_value
 
 
 def dominant_echo(pulse, time_s, need_w, echoes: Echoes, basis, shape) -> np.ndarray:

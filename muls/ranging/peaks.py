@@ -26,7 +26,8 @@ from ..infra.blocks import in_blocks
 from ..infra.lookup import bracket, interp_at, on_geometric_grid, on_log_grid, steps_per_log
 from ..infra.runtime import kernel
 from ..instrument.channels import processor_sigma_lsb
-from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, add_pulse_steps, baseline_values, pulse_value
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch
+from ..optics.sample_kernels import add_pulse_steps, baseline_values, pulse_value
 from ..receiver.digitiser import Waveforms, sample_times
 from .peak_echoes import dominant_echo
 from .peak_order import peak_order
@@ -391,7 +392,7 @@ def _code_segments(row, seg_first, seg_end):
 
 @kernel(inline="always")
 def _add_echo(echoes, first, u, dt, scale, basis):
-    """echoes[first:] += scale * w(u + i dt) (:func:`~muls.optics.optical_model.add_pulse_steps`), from the first
+    """echoes[first:] += scale * w(u + i dt) (:func:`~muls.optics.sample_kernels.add_pulse_steps`), from the first
     sample at or after the echo's start."""
     if u < 0.0:  # the echo starts after this sample: first sample at or after its start
         skip = int(math.ceil(-u / dt))

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..infra.runtime import kernel
-from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, add_pulse_steps, cut_column_power, uncut_column_value
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch
+from ..optics.sample_kernels import add_pulse_steps, cut_column_power, uncut_column_value
 from ..receiver.digitiser import Waveforms
 from .peaks import Peaks, find_peaks
 

@@ -30,7 +30,8 @@ from ..infra.noise import (
 )
 from ..infra.runtime import kernel
 from ..instrument.channels import gate_open_at, level_lsb
-from ..optics.optical_model import Echoes, OpticalModel, PulseBatch, add_pulse_steps, baseline_values, column_integrals_at
+from ..optics.optical_model import Echoes, OpticalModel, PulseBatch
+from ..optics.sample_kernels import add_pulse_steps, baseline_values, column_integrals_at
 from .channel_codes import channel_codes, quantise, ranging_codes
 from .deciding_channels import deciding_channels
 

@@ -229,7 +229,7 @@ def test_baselines_a_window_at_once_are_the_uncut_column_plus_background():
     """The peak search and the channel test take a window's baseline from ``baseline_values`` (a loop of selects
     over the uncut column table); it must be the background plus the column that meets nothing, as the exact
     column (``column_power_w`` with no cut, a second engine) gives it, zero before emission and past the tables."""
-    from muls.optics.optical_model import baseline_values
+    from muls.optics.sample_kernels import baseline_values
 
     model = OpticalModel.build(mul2023(), water_preset("coastal_ocean"))
     end = model.column.step_s * (model.column.uncut.shape[0] - 1)

@@ -29,7 +29,7 @@ def test_the_stepped_pulse_is_the_pulse_evaluated_at_each_sample_until_its_exten
     """add_pulse_steps steps the pulse basis's exponentials by constant factors: each sample it adds is, to
     rounding, the scaled pulse evaluated directly there (pulse_value), from ``first`` on and only while the pulse
     lasts; with the samples' own times (``exact_u``) it reads u from them instead of summing steps."""
-    from muls.optics.optical_model import add_pulse_steps, pulse_value
+    from muls.optics.sample_kernels import add_pulse_steps, pulse_value
     from muls.presets import mul2023
 
     pulse = mul2023().pulse

@@ -68,7 +68,7 @@ def test_full_records_coded_only_where_the_peak_search_reads_give_the_same_peaks
     every record), dark noise of 12 LSB, strong background light (shot noise over the whole record), clean ocean water's
     strong backscatter and clipped near targets, and a range gate opening on the column."""
 
-    from muls.optics.optical_model import baseline_values
+    from muls.optics.sample_kernels import baseline_values
     from muls.ranging.peaks import find_peaks
 
     ins, water, background = _sparse_case(case)
