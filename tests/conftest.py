@@ -12,6 +12,7 @@ import contextlib
 import io
 import os
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +76,18 @@ def chromium() -> str:
         pytest.skip("no chromium on PATH (CI installs it)")
     return browser
 
+
+
+def page_pixels(page: Path, shot: Path, height: int) -> np.ndarray:
+    """The RGB pixels (n, 3) uint8 of ``page`` drawn by headless Chromium 1400 px wide and ``height`` px tall, its
+    screenshot kept at ``shot``."""
+    import matplotlib.image as mpimg
+
+    run = subprocess.run([chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                          f"--window-size=1400,{height}", f"--screenshot={shot}", page.as_uri()],
+                         capture_output=True, text=True, timeout=180)
+    assert run.returncode == 0, run.stderr[-2000:]
+    return (mpimg.imread(shot)[..., :3] * 255).round().astype(np.uint8).reshape(-1, 3)
 
 # Where the suite's time goes: ``--file-durations N`` adds a table of the N test files whose tests took longest, their
 # setup, call and teardown summed (module fixtures are counted in the setup of their file's first test), beside

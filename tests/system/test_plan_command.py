@@ -6,13 +6,11 @@ given a CRS so that lines.geojson is written."""
 import contextlib
 import io as stdio
 import json
-import subprocess
 
-import matplotlib.image as mpimg
 import numpy as np
 import pytest
 import yaml
-from conftest import chromium
+from conftest import page_pixels
 
 from scanner_sim.cli import main
 from scanner_sim.runs.jobs import TIMING_KEYS
@@ -101,14 +99,8 @@ def test_running_the_written_scene_reproduces_the_confirmation(planned, tmp_path
 @pytest.mark.slow
 def test_plan_page_opens_in_headless_chromium_with_its_chart(planned, tmp_path):
     """Chromium renders plan.html; the screenshot shows the chart's chosen-plan red star (#d7301f)."""
-    browser = chromium()
     out, _ = planned["0"]
-    shot = tmp_path / "plan.png"
-    run = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-                          "--window-size=1400,2000", f"--screenshot={shot}", (out / "plan.html").as_uri()],
-                         capture_output=True, text=True, timeout=180)
-    assert run.returncode == 0, run.stderr[-2000:]
-    rgb = (mpimg.imread(shot)[..., :3] * 255).round().astype(np.uint8).reshape(-1, 3)
+    rgb = page_pixels(out / "plan.html", tmp_path / "plan.png", height=2000)
     assert (np.abs(rgb.astype(int) - (0xD7, 0x30, 0x1F)).sum(axis=1) < 6).sum() > 20
     assert "turbid_harbor" in (out / "plan.html").read_text()
 

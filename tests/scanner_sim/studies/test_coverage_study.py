@@ -10,7 +10,7 @@ from html.parser import HTMLParser
 
 import numpy as np
 import pytest
-from conftest import chromium
+from conftest import chromium, page_pixels
 from matplotlib import image as mpimg
 
 from muls.infra.errors import ParameterError
@@ -137,14 +137,8 @@ def test_report_opens_in_headless_chromium_with_every_picture(small_study, tmp_p
     .ci/run installs Chromium and sets MULS_REQUIRE_CHROMIUM=1, so CI never skips this."""
     from scanner_sim.render.plan_map import COVERAGE_COLOURS
 
-    browser = chromium()
     out, _ = small_study
-    shot = tmp_path / "report.png"
-    run = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-                          "--window-size=1400,6000", f"--screenshot={shot}", (out / "report.html").as_uri()],
-                         capture_output=True, text=True, timeout=180)
-    assert run.returncode == 0, run.stderr[-2000:]
-    rgb = (mpimg.imread(shot)[..., :3] * 255).round().astype(np.uint8).reshape(-1, 3)
+    rgb = page_pixels(out / "report.html", tmp_path / "report.png", height=6000)
     colours = {tuple(c) for c in np.unique(rgb, axis=0)}
     assert _hex_rgb(COVERAGE_COLOURS["covered"]) in colours  # a coverage map is drawn
     assert _hex_rgb("#0b1a2a") in colours  # a point-cloud render is drawn (its background)
