@@ -271,7 +271,7 @@ def plot_mobley1993(result: dict, path):
     Lu at three optical depths) as the Monte Carlo over the paper's mean, with 2-standard-error bars, beside the
     range of the paper's codes over the same mean (grey bars).
 
-    result: the dict of :func:`muls.montecarlo.mobley1993_benchmark`.
+    result: the dict of :func:`muls.validation.mobley1993.mobley1993_benchmark`.
     """
     plt = _pyplot()
     colours = {"Ed": "tab:blue", "Eou": "tab:orange", "Lu": "tab:green"}

@@ -30,7 +30,7 @@ class FidelityLevel:
     two echoes with their delays' energy, mean, variance and skewness, else one per sub-ray. deciding_only:
     synthesise and search in each record window only the channels that can decide a return
     (:mod:`muls.receiver.deciding_channels`). multiple_scattering: ``"table"`` (the Monte Carlo's water column and
-    each echo's spread in time, :mod:`muls.optics.scattering`) or ``"none"`` (single scattering),
+    each echo's spread in time, :mod:`muls.montecarlo.scattering_tables`) or ``"none"`` (single scattering),
     ``muls.water.properties.MULTIPLE_SCATTERING``.
     """
 

@@ -1,7 +1,8 @@
 """The ``muls`` subcommands of the multiple-scattering Monte Carlo (multiscatter, multiscatter-study, mobley1993,
 validate-pass): per subcommand a builder that adds its options (:data:`BUILDERS`) and a thin function that runs the
 Monte Carlo and prints the result (each returns the result dict, its table as text and a plot function or None). The
-Monte Carlo itself lives in :mod:`muls.montecarlo`; its studies beside MULS in :mod:`muls.studies`."""
+Monte Carlo itself lives in :mod:`muls.montecarlo`, its checks in :mod:`muls.validation` and its studies beside
+MULS in :mod:`muls.studies`."""
 
 from __future__ import annotations
 
@@ -10,10 +11,11 @@ import json
 import os
 from pathlib import Path
 
-from .. import montecarlo, studies
+from .. import studies
 from ..infra.atomic import write_atomically
 from ..infra.command import fraction, nonempty, output_dir, positive_float, positive_int, seed
 from ..presets import water_preset
+from ..validation import mobley1993
 from .arguments import _attenuation, _common, _count, _fmt, _water_name, _waters
 
 
@@ -119,12 +121,12 @@ def _cmd_multiscatter_study(args):
 
 
 def _cmd_mobley1993(args):
-    photons = _packets("--photons", args.photons, max(montecarlo.mobley1993.PHOTON_FACTOR.values()))
-    result = montecarlo.mobley1993_benchmark(photons=photons, seed=args.seed)
+    photons = _packets("--photons", args.photons, max(mobley1993.PHOTON_FACTOR.values()))
+    result = mobley1993.mobley1993_benchmark(photons=photons, seed=args.seed)
     records = result["problems"]
     lines = [f"Mobley et al. (1993) problems 1 and 2 (sun at 60 deg in a black sky, level surface, n 1.34, infinitely "
              f"deep): Monte Carlo beside Table 5, {result['photons']:,} photons per run at albedo 0.9 "
-             f"({montecarlo.mobley1993.PHOTON_FACTOR[0.2]} times as many at 0.2), seed {result['seed']} "
+             f"({mobley1993.PHOTON_FACTOR[0.2]} times as many at 0.2), seed {result['seed']} "
              f"({result['seconds']:.1f} s)",
              "paper: the codes' mean and s/x as printed, N codes, and the range that holds every code's value "
              "(mean +- s (N-1)/sqrt(N), rounding included)",
@@ -145,7 +147,7 @@ def _cmd_mobley1993(args):
 
 
 def _cmd_validate_pass(args):
-    from ..montecarlo.validate import MAX_MC_REL_ERR, check_packets, validate_pass, verdict
+    from ..validation.validate import MAX_MC_REL_ERR, check_packets, validate_pass, verdict
 
     waters = tuple(_water_name(w) for w in args.waters)
     full = validate_pass(waters, packets=check_packets("--packets", _packets("--packets", args.packets)),
@@ -202,7 +204,7 @@ def _add_multiscatter_study(p: argparse.ArgumentParser) -> None:
 
 
 def _add_mobley1993(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--photons", type=positive_int(), default=montecarlo.MOBLEY1993_PHOTONS,
+    p.add_argument("--photons", type=positive_int(), default=mobley1993.DEFAULT_PHOTONS,
                    help="photons per run at albedo 0.9; the runs at albedo 0.2 trace 5 times as many")
     p.add_argument("--seed", type=seed(), default=0)
     _common(p)
@@ -210,7 +212,7 @@ def _add_mobley1993(p: argparse.ArgumentParser) -> None:
 
 
 def _add_validate_pass(p: argparse.ArgumentParser) -> None:
-    from ..montecarlo.validate import VALIDATION_PACKETS, VALIDATION_SEED, VALIDATION_WATERS
+    from ..validation.validate import VALIDATION_PACKETS, VALIDATION_SEED, VALIDATION_WATERS
 
     p.add_argument("--waters", nargs="+", default=list(VALIDATION_WATERS), type=nonempty(), metavar="WATER",
                    help="water presets (default: %(default)s)")

@@ -1,6 +1,7 @@
-"""The Monte Carlo run behind :class:`muls.optics.scattering.ScatteringTables`: flat 0.1 plates at a grid of ranges in one
-run (the farthest plate's scene gives the water column), tabulated as the model applies them (muls/optics/scattering.py);
-and where a water's tables are found: in memory, shipped with the package, in the user cache, or built by that run.
+"""The Monte Carlo run behind :class:`~muls.montecarlo.scattering_tables.ScatteringTables`: flat 0.1 plates at a grid of ranges
+in one run (the farthest plate's scene gives the water column), tabulated as the model applies them
+(:mod:`muls.montecarlo.scattering_tables`); and where a water's tables are found: in memory, shipped with the package, in the
+user cache, or built by that run.
 """
 
 from __future__ import annotations
@@ -17,10 +18,9 @@ from typing import NamedTuple
 import numpy as np
 
 from ..instrument.overlap import TransceiverGeometry
-from ..optics.scattering import SHIPPED_DIR, SPREAD_NODES, ScatteringTables, clear_water_tables, tables_key
 from ..water.phase_family import phase_from_spec
 from ..water.properties import Water
-from .run import TargetPlanes, run_monte_carlo
+from .scattering_tables import SHIPPED_DIR, SPREAD_NODES, ScatteringTables, clear_water_tables, tables_key
 
 #: Plate ranges of a table's run [m]: every 0.25 m through the near field, where the finite aperture starts to see
 #: the plate and the echo spreads least, then wider steps; cut at :func:`farthest_range_m` for the water.
@@ -70,7 +70,9 @@ def _packets_key(packets: int) -> int | None:
 def build_tables(geometry: TransceiverGeometry, water: Water, packets: int = TABLE_PACKETS, seed: int = TABLE_SEED
                  ) -> ScatteringTables:
     """Run the Monte Carlo for ``water`` (with its phase function) and the receiver of ``geometry`` and tabulate it
-    (module doc of :mod:`muls.optics.scattering`)."""
+    (module doc of :mod:`muls.montecarlo.scattering_tables`)."""
+    from .run import TargetPlanes, run_monte_carlo  # the transport's kernels: only where tables are built
+
     far = farthest_range_m(water)
     ranges = tuple(r for r in TABLE_RANGES_M if r <= far)
     phase = phase_from_spec(water.phase_function)

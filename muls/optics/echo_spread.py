@@ -1,7 +1,8 @@
-"""An echo spread in time by multiple scattering, as the Monte Carlo's tables give it (:mod:`muls.optics.scattering`): each
-echo becomes its share on the straight path and equal shares of the rest at the tables' quantile delays, or one echo
-at their mean delay where they lie close, interpolated linearly in range over the rows the Monte Carlo saw. Compiled
-kernels: each return's row is found once, and the node delays' mean and mean square are closed forms per interval.
+"""An echo spread in time by multiple scattering, as the Monte Carlo's tables give it
+(:mod:`muls.montecarlo.scattering_tables`): each echo becomes its share on the straight path and equal shares of the rest at the
+tables' quantile delays, or one echo at their mean delay where they lie close, interpolated linearly in range over the rows the
+Monte Carlo saw. Compiled kernels: each return's row is found once, and the node delays' mean and mean square are closed forms
+per interval.
 """
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..infra.runtime import kernel
-from .scattering import ScatteringTables
+from ..montecarlo.scattering_tables import ScatteringTables
 
 #: [s] An echo whose delays spread by less than this (their energy-weighted standard deviation) is one echo at their
 #: mean delay: it widens the filtered 10 ns pulse's 5.8 ns rms width by under 1.5 % and lowers its peak by about 1 %.

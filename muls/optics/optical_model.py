@@ -2,7 +2,7 @@
 and background (Eq. 8), summed as in MULS Eq. 1.
 
 With multiple scattering (``multiple_scattering="table"``, the default under the ``monte_carlo`` attenuation
-rule) the Monte Carlo reference's tables for the water and the receiver (:mod:`muls.optics.scattering`) replace the two
+rule) the Monte Carlo reference's tables for the water and the receiver (:mod:`muls.montecarlo.scattering_tables`) replace the two
 single-scattering parts: the column is the Monte Carlo's impulse response, rescaled to the water's beta_pi, and
 each echo is spread in time as the Monte Carlo spreads it, as one echo on the straight path plus equal-energy
 echoes at the quantile delays of its scattered part (one echo at the mean delay where they all lie within
@@ -34,11 +34,12 @@ from ..infra.runtime import kernel
 from ..instrument.channels import ChannelArrays
 from ..instrument.description import Instrument
 from ..instrument.shape_tables import ClipTable, FitTable
+from ..montecarlo.scattering_tables import ScatteringTables
+from ..montecarlo.tables import scattering_tables
 from ..water.properties import MULTIPLE_SCATTERING, Water
 from .echo_spread import spread_echoes, spread_rows
 from .radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission, window_factor
 from .sample_kernels import _column_many
-from .scattering import ScatteringTables
 
 #: Step of the column tables in two-way time [s]: 1/160 of the 4 ns pulse decay time.
 COLUMN_TABLE_STEP_S = 25e-12
@@ -223,8 +224,6 @@ class OpticalModel:
         if water.attenuation_model != "monte_carlo":
             tables = None
         elif tables is None:
-            from ..montecarlo.tables import scattering_tables  # the Monte Carlo sits above the model: lazily
-
             tables = scattering_tables(instrument.geometry, water)
         scattering = tables if multiple_scattering == "table" else None
         return cls(instrument, water, ColumnTables.build(instrument, water, scattering=scattering, tables=tables),
@@ -290,10 +289,10 @@ class OpticalModel:
         return spread_rows(self.scattering)
 
     def spread(self, pulse, delay, energy, source, range_m):
-        """Echoes (m,) spread in time by multiple scattering (:mod:`muls.optics.scattering`): each becomes its share on the
-        straight path at ``delay`` and equal shares of the rest at quantile delays after it: one echo at their
+        """Echoes (m,) spread in time by multiple scattering (:mod:`muls.montecarlo.scattering_tables`): each becomes
+        its share on the straight path at ``delay`` and equal shares of the rest at quantile delays after it: one echo at their
         energy-weighted mean delay where their spread is under :data:`~muls.optics.echo_spread.SPREAD_MERGE_S`, the means
-        of :data:`~muls.optics.scattering.SPREAD_NODES` / 2 pairs of neighbouring nodes where it is under
+        of :data:`~muls.montecarlo.scattering_tables.SPREAD_NODES` / 2 pairs of neighbouring nodes where it is under
         :data:`~muls.optics.echo_spread.SPREAD_FINE_S`, every node beyond (:func:`muls.optics.echo_spread.spread_echoes`).
         Returns (pulse, delay, energy, source) of the echoes, pulse ascending."""
         index, out_delay, out_energy = spread_echoes(self._spread_rows, delay, energy, range_m)

@@ -13,16 +13,17 @@ import math
 import numpy as np
 
 from ..instrument.description import Instrument
+from ..montecarlo.scattering_tables import ScatteringTables
+from ..montecarlo.tables import scattering_tables
 from ..water import smallangle
 from ..water.properties import RANGE_DEPENDENT_MODELS, Water
-from .scattering import ScatteringTables
 
 
 def lidar_attenuation_per_m(instrument: Instrument, water: Water, range_m, tables: ScatteringTables | None = None):
     """The k of exp(-2 k z) in Eqs. 4, 7, 9, 10 for light scattered back at ``range_m`` [m] (any shape) [1/m].
 
     The water's ``attenuation_model`` decides: Eq. 6's k_lidar, c or K_d are constants; ``monte_carlo`` is the
-    Monte Carlo reference's transmission for this water and receiver, range by range (:mod:`muls.optics.scattering`;
+    Monte Carlo reference's transmission for this water and receiver, range by range (:mod:`muls.montecarlo.scattering_tables`;
     ``tables``: those tables if the caller holds them, else they are found or built); ``small_angle`` keeps the
     forward scattering that stays inside the receiver's footprint r2(z) of Eq. 11 (:mod:`muls.water.smallangle`).
     docs/design.md#attenuation compares them. k is the lidar attenuation; the beam attenuation c is
@@ -50,8 +51,6 @@ def lidar_attenuation_per_m(instrument: Instrument, water: Water, range_m, table
     g = instrument.geometry
     if water.attenuation_model == "monte_carlo":
         if tables is None:
-            from ..montecarlo.tables import scattering_tables  # the Monte Carlo sits above the model: lazily
-
             tables = scattering_tables(g, water)
         return tables.lidar_attenuation_per_m(r)
     return smallangle.lidar_attenuation_per_m(water.attenuation_per_m, water.scattering_per_m, 0.5 * g.receiver_diameter_m,

@@ -10,12 +10,12 @@ import time
 import numpy as np
 
 from ..infra.errors import ParameterError, check_positive
-from ..montecarlo.correction import MultipleScatteringCorrection, same_phase
-from ..montecarlo.power import effective_attenuation_per_m, geometry_factor, mc_power_w, muls_power_w, two_way_transmission
 from ..montecarlo.run import TargetPlanes, run_monte_carlo
 from ..optics.optical_model import OpticalModel
 from ..optics.radiometry import lambertian_weight, target_factor
 from ..presets import instrument_preset, water_preset
+from ..validation.correction import MultipleScatteringCorrection, same_phase
+from ..validation.power import effective_attenuation_per_m, geometry_factor, mc_power_w, muls_power_w, two_way_transmission
 from ..water.phase import check_phase
 from ..water.properties import MAX_ATTENUATION_EXPONENT, Water
 from .maxrange import maxrange_study

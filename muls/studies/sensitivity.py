@@ -18,9 +18,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..infra.errors import ParameterError, check_fraction
+from ..montecarlo.scattering_tables import ScatteringTables
 from ..montecarlo.tables import TABLE_PACKETS, TABLE_SEED, scattering_tables
 from ..optics.optical_model import OpticalModel, PulseBatch
-from ..optics.scattering import ScatteringTables
 from ..presets import mul2023, study_water
 from ..water.phase_family import DEFAULT_PHASE, SENSITIVITY_FAMILY, PhaseMember, phase_from_spec
 from ..water.properties import Water

@@ -52,7 +52,7 @@ FF_PETZOLD_MU = 3.5835
 #: averaged, and divided by 1.006449 so that the trapezoidal rule over the table plus the power law below 0.1 deg
 #: integrates to 1 (its Section 3). One printed value is corrected: at 0.50119 deg the paper prints 218.839,
 #: out of line with its neighbours; with it that same rule gives 1.0019, with Light and Water's 201.2 it gives
-#: 1.0000 (tests/muls/montecarlo/test_mobley1993.py checks both sums), so 201.2 is used.
+#: 1.0000 (tests/muls/validation/test_mobley1993.py checks both sums), so 201.2 is used.
 MOBLEY1993_PARTICLE_PER_SR = np.array([
     1.76661e3, 1.29564e3, 9.50172e2, 6.99092e2, 5.13687e2, 3.76373e2, 2.76318e2,
     2.01200e2,  # 0.50119 deg: printed 2.18839e2 (see above); Mobley (1994) Light and Water Table 3.10: 2.012e2

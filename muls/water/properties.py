@@ -32,10 +32,10 @@ GROUP_INDEX_FRESHWATER = 1.357
 #: warning of a seabed beyond any echo, and the farthest plate ``muls multiscatter`` traces.
 MAX_ATTENUATION_EXPONENT = 40.0
 
-#: Attenuation rules (docs/design.md#attenuation). ``monte_carlo`` (the default): the two-way transmission of the
-#: Monte Carlo reference for this water and receiver, tabulated against range (muls.optics.scattering); ``small_angle``:
-#: forward scattering kept by the receiver's field of view, from the small-angle approximation (muls.water.smallangle);
-#: both depend on the range and the receiver. ``k_lidar``: MULS Eq. 6; ``c``: beam attenuation; ``kd``: diffuse.
+#: Attenuation rules (docs/design.md#attenuation). ``monte_carlo`` (the default): the two-way transmission of the Monte Carlo
+#: reference for this water and receiver, tabulated against range (muls.montecarlo.scattering_tables); ``small_angle``: forward
+#: scattering kept by the receiver's field of view, from the small-angle approximation (muls.water.smallangle); both depend on
+#: the range and the receiver. ``k_lidar``: MULS Eq. 6; ``c``: beam attenuation; ``kd``: diffuse.
 ATTENUATION_MODELS = ("monte_carlo", "k_lidar", "c", "kd", "small_angle")
 #: How an echo's multiple scattering is modelled: ``table`` (the Monte Carlo's column and spread in time, under the
 #: ``monte_carlo`` attenuation rule) or ``none`` (single scattering: Eq. 4's column, the echo on its straight path).

@@ -6,7 +6,7 @@ import pytest
 
 from muls import instrument_preset
 from muls.cli import main
-from muls.montecarlo.validate import MAX_MC_REL_ERR
+from muls.validation.validate import MAX_MC_REL_ERR
 
 
 def _run(capsys, *argv):
@@ -22,7 +22,7 @@ def test_validate_pass_with_one_packet_is_refused_not_within(capsys, tmp_path):
     within, so a run that could judge nothing passed every case. Such a case is now "not judged", and a packet count
     under which every case's error is over the limit (the error falls as 1/sqrt(packets), 0.28 % at best with
     400,000) is refused up front."""
-    from muls.montecarlo.validate import judge
+    from muls.validation.validate import judge
 
     code, out, err = _run(capsys, "validate-pass", "--waters", "pond", "--packets", "1")
     assert code == 2 and out == ""
@@ -77,7 +77,7 @@ def test_mobley1993_value_whose_two_sigma_exceeds_the_codes_range_is_not_judged(
     the band [paper_min - 2 sigma, paper_max + 2 sigma] was twelve times the codes' own range (0.000914-0.001018), so
     almost any value was within. Root cause: a Monte Carlo too uncertain to judge widened the band instead of saying
     so. Such a value is now not judged (None); the default run's values (2 sigma of 0.01 % to 3 %) are all judged."""
-    from muls.montecarlo.mobley1993 import judge
+    from muls.validation.mobley1993 import judge
 
     assert judge(0.001241, 0.5 * 1.0207 * 0.001241, 0.000914, 0.001018) is None
     assert judge(0.0, 0.0, 0.000914, 0.001018) is None  # no photon: no spread to judge by

@@ -7,7 +7,7 @@ import pytest
 from conftest import run_muls as _run
 
 from muls import water_preset
-from muls.montecarlo.check import worst_errors
+from muls.validation.check import worst_errors
 
 
 def test_multiscatter_json_has_exactly_the_issue_keys_and_a_picture(capsys, tmp_path):
@@ -68,7 +68,7 @@ def test_multiscatter_study_writes_its_chart_and_json(capsys, tmp_path):
 def test_pond_at_10_m_column_and_echo_within_5_percent_where_within_100_times_of_their_peaks(capsys):
     """The issue's acceptance: ``muls multiscatter --water pond --range-m 10 --json`` (default packets) has the
     column and the target echo at a relative error below 5 % wherever each is within 100 times of its peak
-    (the check of ``python3 -m muls.montecarlo.check``).
+    (the check of ``python3 -m muls.validation.check``).
 
     Root cause of the failure this pins (10 % at 4 million packets, median 4.9 %): the column's error came
     from rare packets. A packet that scattered back towards the instrument outside the ghosts' narrow cone

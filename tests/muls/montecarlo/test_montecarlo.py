@@ -14,15 +14,10 @@ import pytest
 from scipy.integrate import quad
 
 from muls import Water, coaxial, mul2023, water_preset
-from muls.montecarlo import (
-    MultipleScatteringCorrection,
-    TargetPlanes,
-    geometry_factor,
-    mc_power_w,
-    run_monte_carlo,
-)
+from muls.montecarlo import TargetPlanes, run_monte_carlo
 from muls.optics.radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission
 from muls.studies import multiscatter_waters_study
+from muls.validation import MultipleScatteringCorrection, geometry_factor, mc_power_w
 from muls.water.phase import PHASE_FUNCTIONS, phase_function
 from muls.water.phase_kernels import cumulative_at, sample_angle
 from muls.water.properties import henyey_greenstein as hg_closed_form

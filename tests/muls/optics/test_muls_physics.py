@@ -396,7 +396,8 @@ def test_small_angle_rule_against_the_monte_carlo():
     rule gives the echo's effective attenuation within 3 %; in the pond (b Z = 12 at 10 m) the approximation
     keeps more scattered light than the Monte Carlo (no longer paths, no scattering back from large angles):
     k lower, within 15 %."""
-    from muls.montecarlo import TargetPlanes, effective_attenuation_per_m, run_monte_carlo, two_way_transmission
+    from muls.montecarlo import TargetPlanes, run_monte_carlo
+    from muls.validation import effective_attenuation_per_m, two_way_transmission
 
     ins = mul2023()
     for name, tol in (("coastal_ocean", 0.03), ("pond", 0.15)):

@@ -13,9 +13,9 @@ from muls import mul2023, water_preset
 from muls.cli import main
 from muls.infra.errors import ParameterError
 from muls.montecarlo import tables as tables_module
+from muls.montecarlo.scattering_tables import tables_key
 from muls.montecarlo.tables import find_tables
 from muls.optics.optical_model import OpticalModel
-from muls.optics.scattering import tables_key
 from muls.presets import study_water
 from muls.studies.sensitivity import echo_quantities, sensitivity_study
 from muls.water.phase import fournier_forand, henyey_greenstein, petzold

@@ -1,12 +1,12 @@
 """``muls validate-pass``: a consistency check of the scattering tables every pass uses.
 
-A pass models each echo with the ``monte_carlo`` attenuation rule, the finite-aperture overlap and multiple
-scattering from the tables (:mod:`muls.optics.scattering`), which one Monte Carlo run per water and receiver built. Here the
-pass's waveform model is set beside a fresh run of that same Monte Carlo (another seed, flat 0.1 plates at
-:data:`VALIDATION_RANGES_M`, between the tables' ranges), for the MUL in each water of :data:`VALIDATION_WATERS`. It
-shows what tabulating lost (interpolation in range, the echo's spread cut to a few nodes, the smoothed column), not
-whether the Monte Carlo itself is right: both sides share its physics (``muls mobley1993`` and ``muls multiscatter``
-set the Monte Carlo against published results and the analytic rules). The ratios:
+A pass models each echo with the ``monte_carlo`` attenuation rule, the finite-aperture overlap and multiple scattering from the
+tables (:mod:`muls.montecarlo.scattering_tables`), which one Monte Carlo run per water and receiver built. Here the pass's
+waveform model is set beside a fresh run of that same Monte Carlo (another seed, flat 0.1 plates at :data:`VALIDATION_RANGES_M`,
+between the tables' ranges), for the MUL in each water of :data:`VALIDATION_WATERS`. It shows what tabulating lost
+(interpolation in range, the echo's spread cut to a few nodes, the smoothed column), not whether the Monte Carlo itself is
+right: both sides share its physics (``muls mobley1993`` and ``muls multiscatter`` set the Monte Carlo against published results
+and the analytic rules). The ratios:
 
 - ``echo_energy_ratio``: the pass model's echo energy over the Monte Carlo's;
 - ``echo_peak_ratio``: the peak of the pass model's echo, through the band-limited pulse, over the Monte Carlo's
@@ -27,11 +27,11 @@ import time
 
 import numpy as np
 
+from ..montecarlo.run import TargetPlanes, run_monte_carlo
 from ..optics.optical_model import OpticalModel, PulseBatch
 from ..optics.radiometry import two_way_transmission
 from ..presets import mul2023, water_preset
 from .power import mc_power_w
-from .run import TargetPlanes, run_monte_carlo
 
 VALIDATION_WATERS = ("pool", "clean_ocean", "coastal_ocean", "pond", "turbid_harbor")
 VALIDATION_RANGES_M = (2.0, 3.0, 5.0, 10.0, 20.0, 30.0)

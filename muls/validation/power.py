@@ -12,11 +12,11 @@ import math
 import numpy as np
 
 from ..instrument.description import Instrument
+from ..montecarlo.run import BATCHES, MonteCarloResult, TargetPlanes, run_monte_carlo, var_of_mean
 from ..optics import radiometry
 from ..optics.optical_model import OpticalModel
 from ..optics.radiometry import lambertian_weight, target_factor
 from ..water.properties import Water
-from .run import BATCHES, MonteCarloResult, TargetPlanes, run_monte_carlo, var_of_mean
 
 
 def two_way_transmission(instrument: Instrument) -> float:

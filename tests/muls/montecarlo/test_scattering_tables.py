@@ -1,4 +1,4 @@
-"""Multiple scattering in the model (muls/optics/scattering.py, muls/montecarlo/tables.py,
+"""Multiple scattering in the model (muls/montecarlo/scattering_tables.py, muls/montecarlo/tables.py,
 muls/optics/optical_model.py): the Monte Carlo's tables, the monte_carlo attenuation rule, the echo's spread in time
 and the column."""
 
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from muls import Water, mul2023, water_preset
+from muls.montecarlo.scattering_tables import SHIPPED_DIR, ScatteringTables, tables_key
 from muls.montecarlo.tables import build_tables, farthest_range_m, find_tables, scattering_tables
 from muls.optics.optical_model import OpticalModel, PulseBatch
 from muls.optics.radiometry import lidar_attenuation_per_m
-from muls.optics.scattering import SHIPPED_DIR, ScatteringTables, tables_key
 from muls.presets import WATER_PRESETS, coaxial
 
 
@@ -148,7 +148,7 @@ def test_validate_pass_meets_the_acceptance_in_every_water_and_range(capsys):
     import json
 
     from muls.cli import main
-    from muls.montecarlo.validate import VALIDATION_RANGES_M, VALIDATION_WATERS
+    from muls.validation.validate import VALIDATION_RANGES_M, VALIDATION_WATERS
 
     assert main(["validate-pass", "--json"]) == 0
     cases = json.loads(capsys.readouterr().out)["cases"]

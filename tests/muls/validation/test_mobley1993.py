@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 from scipy.integrate import simpson
 
 from muls.montecarlo import run_slab
-from muls.montecarlo.mobley1993 import ALBEDOS, OPTICAL_DEPTHS, QUANTITIES, codes_range, paper_rows, parse_printed
 from muls.montecarlo.slab import ENERGY_KEYS, TALLIES, fresnel_reflectance
+from muls.validation.mobley1993 import ALBEDOS, OPTICAL_DEPTHS, QUANTITIES, codes_range, paper_rows, parse_printed
 from muls.water.phase import (
     MOBLEY1993_PARTICLE_PER_SR,
     MOBLEY1993_PRINTED_0_50119_PER_SR,

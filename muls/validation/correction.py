@@ -13,12 +13,12 @@ import numpy as np
 
 from ..infra.errors import ParameterError
 from ..instrument.description import Instrument
+from ..montecarlo.run import MonteCarloResult, TargetPlanes, run_monte_carlo
 from ..optics.optical_model import OpticalModel
 from ..optics.radiometry import lambertian_weight, target_factor
 from ..water.phase import PhaseFunction, check_phase
 from ..water.properties import Water
 from .power import mc_power_w, two_way_transmission
-from .run import MonteCarloResult, TargetPlanes, run_monte_carlo
 
 
 def same_phase(water: Water, phase: PhaseFunction) -> Water:

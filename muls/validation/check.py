@@ -3,7 +3,7 @@ where each signal is within a factor WITHIN of its own peak, for the Monte Carlo
 and their sum.
 
     muls multiscatter --water pond --range-m 10 --json > pond.json
-    python3 -m muls.montecarlo.check pond.json
+    python3 -m muls.validation.check pond.json
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def main(argv=None) -> int:
     """Print the check for a JSON file (``-``: standard input)."""
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 1:
-        print("usage: python3 -m muls.montecarlo.check MULTISCATTER_JSON (or - for standard input)", file=sys.stderr)
+        print("usage: python3 -m muls.validation.check MULTISCATTER_JSON (or - for standard input)", file=sys.stderr)
         return 2
     with (sys.stdin if argv[0] == "-" else open(argv[0])) as f:
         result = json.load(f)

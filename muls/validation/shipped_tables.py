@@ -1,18 +1,18 @@
 """The Monte Carlo tables the package ships: every water preset with each instrument preset's geometry, built by
-``python3 -m muls.montecarlo.shipped_tables`` into ``muls/data/scattering`` (:mod:`muls.optics.scattering`).
+``python3 -m muls.validation.shipped_tables`` into ``muls/data/scattering`` (:mod:`muls.montecarlo.scattering_tables`).
 """
 
 from __future__ import annotations
 
-from ..optics.scattering import SHIPPED_DIR
+from ..montecarlo.scattering_tables import SHIPPED_DIR
+from ..montecarlo.tables import TABLE_PACKETS, build_tables
 from ..presets import WATER_PRESETS, coaxial, mul2023
-from .tables import TABLE_PACKETS, build_tables
 
 
 def ship(out_dir=None, packets: int = TABLE_PACKETS) -> list:
     """Build the tables of every water preset with each instrument preset's geometry (the MUL's offset receiver and
-    the coaxial one) into ``out_dir`` (default: the folder the package ships, :data:`muls.optics.scattering.SHIPPED_DIR`);
-    returns the files written."""
+    the coaxial one) into ``out_dir`` (default: the folder the package ships,
+    :data:`muls.montecarlo.scattering_tables.SHIPPED_DIR`); returns the files written."""
     folder = SHIPPED_DIR if out_dir is None else out_dir
     written = []
     for geometry in {mul2023().geometry, coaxial().geometry}:

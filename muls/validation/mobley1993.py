@@ -31,7 +31,7 @@ import re
 import time
 
 from ..infra.errors import ParameterError
-from .slab import STREAM, run_slab
+from ..montecarlo.slab import STREAM, run_slab
 
 SOURCE = ("Mobley, Gentili, Gordon, Jin, Kattawar, Morel, Reinersman, Stamnes and Stavn (1993), Comparison of "
           "numerical models for computing underwater light fields, Appl. Opt. 32(36), 7484-7504, Table 5")

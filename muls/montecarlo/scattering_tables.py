@@ -40,7 +40,7 @@ from ..water.properties import Water
 TABLE_FORMAT = 2
 #: Quantile nodes of the scattered part of an echo (even: the model pairs them where the spread is narrow).
 SPREAD_NODES = 8
-#: Tables shipped with the package (the presets, with the instruments' geometries: python3 -m muls.montecarlo.shipped_tables).
+#: Tables shipped with the package (the presets, with the instruments' geometries: python3 -m muls.validation.shipped_tables).
 SHIPPED_DIR = Path(__file__).resolve().parents[1] / "data" / "scattering"
 
 
