@@ -26,5 +26,5 @@ from ..infra.lazy_names import lazy_names
 __all__, __getattr__, __dir__ = lazy_names(__name__, {
     "BATCHES": ".run", "ENERGY_KEYS": ".run", "TAIL_S": ".run", "TIME_STEP_S": ".run", "MonteCarloResult": ".run",
     "TargetPlanes": ".run", "run_monte_carlo": ".run", "SlabResult": ".slab", "run_slab": ".slab",
-    "ScatteringTables": ".scattering_tables", "scattering_tables": ".tables",
+    "ScatteringTables": ".scattering_tables", "find_or_build_tables": ".tables",
 })

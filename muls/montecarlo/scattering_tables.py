@@ -17,7 +17,7 @@ interpolation:
   energy per second at the aperture, all orders of scattering, before the receiver's optics), with the phase
   function's own backscatter b p(pi); the model rescales it to the water's beta_pi.
 
-:func:`muls.montecarlo.tables.scattering_tables` finds the tables for a geometry and a water: in memory, shipped with
+:func:`muls.montecarlo.tables.find_or_build_tables` finds the tables for a geometry and a water: in memory, shipped with
 the package (:data:`SHIPPED_DIR`, the presets with the instruments' geometries), in the user cache, or, failing
 those, by running the Monte Carlo (about half a minute for a turbid water) and caching the result.
 """

@@ -199,7 +199,7 @@ def find_tables(geometry: TransceiverGeometry, water: Water, packets: int | None
     return None
 
 
-def scattering_tables(geometry: TransceiverGeometry, water: Water, packets: int | None = None) -> ScatteringTables:
+def find_or_build_tables(geometry: TransceiverGeometry, water: Water, packets: int | None = None) -> ScatteringTables:
     """The tables of ``geometry`` and ``water``: found (:func:`find_tables`), or built by the Monte Carlo with
     ``packets`` beam packets and kept in the user cache (one run per water, receiver, phase function and packet
     count; by default :data:`TABLE_PACKETS` or the block's :func:`table_packets`). A water that does not scatter

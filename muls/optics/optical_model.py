@@ -35,7 +35,7 @@ from ..instrument.channels import ChannelArrays
 from ..instrument.description import Instrument
 from ..instrument.shape_tables import ClipTable, FitTable
 from ..montecarlo.scattering_tables import ScatteringTables
-from ..montecarlo.tables import scattering_tables
+from ..montecarlo.tables import find_or_build_tables
 from ..water.properties import MULTIPLE_SCATTERING, Water
 from .echo_spread import spread_echoes, spread_rows
 from .radiometry import column_density_per_m, lambertian_weight, target_factor, two_way_transmission, window_factor
@@ -224,7 +224,7 @@ class OpticalModel:
         if water.attenuation_model != "monte_carlo":
             tables = None
         elif tables is None:
-            tables = scattering_tables(instrument.geometry, water)
+            tables = find_or_build_tables(instrument.geometry, water)
         scattering = tables if multiple_scattering == "table" else None
         return cls(instrument, water, ColumnTables.build(instrument, water, scattering=scattering, tables=tables),
                    tables, scattering, multiple_scattering)

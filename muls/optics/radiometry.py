@@ -14,7 +14,7 @@ import numpy as np
 
 from ..instrument.description import Instrument
 from ..montecarlo.scattering_tables import ScatteringTables
-from ..montecarlo.tables import scattering_tables
+from ..montecarlo.tables import find_or_build_tables
 from ..water import smallangle
 from ..water.properties import RANGE_DEPENDENT_MODELS, Water
 
@@ -51,7 +51,7 @@ def lidar_attenuation_per_m(instrument: Instrument, water: Water, range_m, table
     g = instrument.geometry
     if water.attenuation_model == "monte_carlo":
         if tables is None:
-            tables = scattering_tables(g, water)
+            tables = find_or_build_tables(g, water)
         return tables.lidar_attenuation_per_m(r)
     return smallangle.lidar_attenuation_per_m(water.attenuation_per_m, water.scattering_per_m, 0.5 * g.receiver_diameter_m,
                                         math.tan(0.5 * g.fov_full_rad), r)

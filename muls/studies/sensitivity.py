@@ -19,7 +19,7 @@ import numpy as np
 
 from ..infra.errors import ParameterError, check_fraction
 from ..montecarlo.scattering_tables import ScatteringTables
-from ..montecarlo.tables import TABLE_PACKETS, TABLE_SEED, scattering_tables
+from ..montecarlo.tables import TABLE_PACKETS, TABLE_SEED, find_or_build_tables
 from ..optics.optical_model import OpticalModel, PulseBatch
 from ..presets import mul2023, study_water
 from ..water.phase_family import DEFAULT_PHASE, SENSITIVITY_FAMILY, PhaseMember, phase_from_spec
@@ -50,8 +50,8 @@ def member_tables(water: Water, member: PhaseMember, packets: int, seed: int = T
     geometry = mul2023().geometry if geometry is None else geometry
     w = replace(water, phase_function=member.spec)
     if member.spec == DEFAULT_PHASE:
-        return scattering_tables(geometry, w, TABLE_PACKETS)
-    return scattering_tables(geometry, w, packets)
+        return find_or_build_tables(geometry, w, TABLE_PACKETS)
+    return find_or_build_tables(geometry, w, packets)
 
 
 def echo_quantities(model: OpticalModel, ranges_m: np.ndarray, reflectance: float) -> dict[str, np.ndarray]:

@@ -10,7 +10,7 @@ import pytest
 
 from muls import Water, mul2023, water_preset
 from muls.montecarlo.scattering_tables import SHIPPED_DIR, ScatteringTables, tables_key
-from muls.montecarlo.tables import build_tables, farthest_range_m, find_tables, scattering_tables
+from muls.montecarlo.tables import build_tables, farthest_range_m, find_or_build_tables, find_tables
 from muls.optics.optical_model import OpticalModel, PulseBatch
 from muls.optics.radiometry import lidar_attenuation_per_m
 from muls.presets import WATER_PRESETS, coaxial
@@ -44,7 +44,7 @@ def test_a_water_that_does_not_scatter_attenuates_by_its_absorption_alone():
 
 
 def test_tables_round_trip_through_their_file(tmp_path):
-    tables = scattering_tables(mul2023().geometry, water_preset("coastal_ocean"))
+    tables = find_or_build_tables(mul2023().geometry, water_preset("coastal_ocean"))
     tables.save(tmp_path / "t.npz")
     back = ScatteringTables.load(tmp_path / "t.npz")
     assert back.key == tables.key and back.source == tables.source
@@ -57,7 +57,7 @@ def test_the_monte_carlo_attenuation_lies_between_the_absorption_and_the_beam_at
     """Every scattered photon lost gives c; none lost gives a: the light a finite receiver keeps lies between, for
     every range the tables hold."""
     water = water_preset(name)
-    tables = scattering_tables(mul2023().geometry, water)
+    tables = find_or_build_tables(mul2023().geometry, water)
     seen = tables.ranges_m >= 2.25  # the plate is seen (finite-aperture overlap over 0.1)
     k = tables.attenuation_per_m_table[seen]
     assert np.all(k >= water.absorption_per_m * 0.99) and np.all(k <= water.attenuation_per_m * 1.01)
