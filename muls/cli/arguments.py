@@ -10,36 +10,41 @@ from ..infra.command import output_file
 from ..presets import WATER_PRESETS
 
 
-def _one_of(option: str, name: str, allowed) -> str:
+def one_of(option: str, name: str, allowed) -> str:
     """``name`` if it is in ``allowed``, else ValueError naming ``option``, the value and the names allowed."""
     if name not in allowed:
         raise ValueError(f"{option} {name!r}: must be one of {', '.join(allowed)}")
     return name
 
 
-def _water_name(name: str) -> str:
-    return _one_of("--water", name, sorted(WATER_PRESETS))
+def water_name(name: str) -> str:
+    """``--water``: a water preset's name."""
+    return one_of("--water", name, sorted(WATER_PRESETS))
 
 
-def _positive(option: str, value: float) -> float:
+def positive_number(option: str, value: float) -> float:
+    """``value`` if it is a finite number above 0, else ValueError naming ``option``."""
     if not (math.isfinite(value) and value > 0.0):
         raise ValueError(f"{option} {value!r}: must be a number > 0")
     return value
 
 
-def _count(option: str, value: int) -> int:
+def count_option(option: str, value: int) -> int:
+    """``value`` if it is at least 1, else ValueError naming ``option``."""
     if value < 1:
         raise ValueError(f"{option} {value!r}: must be an integer >= 1")
     return value
 
 
-def _attenuation(name: str) -> str:
+def attenuation_rule(name: str) -> str:
+    """``--attenuation``: one of the attenuation rules (:data:`muls.water.properties.ATTENUATION_MODELS`)."""
     from ..water.properties import ATTENUATION_MODELS
 
-    return _one_of("--attenuation", name, ATTENUATION_MODELS)
+    return one_of("--attenuation", name, ATTENUATION_MODELS)
 
 
-def _fmt(v, digits: int = 3) -> str:
+def table_cell(v, digits: int = 3) -> str:
+    """A printed table's cell: "-" for None, a float with ``digits`` decimals, anything else as str."""
     if v is None:
         return "-"
     if isinstance(v, float):
@@ -47,11 +52,13 @@ def _fmt(v, digits: int = 3) -> str:
     return str(v)
 
 
-def _waters() -> str:
+def water_names() -> str:
+    """The water presets' names, for a help text."""
     return ", ".join(sorted(WATER_PRESETS))
 
 
-def _common(p, plot=True, out_type=output_file):
+def add_output_options(p, plot=True, out_type=output_file):
+    """``--json`` and, for a subcommand that draws (``plot``), ``--out`` (of type ``out_type``) and ``--no-plot``."""
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     if plot:
         p.add_argument("--out", default=None, type=out_type(),

@@ -16,7 +16,7 @@ from ..infra.atomic import write_atomically
 from ..infra.command import fraction, nonempty, output_dir, positive_float, positive_int, seed
 from ..presets import water_preset
 from ..validation import mobley1993
-from .arguments import _attenuation, _common, _count, _fmt, _water_name, _waters
+from .arguments import add_output_options, attenuation_rule, count_option, table_cell, water_name, water_names
 
 
 def _packets(option: str, value: int, factor: int = 1) -> int:
@@ -25,7 +25,7 @@ def _packets(option: str, value: int, factor: int = 1) -> int:
     from ..montecarlo.run import max_packets
 
     limit = max_packets() // factor
-    if _count(option, value) > limit:
+    if count_option(option, value) > limit:
         raise ValueError(f"{option} = {value}: at most {limit:,} (the Monte Carlo numbers its packets in 64 bits)")
     return value
 
@@ -43,13 +43,13 @@ MULTISCATTER_KEYS = ("time_ns", "mc_w", "mc_rel_err", "muls_w", "mc_column_w", "
 
 
 def _cmd_multiscatter(args):
-    water = _water_name(args.water)
+    water = water_name(args.water)
     range_m = studies.multiscatter.check_range_m("--range-m", water_preset(water), args.range_m,
                                                 _geometry(args.geometry))
     full = studies.multiscatter_study(water, range_m,
                                          geometry=_geometry(args.geometry), packets=_packets("--packets", args.packets),
                                          seed=args.seed, reflectance=args.reflectance,
-                                         attenuation_model=_attenuation(args.attenuation))
+                                         attenuation_model=attenuation_rule(args.attenuation))
     d = full["details"]
     tg = full["target"]
     rules = d["attenuation_rules_per_m"]
@@ -59,18 +59,18 @@ def _cmd_multiscatter(args):
              f"{d['reflectance']:g}), {d['phase']} phase function, {full['packets']:,} packets, seed {d['seed']} "
              f"({full['seconds']:.1f} s)",
              f"target echo energy: Monte Carlo {tg['mc_energy_j']:.4g} J ({mc_err}), MULS {tg['muls_energy_j']:.4g} J, "
-             f"ratio {_fmt(tg['ratio'], 4)}",
-             f"effective attenuation of the echo: {_fmt(full['effective_attenuation_per_m'], 4)} /m (MULS k_lidar "
+             f"ratio {table_cell(tg['ratio'], 4)}",
+             f"effective attenuation of the echo: {table_cell(full['effective_attenuation_per_m'], 4)} /m (MULS k_lidar "
              f"{rules['muls_k_lidar']:.4f}, c {rules['muls_c']:.4f}, kd {rules['muls_kd']:.4f}; the water uses "
              f"{rules['muls_model']})",
-             f"column peak: Monte Carlo / MULS {_fmt(full['column_peak_ratio'], 3)} (at {d['mc_column_peak_time_ns']:.1f}"
-             f" vs {d['muls_column_peak_time_ns']:.1f} ns; first scattering alone {_fmt(d['column_first_peak_ratio'], 4)};"
-             f" beta_pi of the phase function / MULS's {_fmt(d['beta_pi_ratio'], 3)})",
+             f"column peak: Monte Carlo / MULS {table_cell(full['column_peak_ratio'], 3)} (at {d['mc_column_peak_time_ns']:.1f}"
+             f" vs {d['muls_column_peak_time_ns']:.1f} ns; first scattering alone {table_cell(d['column_first_peak_ratio'], 4)};"
+             f" beta_pi of the phase function / MULS's {table_cell(d['beta_pi_ratio'], 3)})",
              f"{'time ns':>8s} {'MC W':>11s} {'rel err':>8s} {'MULS W':>11s} {'MC/MULS':>8s}"]
     step = max(1, len(full["time_ns"]) // 24)
     for t, mc, err, mu in list(zip(full["time_ns"], full["mc_w"], full["mc_rel_err"], full["muls_w"]))[::step]:
         ratio = f"{mc / mu:8.3g}" if mu > 0 else "       -"
-        lines.append(f"{t:8.1f} {mc:11.4g} {_fmt(err, 3):>8s} {mu:11.4g} {ratio}")
+        lines.append(f"{t:8.1f} {mc:11.4g} {table_cell(err, 3):>8s} {mu:11.4g} {ratio}")
     from ..plots import plot_multiscatter
 
     result = {k: full[k] for k in MULTISCATTER_KEYS}
@@ -78,10 +78,10 @@ def _cmd_multiscatter(args):
 
 
 def _cmd_multiscatter_study(args):
-    waters = [_water_name(w) for w in args.waters]
+    waters = [water_name(w) for w in args.waters]
     result = studies.multiscatter_waters_study(waters, packets=_packets("--packets", args.packets), seed=args.seed,
                                                   geometry=_geometry(args.geometry),
-                                                  attenuation_model=_attenuation(args.attenuation))
+                                                  attenuation_model=attenuation_rule(args.attenuation))
     s = result["settings"]
     lines = [f"Monte Carlo / MULS, {s['geometry']}, flat 0.1 plate, {s['phase']} phase function, MULS's own rule "
              f"{s['attenuation_model']} (its maximum range, the correction table), "
@@ -94,7 +94,7 @@ def _cmd_multiscatter_study(args):
         for row in result[w]["ranges"]:
             r = row["ratio"]
             lines.append(f"{w:14s} {row['range_m']:7.2f} {r['k_lidar']:9.3g} {r['c']:9.3g} {r['kd']:9.3g} "
-                         f"{r['small_angle']:9.3g} {row['closest_rule']:>11s} {_fmt(row['geometry'], 3):>8s} "
+                         f"{r['small_angle']:9.3g} {row['closest_rule']:>11s} {table_cell(row['geometry'], 3):>8s} "
                          f"{row['effective_attenuation_per_m']:8.3f} {row['mc_rel_err']:6.1%}")
     lines.append("water column peak, MC / MULS (MULS's beta_pi; with the phase function's beta_pi), first-order "
                  "share, and the detection range MULS needs vs the MC implies:")
@@ -149,7 +149,7 @@ def _cmd_mobley1993(args):
 def _cmd_validate_pass(args):
     from ..validation.validate import MAX_MC_REL_ERR, check_packets, validate_pass, verdict
 
-    waters = tuple(_water_name(w) for w in args.waters)
+    waters = tuple(water_name(w) for w in args.waters)
     full = validate_pass(waters, packets=check_packets("--packets", _packets("--packets", args.packets)),
                          seed=args.seed)
     lines = [f"consistency of the scattering tables: the pass's waveform model (monte_carlo attenuation, finite "
@@ -177,7 +177,7 @@ FOLDER_OUTPUTS = ("multiscatter-study",)
 
 
 def _add_multiscatter(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--water", required=True, type=nonempty(), help=f"water preset ({_waters()})")
+    p.add_argument("--water", required=True, type=nonempty(), help=f"water preset ({water_names()})")
     p.add_argument("--range-m", type=positive_float(), required=True, help="plate range [m]: beyond the geometry's "
                    "blind zone (mul2023: 1.68 m), up to where absorption leaves e^-40 of the light")
     p.add_argument("--geometry", default="mul2023", type=nonempty(),
@@ -187,19 +187,19 @@ def _add_multiscatter(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed(), default=0)
     p.add_argument("--attenuation", default="small_angle", type=nonempty(),
                    help="MULS's attenuation rule (k_lidar, c, kd, small_angle)")
-    _common(p)
+    add_output_options(p)
     p.set_defaults(run=_cmd_multiscatter)
 
 
 def _add_multiscatter_study(p: argparse.ArgumentParser) -> None:
     p.add_argument("--waters", nargs="+", type=nonempty(), default=list(studies.STUDY_WATERS),
-                   help=f"water presets ({_waters()})")
+                   help=f"water presets ({water_names()})")
     p.add_argument("--geometry", default="mul2023", type=nonempty(), help="mul2023 or coaxial")
     p.add_argument("--packets", type=positive_int(), default=studies.STUDY_PACKETS, help="beam packets per water")
     p.add_argument("--seed", type=seed(), default=0)
     p.add_argument("--attenuation", default="small_angle", type=nonempty(),
                    help="MULS's own rule for its maximum range and the correction table (k_lidar, c, kd, small_angle)")
-    _common(p, out_type=output_dir)  # a folder: the study's chart and its JSON
+    add_output_options(p, out_type=output_dir)  # a folder: the study's chart and its JSON
     p.set_defaults(run=_cmd_multiscatter_study)
 
 
@@ -207,7 +207,7 @@ def _add_mobley1993(p: argparse.ArgumentParser) -> None:
     p.add_argument("--photons", type=positive_int(), default=mobley1993.DEFAULT_PHOTONS,
                    help="photons per run at albedo 0.9; the runs at albedo 0.2 trace 5 times as many")
     p.add_argument("--seed", type=seed(), default=0)
-    _common(p)
+    add_output_options(p)
     p.set_defaults(run=_cmd_mobley1993)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 
 from ..infra.command import fraction, nonempty, positive_float, positive_int, seed
-from .arguments import _common, _water_name, _waters
+from .arguments import add_output_options, water_name, water_names
 
 DEFAULT_OUT = {"sensitivity": "sensitivity.png", "pond-unknowns": ""}
 FOLDER_OUTPUTS = ()
@@ -25,7 +25,7 @@ def _water(args):
         index = GROUP_INDEX_FRESHWATER if args.fresh else GROUP_INDEX_SEAWATER
         return Water.from_attenuation(f"c {args.c_per_m:g} a {args.a_per_m:g}", args.c_per_m, args.a_per_m,
                                       group_index=index, source="given on the command line")
-    return _water_name(args.water or "pond")
+    return water_name(args.water or "pond")
 
 
 def _cmd_sensitivity(args):
@@ -55,7 +55,7 @@ def _cmd_sensitivity(args):
 def _add_sensitivity(p: argparse.ArgumentParser) -> None:
     from ..studies.sensitivity import SENSITIVITY_PACKETS
 
-    p.add_argument("--water", default=None, type=nonempty(), help=f"water preset ({_waters()}); default pond")
+    p.add_argument("--water", default=None, type=nonempty(), help=f"water preset ({water_names()}); default pond")
     p.add_argument("--c-per-m", type=positive_float(), default=None, help="beam attenuation c [1/m] (with --a-per-m)")
     p.add_argument("--a-per-m", type=positive_float(), default=None, help="absorption a [1/m] (with --c-per-m)")
     p.add_argument("--fresh", action="store_true", help="fresh water's group index (with --c-per-m/--a-per-m)")
@@ -63,7 +63,7 @@ def _add_sensitivity(p: argparse.ArgumentParser) -> None:
                    help="beam packets of each member's table run (the default member uses the model's own tables)")
     p.add_argument("--reflectance", type=fraction(), default=0.1, help="the plate's Lambertian reflectance")
     p.add_argument("--seed", type=seed(), default=None, help="seed of the members' runs (default the tables' own)")
-    _common(p)
+    add_output_options(p)
     p.set_defaults(run=_cmd_sensitivity)
 
 
@@ -92,7 +92,7 @@ def _add_pond_unknowns(p: argparse.ArgumentParser) -> None:
     p.add_argument("--shots", type=positive_int(), default=1000, help="static shots at each distance")
     p.add_argument("--seed", type=seed(), default=0)
     p.add_argument("--ranging", default="prototype", type=nonempty(), help="prototype or template")
-    _common(p, plot=False)
+    add_output_options(p, plot=False)
     p.set_defaults(run=_cmd_pond_unknowns, no_plot=True, out=None)
 
 

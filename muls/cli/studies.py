@@ -22,19 +22,28 @@ from ..infra.command import (
     seed,
 )
 from ..studies.common import check_pulse_memory
-from .arguments import _attenuation, _common, _count, _fmt, _one_of, _positive, _water_name, _waters
+from .arguments import (
+    add_output_options,
+    attenuation_rule,
+    count_option,
+    one_of,
+    positive_number,
+    table_cell,
+    water_name,
+    water_names,
+)
 
 
 def _shots(option: str, value: int, per_shot: int, what: str, unit: str = "shots", mode: str = "windowed") -> int:
     """A count of pulses, ``per_shot`` of them in one simulate call each (``what`` they are, e.g. "3 distances"):
     refused before allocating when that call needs more memory than the command may plan on."""
-    check_pulse_memory(option, _count(option, value), per_shot, f"{what}{value:,} {unit}", unit, mode)
+    check_pulse_memory(option, count_option(option, value), per_shot, f"{what}{value:,} {unit}", unit, mode)
     return value
 
 
 def _gate_s(args) -> tuple[float | None, float | None]:
     delay = None if args.gate_delay_ns is None else args.gate_delay_ns * 1e-9
-    width = None if args.gate_width_ns is None else _positive("--gate-width-ns", args.gate_width_ns) * 1e-9
+    width = None if args.gate_width_ns is None else positive_number("--gate-width-ns", args.gate_width_ns) * 1e-9
     if delay is not None and not (math.isfinite(delay) and delay >= 0.0):
         raise ValueError(f"--gate-delay-ns {args.gate_delay_ns!r}: must be a number >= 0")
     return delay, width
@@ -42,9 +51,9 @@ def _gate_s(args) -> tuple[float | None, float | None]:
 
 def _cmd_waveform(args):
     delay, width = _gate_s(args)
-    result = studies.waveform_study(_water_name(args.water), _positive("--range-m", args.range_m), seed=args.seed,
+    result = studies.waveform_study(water_name(args.water), positive_number("--range-m", args.range_m), seed=args.seed,
                                     reflectance=args.reflectance, gate_delay_s=delay, gate_width_s=width,
-                                    attenuation_model=_attenuation(args.attenuation))
+                                    attenuation_model=attenuation_rule(args.attenuation))
     s = result["settings"]
     lines = [f"waveform: {s['water']}, panel at {s['range_m']:g} m (reflectance {s['reflectance']:g}), "
              f"CH3 gate {s['gate_delay_ns']:g}/{s['gate_width_ns']:g} ns, seed {s['seed']}, full record"]
@@ -65,12 +74,12 @@ def _cmd_waveform(args):
 
 
 def _cmd_maxrange(args):
-    waters = [_water_name(w) for w in args.waters]
+    waters = [water_name(w) for w in args.waters]
     from ..studies.maxrange import MAX_BATCH_RANGES
 
     shots = _shots("--shots", args.shots, MAX_BATCH_RANGES, f"up to {MAX_BATCH_RANGES} ranges at once x ")
     result = studies.maxrange_study(waters, shots=shots, seed=args.seed,
-                                    reflectance=args.reflectance, attenuation_model=_attenuation(args.attenuation))
+                                    reflectance=args.reflectance, attenuation_model=attenuation_rule(args.attenuation))
     s = result["settings"]
     lines = [f"maximum detectable range [m]: reflectance {s['reflectance']:g}, >= {s['detection_fraction']:.0%} "
              f"of {s['shots']} pulses within {s['tolerance_bins']} range bins, {s['attenuation_model']} attenuation, "
@@ -80,27 +89,28 @@ def _cmd_maxrange(args):
     for w in s["waters"]:
         r = result[w]
         g = r["gains"]
-        lines.append(f"{w:15s} {_fmt(r['single_channel_m'], 1):>7s} {_fmt(r['near_field_m'], 1):>7s} "
-                     f"{_fmt(r['far_field_m'], 1):>7s} {_fmt(r['total_m'], 1):>7s} {_fmt(r['improvement'], 2):>12s}  "
+        lines.append(f"{w:15s} {table_cell(r['single_channel_m'], 1):>7s} {table_cell(r['near_field_m'], 1):>7s} "
+                     f"{table_cell(r['far_field_m'], 1):>7s} {table_cell(r['total_m'], 1):>7s} "
+                     f"{table_cell(r['improvement'], 2):>12s}  "
                      f"{g['single']:>6.1f}/{g['pmt1']:>6.0f}/{g['pmt2']:>6.0f}")
     lines.append("limited by (the best channel one step beyond each edge: its SNR, and the cause):")
     for w in s["waters"]:
         cells = []
         for group, lim in result[w]["limits"].items():
             cells.append(f"{group} -" if lim is None else
-                         f"{group} {lim['channel']} {lim['cause']} (SNR {_fmt(lim['snr'], 1)})")
+                         f"{group} {lim['channel']} {lim['cause']} (SNR {table_cell(lim['snr'], 1)})")
         lines.append(f"{w:15s} " + "; ".join(cells))
     result["settings"] = {**s, "phase_function": "petzold (default)", "band": bool(args.band)}
     if args.band:
         from ..studies.bands import MAXRANGE_FIGURES, maxrange_band
 
         result["band"] = maxrange_band(waters, shots=shots, reflectance=args.reflectance, seed=args.seed,
-                                       attenuation_model=_attenuation(args.attenuation))
+                                       attenuation_model=attenuation_rule(args.attenuation))
         lines.append(f"band [low median high] over {len(result['band']['phase_functions'])} phase functions:")
         for w, b in result["band"]["waters"].items():
             lines.append(f"{w:15s} " + "; ".join(
-                f"{f.removesuffix('_m')} [{_fmt(b['figures'][f]['low'], 1)} {_fmt(b['figures'][f]['median'], 1)} "
-                f"{_fmt(b['figures'][f]['high'], 1)}]" for f in MAXRANGE_FIGURES))
+                f"{f.removesuffix('_m')} [{table_cell(b['figures'][f]['low'], 1)} {table_cell(b['figures'][f]['median'], 1)} "
+                f"{table_cell(b['figures'][f]['high'], 1)}]" for f in MAXRANGE_FIGURES))
     lines.append("phase function: petzold (default); " + ("band computed" if args.band else "no band (--band)"))
     from ..plots import plot_maxrange
 
@@ -109,30 +119,30 @@ def _cmd_maxrange(args):
 
 def _cmd_precision(args):
     delay, width = _gate_s(args)
-    ranges = [_positive("--ranges-m", r) for r in args.ranges_m]
+    ranges = [positive_number("--ranges-m", r) for r in args.ranges_m]
     shots = _shots("--shots", args.shots, len(ranges), f"{len(ranges)} ranges x ")
-    result = studies.precision_study(_water_name(args.water), ranges, shots=shots,
+    result = studies.precision_study(water_name(args.water), ranges, shots=shots,
                                      seed=args.seed, reflectance=args.reflectance, gate_delay_s=delay,
-                                     gate_width_s=width, attenuation_model=_attenuation(args.attenuation))
+                                     gate_width_s=width, attenuation_model=attenuation_rule(args.attenuation))
     s = result["settings"]
     lines = [f"range precision: {s['water']}, {s['shots']} shots per range, CH3 gate {s['gate_delay_ns']:g}/"
              f"{s['gate_width_ns']:g} ns, detection within {s['tolerance_m']:.3f} m, seed {s['seed']}",
              f"{'range m':>8s} {'channel':8s} {'std m':>8s} {'mean dev m':>11s} {'detected':>9s} {'clipped':>8s}"]
     for key in (k for k in result if k != "settings"):
         for ch, st in result[key].items():
-            lines.append(f"{key:>8s} {ch:8s} {_fmt(st['precision_m'], 4):>8s} {_fmt(st['mean_deviation_m'], 4):>11s} "
-                         f"{_fmt(st['detected_fraction'], 3):>9s} {_fmt(st['saturated_fraction'], 3):>8s}")
+            lines.append(f"{key:>8s} {ch:8s} {table_cell(st['precision_m'], 4):>8s} {table_cell(st['mean_deviation_m'], 4):>11s} "
+                         f"{table_cell(st['detected_fraction'], 3):>9s} {table_cell(st['saturated_fraction'], 3):>8s}")
     from ..plots import plot_precision
 
     return result, "\n".join(lines), plot_precision
 
 
 def _cmd_edge_bias(args):
-    waters = [_water_name(w) for w in args.waters] if args.waters else None
-    ranges = [_positive("--ranges-m", r) for r in args.ranges_m]
+    waters = [water_name(w) for w in args.waters] if args.waters else None
+    ranges = [positive_number("--ranges-m", r) for r in args.ranges_m]
     shots = _shots("--shots", args.shots, len(ranges), f"{len(ranges)} ranges x ")
     result = studies.edge_bias_study(waters, ranges, shots=shots, seed=args.seed, reflectance=args.reflectance,
-                                     attenuation_model=_attenuation(args.attenuation))
+                                     attenuation_model=attenuation_rule(args.attenuation))
     s = result["settings"]
     lines = [f"range bias at the blind-zone edge: plate {s['reflectance']:g} at normal incidence, {s['shots']} shots "
              f"per range, {s['attenuation_model']} attenuation, CH3 gate {s['gate_delay_ns']:g}/{s['gate_width_ns']:g} "
@@ -158,13 +168,13 @@ def _cmd_edge_bias(args):
 def _experiment_name(name: str) -> str:
     from ..experiments import EXPERIMENTS
 
-    return _one_of("experiment", name, EXPERIMENTS)
+    return one_of("experiment", name, EXPERIMENTS)
 
 
 def _ranging(name: str) -> str:
     from ..experiments import RANGING
 
-    return _one_of("--ranging", name, RANGING)
+    return one_of("--ranging", name, RANGING)
 
 
 #: The keys ``muls experiment --json`` prints (the study also returns the waveforms, for the picture).
@@ -174,7 +184,7 @@ EXPERIMENT_KEYS = ("distances", "settings")
 def _cmd_experiment(args):
     from ..experiments import experiment_preset
 
-    exp = experiment_preset(_experiment_name(args.experiment), _attenuation(args.attenuation))
+    exp = experiment_preset(_experiment_name(args.experiment), attenuation_rule(args.attenuation))
     shots = _shots("--shots", args.shots, len(exp.distances_m), f"{len(exp.distances_m)} distances x ")
     full = studies.experiment_study(exp, shots=shots, seed=args.seed,
                                     ranging=_ranging(args.ranging), waveforms=not args.no_plot)
@@ -193,9 +203,9 @@ def _cmd_experiment(args):
         for ch, st in chans.items():
             cells = "" if band is None else "  [{low:.3f} {median:.3f} {high:.3f}]".format(
                 **band["distances"][key][ch]["detected_fraction"])
-            lines.append(f"{key:>6s} {ch:4s} {_fmt(st['detected_fraction'], 3):>8s} {_fmt(st['precision_m'], 4):>8s} "
-                         f"{_fmt(st['mean_abs_deviation_m'], 4):>8s} {_fmt(st['bias_m'], 4):>8s} "
-                         f"{_fmt(st['clipped_fraction'], 3):>8s}{cells}")
+            lines.append(f"{key:>6s} {ch:4s} {table_cell(st['detected_fraction'], 3):>8s} {table_cell(st['precision_m'], 4):>8s} "
+                         f"{table_cell(st['mean_abs_deviation_m'], 4):>8s} {table_cell(st['bias_m'], 4):>8s} "
+                         f"{table_cell(st['clipped_fraction'], 3):>8s}{cells}")
     lines.append("phase function: petzold (default)" + ("; no band computed (--no-band)" if band is None else
                  f"; band over {len(band['members'])} phase functions: {', '.join(band['members'])}"))
     from ..plots import plot_experiment
@@ -223,15 +233,15 @@ def _dump_json(result, path):
 def _cmd_budget(args):
     from ..studies.budget import budget_table
 
-    result = studies.budget_study(_attenuation(args.attenuation))
+    result = studies.budget_study(attenuation_rule(args.attenuation))
     head = (f"photon budget, {result['settings']['attenuation_model']} attenuation, panel "
             f"{result['settings']['reflectance']:g}: photoelectrons / echo peak LSB / SNR per channel")
     return result, "\n".join([head] + budget_table(result)), None
 
 
 def _cmd_coaxial(args):
-    rule = _attenuation(args.attenuation)
-    result = studies.coaxial_study(_water_name(args.water), attenuation_model=rule)
+    rule = attenuation_rule(args.attenuation)
+    result = studies.coaxial_study(water_name(args.water), attenuation_model=rule)
     s = result["settings"]
     text = (f"coaxial vs non-coaxial water-column backscatter in {s['water']}:\n"
             f"  peak coaxial {result['coaxial_peak_w']:.4g} W at {result['coaxial_peak_time_ns']:.1f} ns, "
@@ -249,7 +259,7 @@ def _cmd_coaxial(args):
 def _cmd_bench(args):
     result = studies.bench_study(pulses=_shots("--pulses", args.pulses, 1, "", "windowed pulses"),
                                  full_pulses=_shots("--full-pulses", args.full_pulses, 1, "", "full records", "full"),
-                                 repeats=_count("--repeats", args.repeats))
+                                 repeats=count_option("--repeats", args.repeats))
     m = result["machine"]
     lines = [f"simulate (waveform + digitise + ranging), {result['settings']['water']}, mul2023, "
              f"{m['cpu_count']} CPUs, {m['numba_threads']} numba threads, load {m['loadavg_1_5_15']}"]
@@ -267,7 +277,7 @@ FOLDER_OUTPUTS = ("experiment",)
 
 
 def _add_waveform(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--water", default="pond", type=nonempty(), help=f"water preset ({_waters()})")
+    p.add_argument("--water", default="pond", type=nonempty(), help=f"water preset ({water_names()})")
     p.add_argument("--range-m", type=positive_float(), default=11.5, help="panel range [m]")
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--seed", type=seed(), default=0)
@@ -276,7 +286,7 @@ def _add_waveform(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gate-width-ns", type=positive_float(), default=None, help="CH3 gate width [ns]")
     p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
                    help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
-    _common(p)
+    add_output_options(p)
     p.set_defaults(run=_cmd_waveform)
 
 
@@ -285,17 +295,17 @@ def _add_maxrange(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed(), default=0)
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--waters", nargs="+", type=nonempty(), default=list(studies.MAXRANGE_WATERS),
-                   help=f"water presets ({_waters()})")
+                   help=f"water presets ({water_names()})")
     p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
                    help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
     p.add_argument("--band", action="store_true",
                    help="each figure's band over the family of phase functions (the study once per member)")
-    _common(p)
+    add_output_options(p)
     p.set_defaults(run=_cmd_maxrange)
 
 
 def _add_precision(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--water", default="pond", type=nonempty(), help=f"water preset ({_waters()})")
+    p.add_argument("--water", default="pond", type=nonempty(), help=f"water preset ({water_names()})")
     p.add_argument("--ranges-m", type=positive_float(), nargs="+", default=[8.5, 10.0, 11.5], help="panel ranges [m]")
     p.add_argument("--shots", type=positive_int(), default=1000)
     p.add_argument("--seed", type=seed(), default=0)
@@ -304,12 +314,12 @@ def _add_precision(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gate-width-ns", type=positive_float(), default=None)
     p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
                    help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
-    _common(p)
+    add_output_options(p)
     p.set_defaults(run=_cmd_precision)
 
 
 def _add_edge_bias(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--waters", nargs="+", type=nonempty(), default=None, help=f"water presets (default all: {_waters()})")
+    p.add_argument("--waters", nargs="+", type=nonempty(), default=None, help=f"water presets (default all: {water_names()})")
     p.add_argument("--ranges-m", type=positive_float(), nargs="+", default=list(studies.EDGE_RANGES_M),
                    help="plate ranges [m] (default 1.60 to 2.20 m in 5 cm steps)")
     p.add_argument("--shots", type=positive_int(), default=200, help="noisy pulses per range and water")
@@ -317,7 +327,7 @@ def _add_edge_bias(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
                    help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
-    _common(p, plot=False)
+    add_output_options(p, plot=False)
     p.set_defaults(run=_cmd_edge_bias, no_plot=True, out=None)
 
 
@@ -331,22 +341,22 @@ def _add_experiment(p: argparse.ArgumentParser) -> None:
                    help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
     p.add_argument("--no-band", action="store_true",
                    help="skip the band over the family of phase functions (one more run per member)")
-    _common(p, out_type=output_dir)  # a folder: experiment.json and experiment.png
+    add_output_options(p, out_type=output_dir)  # a folder: experiment.json and experiment.png
     p.set_defaults(run=_cmd_experiment)
 
 
 def _add_budget(p: argparse.ArgumentParser) -> None:
     p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
                    help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
-    _common(p, plot=False)
+    add_output_options(p, plot=False)
     p.set_defaults(run=_cmd_budget)
 
 
 def _add_coaxial(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--water", default="turbid_harbor", type=nonempty(), help=f"water preset ({_waters()})")
+    p.add_argument("--water", default="turbid_harbor", type=nonempty(), help=f"water preset ({water_names()})")
     p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
                    help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
-    _common(p)
+    add_output_options(p)
     p.set_defaults(run=_cmd_coaxial)
 
 
@@ -354,7 +364,7 @@ def _add_bench(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pulses", type=positive_int(), default=100_000, help="windowed-mode pulses")
     p.add_argument("--full-pulses", type=positive_int(), default=10_000, help="full-record pulses")
     p.add_argument("--repeats", type=positive_int(), default=3)
-    _common(p, plot=False)
+    add_output_options(p, plot=False)
     p.set_defaults(run=_cmd_bench)
 
 
