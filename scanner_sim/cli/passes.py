@@ -152,6 +152,10 @@ def set_overrides(items: list[str]) -> dict:
 def scene_overrides(args, config) -> dict:
     """The scene keys that ``run``'s options set, by dotted name (validated later with the scene)."""
     changes = set_overrides(args.set)
+    for key, value in (("water", args.water), ("survey.seed", args.seed), ("survey.fidelity", args.fidelity),
+                       ("survey.max_pulses", args.max_pulses), ("survey.chunk_pulses", args.chunk_pulses)):
+        if value is not None:
+            changes[key] = value
     if args.altitude_m is not None:
         changes["platform.altitude_m"] = args.altitude_m
     if args.gate_delay_ns is not None or args.gate_width_ns is not None:
@@ -201,8 +205,8 @@ def _cmd_run(args) -> int:
 
     config = load_scene(args.scene)
     config = config.with_overrides(scene_overrides(args, config))
-    # The picture process starts once the scene is known good, before the pass's own imports (a second), so that it
-    # loads pyvista beside them and the set-up rather than beside the pass.
+    # The picture process starts once the scene and the options are known good, before the pass's own imports (a
+    # second), so that it loads pyvista beside them and the set-up rather than beside the pass.
     with (contextlib.nullcontext() if args.no_render else PictureWorker()) as pictures:
         return _run_scene(args, config, pictures)
 
@@ -214,9 +218,7 @@ def _run_scene(args, config, pictures) -> int:
     from scanner_sim.survey.pipeline import check_bag_dir, run_pass
     from scanner_sim.survey.setup import PassOptions
 
-    options = PassOptions(water=args.water, seed=args.seed, fidelity=args.fidelity, max_pulses=args.max_pulses,
-                          chunk_pulses=args.chunk_pulses, waveforms=args.waveforms, progress=not args.quiet,
-                          render=not args.no_render)
+    options = PassOptions(waveforms=args.waveforms, progress=not args.quiet, render=not args.no_render)
     out = Path(args.out or config.output_dir)
     bag = config.output.rosbag
     check_bag_dir(bag, out)  # before the bag's lock would create its parent folder
