@@ -81,8 +81,8 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     first: ``PassSetup.ranging_s``). A scene with a seabed also gets its coverage: the
     summary's ``coverage``, coverage_grid.npz and, when rendering, coverage_map.png. ``scene`` reuses a built scene;
     ``picture_process``: a :class:`~scanner_sim.render.worker.PictureWorker` the caller started earlier (``scanner-sim
-    run`` starts it before the pass's imports, so that it loads its libraries beside them), used for render.png and
-    closed by the pass (else the pass starts its own).
+    run`` starts it before the pass's imports, so that it loads its libraries beside them), used for the pictures
+    and closed by the pass (else the pass starts its own).
     """
     if out_dir is not None and not isinstance(out_dir, (str, os.PathLike)):
         raise TypeError(f"out_dir must be a folder path (str or Path) or None, not {type(out_dir).__name__} {out_dir!r}")
@@ -314,7 +314,7 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     the pictures while this one writes the rest (:func:`picture_worker`; None: drawn here)."""
     facts, files, output = pass_facts(setup, options), setup.plan.files, setup.config.output
     render = "render.png" in files
-    draw = pictures.draw_here if worker is None else worker.draw  # render.png's; the plan maps are drawn here
+    draw = pictures.draw_here if worker is None else worker.draw
     if render and worker is not None:  # the child builds the plotter and the mesh while the pass runs
         pictures.prepare_render(setup.scene, options.render_size, draw)
     with ExitStack() as stack:
@@ -334,6 +334,10 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     summary["uncertainty"] = uncertainty_figures(setup, uncertainty, stats.pulses)
     if coverage is not None:
         summary["coverage"] = coverage.write(out / "coverage_grid.npz")
+    if "coverage_map.png" in files:
+        pictures.render_coverage_map(out / "coverage_map.png", coverage, setup.scene, facts, summary["coverage"], draw)
+    if "s44_map.png" in files:
+        pictures.render_order_map(out / "s44_map.png", coverage, facts, summary["coverage"], draw)
     if "scene.ply" in files:
         scene = setup.scene
         io.write_scene_ply(out / "scene.ply", scene.vertices, scene.faces, scene.face_label, scene.face_object)
@@ -345,10 +349,6 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
         write_gis_products(out, crs, coverage, table, setup.trajectory.waypoints_xy_m)
     if "waveforms.npz" in files:
         waveforms.write(out / "waveforms.npz")
-    if "coverage_map.png" in files:  # while the child renders render.png
-        pictures.render_coverage_map(out / "coverage_map.png", coverage, setup.scene, facts, summary["coverage"])
-    if "s44_map.png" in files:
-        pictures.render_order_map(out / "s44_map.png", coverage, facts, summary["coverage"])
     if worker is not None:
         worker.finish()
     io.write_summary_json(out / "summary.json", summary)  # last: a complete pass is one with a summary
@@ -356,12 +356,13 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
 
 
 def picture_worker(plan: PassPlan, started: PictureWorker | None = None) -> PictureWorker | None:
-    """A :class:`~scanner_sim.render.worker.PictureWorker` for render.png of ``plan``: ``started``, or one started now
-    so that it loads its libraries while the pass is set up; None (``started`` closed) when the plan has no
-    render.png, or when this process may not start one (a daemonic process, such as a multiprocessing pool's worker:
-    its pictures are drawn in it)."""
-    if "render.png" not in plan.files or multiprocessing.current_process().daemon:
+    """A :class:`~scanner_sim.render.worker.PictureWorker` for the pictures of ``plan``: ``started``, or one started
+    now so that it loads its libraries while the pass is set up; None (``started`` closed) when the plan has no
+    picture, or when this process may not start one (a daemonic process, such as a multiprocessing pool's worker: its
+    pictures are drawn in it)."""
+    three_d = "render.png" in plan.files
+    if not (three_d or "coverage_map.png" in plan.files) or multiprocessing.current_process().daemon:
         if started is not None:
             started.close()
         return None
-    return started or PictureWorker()
+    return started or PictureWorker(three_d)
