@@ -21,6 +21,7 @@ pickled whole under its key and the SHA-256 of the pickle, read back only when b
 one); the cache is this user's own, as numba's pickled kernels beside it. The least recently used scenes go
 beyond :data:`SCENES_KEPT_BYTES`.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -184,15 +185,16 @@ def _read_scene(path: Path, key: str) -> Scene | SiteScene | None:
 
 
 def _write_scene(path: Path, key: str, scene: Scene | SiteScene) -> None:
-    """Store ``scene`` at ``path`` atomically; an unwritable cache is skipped."""
-    payload = pickle.dumps(scene, protocol=pickle.HIGHEST_PROTOCOL)
+    """Store ``scene`` at ``path`` atomically; an unwritable cache (or a scene holding what pickle cannot store) is
+    skipped: the next run builds it again."""
     try:
+        payload = pickle.dumps(scene, protocol=pickle.HIGHEST_PROTOCOL)
         fresh = not path.parent.exists()
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_open(path) as fh:
             fh.write(key.encode() + hashlib.sha256(payload).digest())
             fh.write(payload)
-    except OSError:
+    except (OSError, pickle.PicklingError, TypeError, AttributeError):
         return
     if fresh:
         _remove_stale(path.parent)
