@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import sys
 
@@ -200,24 +199,16 @@ def _first_run_notice() -> bool:
 
 
 def _cmd_run(args) -> int:
-    from scanner_sim.config import load_scene
-    from scanner_sim.render.worker import PictureWorker
-
-    config = load_scene(args.scene)
-    config = config.with_overrides(scene_overrides(args, config))
-    # The picture process starts once the scene and the options are known good, before the pass's own imports (a
-    # second), so that it loads pyvista beside them and the set-up rather than beside the pass.
-    with (contextlib.nullcontext() if args.no_render else PictureWorker()) as pictures:
-        return _run_scene(args, config, pictures)
-
-
-def _run_scene(args, config, pictures) -> int:
+    import contextlib
     from pathlib import Path
 
+    from scanner_sim.config import load_scene
     from scanner_sim.io.run_dir import hold_output
     from scanner_sim.survey.pipeline import check_bag_dir, run_pass
     from scanner_sim.survey.setup import PassOptions
 
+    config = load_scene(args.scene)
+    config = config.with_overrides(scene_overrides(args, config))
     options = PassOptions(waveforms=args.waveforms, progress=not args.quiet, render=not args.no_render)
     out = Path(args.out or config.output_dir)
     bag = config.output.rosbag
@@ -225,7 +216,7 @@ def _run_scene(args, config, pictures) -> int:
     with hold_output(out), (hold_output(bag.dir) if bag and bag.dir else contextlib.nullcontext()):
         # taken before the pass is built, so a second writer is refused at once
         compiling = _first_run_notice()
-        summary = run_pass(config, out, options, picture_process=pictures).summary
+        summary = run_pass(config, out, options).summary
     if compiling:
         print(f"first run: the kernels compiled in {summary['compile_s']:.0f} s (summary.json's compile_s; its "
               "pulses_per_s leaves it out)", file=sys.stderr, flush=True)

@@ -70,7 +70,7 @@ class PassResult:
 
 @abort_on_error  # an unfinished run (an error, Ctrl-C, SIGTERM) leaves the output folder as it was
 def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: PassOptions = PassOptions(),
-             scene: Scene | None = None, *, picture_process: PictureWorker | None = None) -> PassResult:
+             scene: Scene | None = None) -> PassResult:
     """Simulate the scene's pass and write its outputs in ``out_dir`` (default: the scene's output dir).
 
     The files are those of the pass's plan (:class:`~scanner_sim.survey.setup.PassPlan`): what the scene's
@@ -79,17 +79,14 @@ def run_pass(config: SceneConfig, out_dir: str | Path | None = None, options: Pa
     ``setup_s`` the scene, BVH and tables built before it, ``compile_s`` the kernels compiled or loaded from the
     cache before it (:func:`warm_up`, and the set-up's ranging table, through which the physics kernels compile
     first: ``PassSetup.ranging_s``). A scene with a seabed also gets its coverage: the
-    summary's ``coverage``, coverage_grid.npz and, when rendering, coverage_map.png. ``scene`` reuses a built scene;
-    ``picture_process``: a :class:`~scanner_sim.render.worker.PictureWorker` the caller started earlier (``scanner-sim
-    run`` starts it before the pass's imports, so that it loads its libraries beside them), used for the pictures
-    and closed by the pass (else the pass starts its own).
+    summary's ``coverage``, coverage_grid.npz and, when rendering, coverage_map.png. ``scene`` reuses a built scene.
     """
     if out_dir is not None and not isinstance(out_dir, (str, os.PathLike)):
         raise TypeError(f"out_dir must be a folder path (str or Path) or None, not {type(out_dir).__name__} {out_dir!r}")
     check_pass_arguments(config, options, scene)
     check_bag_dir(config.output.rosbag, Path(out_dir or config.output_dir))  # before the slow set-up
     with ExitStack() as stack:
-        worker = picture_worker(PassPlan.of(config, options), picture_process)
+        worker = picture_worker(PassPlan.of(config, options))
         if worker is not None:
             stack.enter_context(worker)  # an unfinished pass stops it
         t_setup = time.perf_counter()
@@ -355,14 +352,11 @@ def stream_to_files(setup: PassSetup, out: Path, chunks, options: PassOptions, s
     return summary
 
 
-def picture_worker(plan: PassPlan, started: PictureWorker | None = None) -> PictureWorker | None:
-    """A :class:`~scanner_sim.render.worker.PictureWorker` for the pictures of ``plan``: ``started``, or one started
-    now so that it loads its libraries while the pass is set up; None (``started`` closed) when the plan has no
-    picture, or when this process may not start one (a daemonic process, such as a multiprocessing pool's worker: its
-    pictures are drawn in it)."""
+def picture_worker(plan: PassPlan) -> PictureWorker | None:
+    """A :class:`~scanner_sim.render.worker.PictureWorker` for the pictures of ``plan``, started now so that it
+    loads its libraries while the pass is set up; None when the plan has no picture, or when this process may
+    not start one (a daemonic process, such as a multiprocessing pool's worker: its pictures are drawn in it)."""
     three_d = "render.png" in plan.files
     if not (three_d or "coverage_map.png" in plan.files) or multiprocessing.current_process().daemon:
-        if started is not None:
-            started.close()
         return None
-    return started or PictureWorker(three_d)
+    return PictureWorker(three_d)

@@ -14,7 +14,6 @@ import trimesh
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
 from scanner_sim.records.point_records import DROPOUT_CAUSES
-from scanner_sim.render.worker import PictureWorker
 from scanner_sim.survey.pipeline import last_cut, run_pass
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import LABELS
@@ -153,18 +152,6 @@ def test_run_writes_every_output(tmp_path):
         assert key in summary
     with np.load(out / "waveforms.npz") as wf:
         assert wf["ch0"].shape[0] == 3 and wf["ch1"].shape == wf["ch0"].shape
-
-
-def test_a_picture_process_started_ahead_draws_the_pass_or_is_closed_unused(tmp_path, cable_survey):
-    """``scanner-sim run`` starts the picture process before the pass's imports and hands it to run_pass, which
-    draws render.png in it, or closes it at once when the pass draws none (a scheduled drawing is then refused)."""
-    for render in (True, False):
-        worker = PictureWorker()
-        out = tmp_path / str(render)
-        run_pass(cable_survey, out, PassOptions(max_pulses=2000, render=render, progress=False), picture_process=worker)
-        assert (out / "render.png").exists() == (out / "coverage_map.png").exists() == render
-        with pytest.raises(RuntimeError, match="shutdown"):
-            worker.draw(print)
 
 
 def test_run_rejects_a_bad_water_in_one_line(capsys):
