@@ -18,8 +18,8 @@ triangles, 0.04 s to read back) is kept the same way by :func:`cached_scene` in 
 on the scene sections it is built from (seabed, objects, CRS; a raster's window follows the survey's plan), the
 path, size and modification time of the raster and mesh files they read, and the code. An entry is the scene
 pickled whole under its key and the SHA-256 of the pickle, read back only when both match (so never a damaged
-one); the cache is this user's own, as numba's pickled kernels beside it. The least recently used scenes go
-beyond :data:`SCENES_KEPT_BYTES`.
+one); the cache is this user's own, as numba's pickled kernels beside it. The least recently used scenes, of any
+source state, go beyond :data:`SCENES_KEPT_BYTES`.
 """
 
 from __future__ import annotations
@@ -117,8 +117,9 @@ def _write(path: Path, key: str, table: RangingPrecision) -> None:
         _remove_stale(path.parent)
 
 
-#: Bytes of built scenes kept per source state (the least recently used go beyond it): a campaign sweeping a seabed
-#: key writes one scene per value, some 30 MB for cable_survey's.
+#: Bytes of built scenes kept, all source states together (the least recently used go beyond it): a campaign
+#: sweeping a seabed key writes one scene per value, and each edit of the code a scene per scene run, some 30 MB for
+#: cable_survey's.
 SCENES_KEPT_BYTES = 1 << 30
 
 
@@ -198,14 +199,14 @@ def _write_scene(path: Path, key: str, scene: Scene | SiteScene) -> None:
         return
     if fresh:
         _remove_stale(path.parent)
-    _trim(path.parent, SCENES_KEPT_BYTES, keep=path)
+    _trim(scenes_dir(), SCENES_KEPT_BYTES, keep=path)
 
 
 def _trim(folder: Path, budget: int, keep: Path) -> None:
-    """Remove the least recently used scenes of ``folder`` (but ``keep``) until the rest hold at most ``budget``
-    bytes."""
+    """Remove the least recently used scenes under ``folder`` (of every source state; but ``keep``) until the rest
+    hold at most ``budget`` bytes."""
     entries = []
-    for entry in folder.glob("scene_*.pickle"):
+    for entry in folder.glob("*/scene_*.pickle"):
         with contextlib.suppress(OSError):
             stat = entry.stat()
             entries.append((stat.st_mtime_ns, stat.st_size, entry))

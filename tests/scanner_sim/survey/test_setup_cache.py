@@ -207,3 +207,16 @@ def test_the_least_recently_used_scenes_go_beyond_the_budget(builds, mine_field,
     assert len(builds) == 3  # both kept; seed 4's went
     setup_cache.cached_scene(seeds[0])
     assert len(builds) == 4
+
+
+def test_the_budget_holds_the_scenes_of_every_source_state(builds, mine_field, monkeypatch):
+    """Each edit of the code is a new source state, whose runs store their scenes anew: the budget counts the
+    scenes of the older states too, so that editing does not pile up a scene per run."""
+    setup_cache.cached_scene(mine_field)
+    (first,) = setup_cache.scenes_dir().rglob("scene_*.pickle")
+    monkeypatch.setattr(setup_cache, "SCENES_KEPT_BYTES", int(1.5 * first.stat().st_size))
+    os.utime(first, ns=(0, 0))
+    monkeypatch.setattr(setup_cache, "code_key", lambda: "an_edited_state")
+    setup_cache.cached_scene(mine_field)
+    assert len(builds) == 2
+    assert [p.parent.name for p in setup_cache.scenes_dir().rglob("scene_*.pickle")] == ["an_edited_state"]
