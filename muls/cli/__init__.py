@@ -19,7 +19,7 @@ import json
 
 from ..infra.atomic import write_atomically
 from ..infra.command import OneLineParser, checked_types, package_version, parse_guarded, run_guarded
-from ..infra.runtime import configure_process
+from ..infra.runtime import configure_process, end_of_command
 from .registry import SUBCOMMANDS
 
 #: Build every subcommand's options (the default of :func:`build_parser`).
@@ -51,7 +51,10 @@ def main(argv=None) -> int:
     args, code = parse_guarded(build_parser(command), argv)
     if args is None:
         return code
-    return run_guarded(f"muls {args.command}", lambda: _run(args))
+    code = run_guarded(f"muls {args.command}", lambda: _run(args))
+    if argv is None:  # the console script's own process, which ends now
+        end_of_command()
+    return code
 
 
 def _run(args) -> int:

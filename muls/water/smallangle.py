@@ -32,7 +32,6 @@ import math
 from functools import lru_cache
 
 import numpy as np
-from scipy.special import j0, j1
 
 from .phase import petzold
 
@@ -53,6 +52,8 @@ X_STEP = 0.4
 @lru_cache(maxsize=1)
 def _forward_transform() -> tuple[np.ndarray, np.ndarray]:
     """(nu (n,), Q (n,)): Q(v) = int_0^v P(nu) d nu of Petzold's forward hemisphere on a log grid of nu."""
+    from scipy.special import j0  # here: a pass whose water needs no small-angle table never imports scipy.special
+
     phase = petzold()
     forward = phase.theta_rad <= 0.5 * math.pi
     th = phase.theta_rad[forward]
@@ -67,6 +68,8 @@ def _forward_transform() -> tuple[np.ndarray, np.ndarray]:
 @lru_cache(maxsize=1)
 def _x_grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x, J1(x), trapezoid weights) of the Hankel integral."""
+    from scipy.special import j1
+
     x = np.concatenate([np.linspace(1e-9, X_SPLIT, X_FINE_SIZE),
                         np.arange(X_SPLIT + X_STEP, X_MAX + 0.5 * X_STEP, X_STEP)])
     dx = np.diff(x)

@@ -42,7 +42,7 @@ def build_parser(command=EVERY) -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Entry point of ``scanner-sim``; returns the exit code: 0, 1 (a failure such as a full disk), 2 (bad
     input), 130 (Ctrl-C) or 143 (SIGTERM), with one line on stderr for anything but 0 (``docs/errors.md``)."""
-    from muls.infra.runtime import configure_process
+    from muls.infra.runtime import configure_process, end_of_command
 
     configure_process()  # threads, memory and the kernel cache, before any kernel runs (muls/infra/runtime.py)
     words = sys.argv[1:] if argv is None else argv
@@ -50,7 +50,10 @@ def main(argv=None) -> int:
     args, code = parse_guarded(build_parser(command), argv)
     if args is None:  # --help, --version (0) or a bad argument (2, one line printed)
         return code
-    return run_guarded(f"scanner-sim {args.command}", lambda: args.func(args), bad_input=corrupt_file_errors)
+    code = run_guarded(f"scanner-sim {args.command}", lambda: args.func(args), bad_input=corrupt_file_errors)
+    if argv is None:  # the console script's own process, which ends now
+        end_of_command()
+    return code
 
 
 def corrupt_file_errors() -> tuple[type[BaseException], ...]:

@@ -151,6 +151,10 @@ def set_overrides(items: list[str]) -> dict:
 def scene_overrides(args, config) -> dict:
     """The scene keys that ``run``'s options set, by dotted name (validated later with the scene)."""
     changes = set_overrides(args.set)
+    for key, value in (("water", args.water), ("survey.seed", args.seed), ("survey.fidelity", args.fidelity),
+                       ("survey.max_pulses", args.max_pulses), ("survey.chunk_pulses", args.chunk_pulses)):
+        if value is not None:
+            changes[key] = value
     if args.altitude_m is not None:
         changes["platform.altitude_m"] = args.altitude_m
     if args.gate_delay_ns is not None or args.gate_width_ns is not None:
@@ -205,9 +209,7 @@ def _cmd_run(args) -> int:
 
     config = load_scene(args.scene)
     config = config.with_overrides(scene_overrides(args, config))
-    options = PassOptions(water=args.water, seed=args.seed, fidelity=args.fidelity, max_pulses=args.max_pulses,
-                          chunk_pulses=args.chunk_pulses, waveforms=args.waveforms, progress=not args.quiet,
-                          render=not args.no_render)
+    options = PassOptions(waveforms=args.waveforms, progress=not args.quiet, render=not args.no_render)
     out = Path(args.out or config.output_dir)
     bag = config.output.rosbag
     check_bag_dir(bag, out)  # before the bag's lock would create its parent folder

@@ -15,6 +15,8 @@ from __future__ import annotations
 import multiprocessing
 from concurrent.futures import Future, ProcessPoolExecutor
 
+from muls.infra.runtime import end_of_command
+
 
 class PictureWorker:
     """One child process that draws pictures in the order given; :meth:`finish` waits for them and raises the first
@@ -31,6 +33,7 @@ class PictureWorker:
 
     def finish(self) -> None:
         """Wait for every drawing; raise the first error one raised (the child's traceback chained to it)."""
+        self._pending.append(self._pool.submit(end_of_command))  # the child's exit, then, need not collect
         try:
             for future in self._pending:
                 future.result()

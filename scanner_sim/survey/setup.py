@@ -36,10 +36,10 @@ from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
 from scanner_sim.survey.ranging_precision import panel_ranges_m
-from scanner_sim.survey.setup_cache import cached_ranging_precision
+from scanner_sim.survey.setup_cache import cached_ranging_precision, cached_scene
 from scanner_sim.survey.sizing import check_pass_budget
 from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel
-from scanner_sim.world.scene import Scene, build_scene
+from scanner_sim.world.scene import Scene
 from scanner_sim.world.site import SiteScene
 
 
@@ -256,7 +256,7 @@ class PassSetup:
         config = given = config.with_overrides(options.scene_overrides())
         survey = config.survey
         water = config.water_model()
-        scene = build_scene(config) if scene is None else scene
+        scene = cached_scene(config) if scene is None else scene
         # The Embree BVH and the seabed's proof grid: set-up, not part of the pass (a site's: per window, as it goes).
         target = TiledTarget(scene) if isinstance(scene, SiteScene) else CastScene.build(scene)
         trajectory = checked_trajectory(config, scene)
