@@ -17,9 +17,9 @@ import numpy as np
 
 from muls.infra.runtime import kernel
 from scanner_sim.rays.cast import BeamCast, CastScene, cast_beams, kernel_inputs
-from scanner_sim.rays.collapse import collapse_simple, emit_rows, pulse_figures, simple_pulses
+from scanner_sim.rays.collapse import cast_pulse_figures, collapse_simple, emit_rows, pulse_figures, simple_pulses
 from scanner_sim.rays.hits import Hits, empty_columns, head
-from scanner_sim.rays.kernels import ShadowRays, clear_blocked, hit_block, subrays_local32
+from scanner_sim.rays.kernels import ShadowRays, hit_block, subrays_local32
 from scanner_sim.rays.seabed_grid import no_grid_reason
 from scanner_sim.rays.seabed_kernels import analytic_block, unproven_shadows
 
@@ -28,44 +28,46 @@ AUTO_BLOCK_RAYS = 32768
 
 
 @kernel(nogil=True)
-def _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, view, rows, shadows):
-    """:func:`scanner_sim.rays.kernels.hit_block` over the block's pulses that ``analytic`` leaves to Embree:
-    their hit rows and shadow rays packed from 0, in pulse order. Returns the row count."""
+def _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept):
+    """For each pulse of the block that ``analytic`` proves, its collapse figures (:func:`cast_pulse_figures`:
+    ``figures[q]`` = (beam, rho_mean, cosine, mean_range), ``nodes[q]``, ``share[q]``), summed from its cast without
+    making its rows. ``kept`` ((n m,) int32): ``prim`` where a hit row is still to be made (every sub-ray of a pulse
+    left to Embree or not simple, the axis alone of a simple one), -1 elsewhere."""
     m = layout.xy.shape[0]
-    c = 0
+    energy, tau = np.empty(m), np.empty(m)
     for q in range(analytic.shape[0]):
-        if not analytic[q]:
-            c += hit_block(prim[q * m:(q + 1) * m], tfar[q * m:(q + 1) * m], (p0 + q) * m, c, rays, layout, faces,
-                           view, rows, ShadowRays(shadows.origin[c:], shadows.direction[c:], shadows.length[c:]))
-    return c
+        first = q * m
+        kept[first:first + m] = prim[first:first + m]
+        if analytic[q]:
+            beam, rho_mean, cosine, mean_range = cast_pulse_figures(prim[first:first + m], tfar[first:first + m],
+                                                                    p0 + q, rays, layout, faces, view, energy, tau,
+                                                                    nodes[q], share[q])
+            figures[q, 0], figures[q, 1], figures[q, 2], figures[q, 3] = beam, rho_mean, cosine, mean_range
+            if beam >= 0.0:
+                kept[first + 1:first + m] = -1
 
 
 @kernel(nogil=True)
-def _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, view, unproven, one, out):
-    """The block's rows as :func:`collapse_simple` keeps them, pulse by pulse into ``out`` (room for every
-    sub-ray): a proven pulse's hit rows made (:func:`scanner_sim.rays.kernels.hit_block`, into the m-row scratch
-    ``one``) and collapsed while in cache, the others' collapsed from ``unproven`` (their rows, shadow rays
-    applied, incidence as cosines). Returns the rows written."""
-    m = layout.xy.shape[0]
-    shadows = ShadowRays(np.empty((m, 3), np.float32), np.empty((m, 3), np.float32), np.empty(m, np.float32))
-    energy, tau, nodes, share = np.empty(m), np.empty(m), np.empty(2), np.empty(2)
-    unproven_pulse = unproven.pulse_index
-    o, u = 0, 0
-    for q in range(analytic.shape[0]):
-        p = p0 + q
+def _collapsed_rows(rows, analytic, p0, m, figures, nodes, share, out):
+    """The block's hit ``rows`` (scan order, incidence as cosines) as :func:`collapse_simple` keeps them, into
+    ``out``: a proven pulse's with the figures :func:`_proven_figures` found, another's with its own
+    (:func:`pulse_figures`). Returns the rows written."""
+    pulse = rows.pulse_index
+    energy, tau, own_nodes, own_share = np.empty(m), np.empty(m), np.empty(2), np.empty(2)
+    start, o = 0, 0
+    while start < pulse.shape[0]:
+        stop = start + 1
+        while stop < pulse.shape[0] and pulse[stop] == pulse[start]:
+            stop += 1
+        q = pulse[start] - p0
         if analytic[q]:
-            c = hit_block(prim[q * m:(q + 1) * m], tfar[q * m:(q + 1) * m], p * m, 0, rays, layout, faces,
-                          view, one, shadows)
-            beam, rho_mean, cosine, mean_range = pulse_figures(0, c, m, one, False, energy, tau, nodes, share)
-            o = emit_rows(0, c, one, False, out, o, beam, rho_mean, cosine, mean_range, nodes, share)
+            o = emit_rows(start, stop, rows, False, out, o, figures[q, 0], figures[q, 1], figures[q, 2],
+                          figures[q, 3], nodes[q], share[q])
         else:
-            start = u
-            while u < unproven_pulse.shape[0] and unproven_pulse[u] == p:
-                u += 1
-            if u > start:
-                beam, rho_mean, cosine, mean_range = pulse_figures(start, u, m, unproven, False, energy, tau,
-                                                                   nodes, share)
-                o = emit_rows(start, u, unproven, False, out, o, beam, rho_mean, cosine, mean_range, nodes, share)
+            beam, rho_mean, cosine, mean_range = pulse_figures(start, stop, m, rows, False, energy, tau, own_nodes,
+                                                               own_share)
+            o = emit_rows(start, stop, rows, False, out, o, beam, rho_mean, cosine, mean_range, own_nodes, own_share)
+        start = stop
     return o
 
 
@@ -73,6 +75,24 @@ def _scratch(caster, prefix: str, n: int):
     """:class:`~scanner_sim.rays.hits.HitColumns` of n rows in ``caster``'s per-thread workspace (reused block
     after block: no fresh pages)."""
     return empty_columns(n, lambda name, shape, dtype: caster.workspace(f"{prefix}_{name}", shape, dtype))
+
+
+def _collapse_block(caster, prim, tfar, analytic, p0, rays, layout, faces, view, shadow_rays, rows, shadows, out,
+                    scratch) -> int:
+    """One block's hit rows, collapsed, into ``out`` (rows made and shadow rays cast only where needed: a proven
+    simple pulse's figures come from its cast, and only its axis row is made; a proven pulse's shadow rays are
+    clear). Returns the rows written."""
+    n, m = analytic.shape[0], layout.xy.shape[0]
+    figures, nodes, share = (a[:n] for a in scratch[:3])
+    kept = scratch[3][:n * m]
+    _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept)
+    c = hit_block(kept, tfar, p0 * m, 0, rays, layout, faces, view, rows, shadows)
+    if shadow_rays and c:
+        need = unproven_shadows(rows.pulse_index[:c], p0, analytic, shadows.length[:c])
+        if need.size:
+            occluded = caster.occluded_raw(shadows.origin[need], shadows.direction[need], shadows.length[need])
+            rows.receiver_weight[need[occluded >= 0]] = 0.0
+    return _collapsed_rows(head(rows, c), analytic, p0, m, figures, nodes, share, out)
 
 
 def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
@@ -104,7 +124,10 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
                          caster.workspace("shadow_dirs32", (size, 3), np.float32),
                          caster.workspace("shadow_length32", (size,), np.float32))
     out = _scratch(caster, "auto_out", size) if collapse else None
-    one = empty_columns(m) if collapse else None
+    figure_scratch = (caster.workspace("auto_figures", (size // m, 4), np.float64),
+                      caster.workspace("auto_nodes", (size // m, 2), np.float64),
+                      caster.workspace("auto_share", (size // m, 2), np.float64),
+                      caster.workspace("auto_kept", (size,), np.int32))
     rest_sub = np.arange(1, m)
     parts = []
     for p0 in range(0, n_pulses, block):
@@ -124,11 +147,8 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
             at = (cast[:, None] * m + rest_sub).ravel()
             prim[at], tfar[at] = caster.first_hits_raw(o32[at], d32[at])
         if collapse:
-            c = _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, view, rows, shadows)
-            if shadow_rays and c:
-                occluded = caster.occluded_raw(shadows.origin[:c], shadows.direction[:c], shadows.length[:c])
-                clear_blocked(occluded, shadows.length[:c], rows.receiver_weight, 0)
-            k = _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, view, head(rows, c), one, out)
+            k = _collapse_block(caster, prim, tfar, analytic, p0, rays, layout, faces, view, shadow_rays, rows,
+                                shadows, out, figure_scratch)
             parts.append(Hits.from_columns(head(out, k), p1 - p0, m, copy=True))
             continue
         c = hit_block(prim, tfar, p0 * m, 0, rays, layout, faces, view, rows, shadows)
