@@ -17,13 +17,14 @@ from muls.infra.runtime import kernel
 class SeabedGrid(NamedTuple):
     """The seabed height field as the proofs of this module see it (scanner_sim.rays.seabed_grid.seabed_grid).
 
-    x0, y0 [m]: local-frame position of node (0, 0); spacing [m]; nx, ny: nodes; face0: the scene face of cell
-    (0, 0)'s lower triangle (cell (i, j) is face0 + i (nx - 1) + j, its upper triangle that plus (nx - 1)(ny - 1),
-    as scanner_sim.world.terrain.HeightField.mesh orders them); k: height-field cells per side of a coarse cell.
-    Per coarse cell (cy, cx): gradient (cy, cx, 4), the least and greatest dz/dx and dz/dy of its seabed
-    triangles; seabed_top [m], its highest
-    node; object_top [m], the highest point of any other triangle whose xy box overlaps it (-inf: none).
-    z_top [m]: above it there is no geometry at all. plane (2 (nx - 1)(ny - 1), 4): each seabed face's plane n . x = w
+    x0, y0 [m]: local-frame position of node (0, 0); spacing [m]; nx, ny: nodes; face0: the scene's first seabed
+    face; cell_face (2 (nx - 1)(ny - 1),): the seabed face, counted from face0, of each triangle of the height field
+    (cell (i, j)'s lower triangle at i (nx - 1) + j, its upper one at that plus (nx - 1)(ny - 1), as
+    scanner_sim.world.terrain.HeightField.mesh orders them), -1 where the cell is a gap (no data, no triangle);
+    k: height-field cells per side of a coarse cell. Per coarse cell (cy, cx): gradient (cy, cx, 4), the least and
+    greatest dz/dx and dz/dy of its seabed triangles; seabed_top [m], its highest node (-inf: gaps only);
+    object_top [m], the highest point of any other triangle whose xy box overlaps it (-inf: none).
+    z_top [m]: above it there is no geometry at all. plane (seabed faces, 4): each seabed face's plane n . x = w
     as (n, w), n the (unnormalised) cross product of its float32 edges, in face order from face0. super_top
     (sy, sx) [m]: the highest point of any triangle over each block of super_k x super_k coarse cells. object_id: the
     seabed's index in the scene's objects."""
@@ -34,6 +35,7 @@ class SeabedGrid(NamedTuple):
     nx: int
     ny: int
     face0: int
+    cell_face: np.ndarray
     k: int
     gradient: np.ndarray
     seabed_top: np.ndarray
@@ -68,9 +70,9 @@ def rasterise_tops(vertices, faces, first, stop, x0, y0, size, top):
 
 @kernel(inline="always")
 def seabed_face_at(x0, y0, spacing, nx, ny, x, y):
-    """The face under local (x, y) of the height field of ``nx`` x ``ny`` nodes ``spacing`` [m] apart from (x0, y0)
-    (:class:`SeabedGrid`'s), numbered from its ``face0`` (terrain.HeightField.height's choice of triangle), -1 off
-    it. Scalars only: a kernel handed the grid's arrays costs several times more per call."""
+    """The triangle under local (x, y) of the height field of ``nx`` x ``ny`` nodes ``spacing`` [m] apart from
+    (x0, y0) (:class:`SeabedGrid`'s), numbered as its ``cell_face`` numbers them (terrain.HeightField.height's choice
+    of triangle), -1 off it. Scalars only: a kernel handed the grid's arrays costs several times more per call."""
     inv_spacing = 1.0 / spacing
     fx = (x - x0) * inv_spacing
     fy = (y - y0) * inv_spacing
@@ -208,9 +210,8 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
     rising: then no shadow ray of the pulse can be blocked, and none is cast."""
     n = axis_prim.shape[0]
     m = origins.shape[0] // n
-    plane, face0 = grid.plane, grid.face0
+    plane, face0, cell_face = grid.plane, grid.face0, grid.cell_face
     x0, y0, spacing, nx, ny = grid.x0, grid.y0, grid.spacing, grid.nx, grid.ny
-    cells = (nx - 1) * (ny - 1)
     # Segments to test: the m sub-rays back up from their hits, then (shadow) the m hits up to the receiver.
     hx, hy, hz = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
     z_end, wx, wy, rise = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
@@ -218,7 +219,7 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
         f0 = axis_prim[q]
         prim[q * m] = f0
         tfar[q * m] = axis_tfar[q]
-        ok = face0 <= f0 < face0 + 2 * cells
+        ok = face0 <= f0 < face0 + plane.shape[0]
         for j in range(m):
             if not ok:
                 break
@@ -237,7 +238,9 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
                     t = (plane[f, 3] - (plane[f, 0] * ox + plane[f, 1] * oy + plane[f, 2] * oz)) / (
                         plane[f, 0] * dx + plane[f, 1] * dy + plane[f, 2] * dz)
                     g = seabed_face_at(x0, y0, spacing, nx, ny, ox + t * dx, oy + t * dy) if t > 0.0 else -1
-                    if g < 0:
+                    if g >= 0:
+                        g = cell_face[g]
+                    if g < 0:  # off the height field, or over a gap: the sub-ray may meet something further on
                         break
                     if g == f:
                         found = True
