@@ -28,6 +28,32 @@ AUTO_BLOCK_RAYS = 32768
 
 
 @kernel(nogil=True)
+def _left_to_embree(o32, d32, analytic, m, origins, dirs):
+    """The sub-rays but the axis of each pulse of the block that ``analytic`` does not prove, packed in scan order
+    into ``origins`` and ``dirs`` ((k, 3) float32, room for every ray); returns k."""
+    c = 0
+    for q in range(analytic.shape[0]):
+        if not analytic[q]:
+            for k in range(q * m + 1, (q + 1) * m):
+                for a in range(3):
+                    origins[c, a], dirs[c, a] = o32[k, a], d32[k, a]
+                c += 1
+    return c
+
+
+@kernel(nogil=True)
+def _embree_answers(prim, tfar, analytic, m, cast_prim, cast_tfar):
+    """Embree's answers ``cast_prim``, ``cast_tfar`` for the rays :func:`_left_to_embree` packed, put back in place in
+    the block's ``prim`` and ``tfar``."""
+    c = 0
+    for q in range(analytic.shape[0]):
+        if not analytic[q]:
+            for k in range(q * m + 1, (q + 1) * m):
+                prim[k], tfar[k] = cast_prim[c], cast_tfar[c]
+                c += 1
+
+
+@kernel(nogil=True)
 def _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept):
     """For each pulse of the block that ``analytic`` proves, its collapse figures (:func:`cast_pulse_figures`:
     ``figures[q]`` = (beam, rho_mean, cosine, mean_range), ``nodes[q]``, ``share[q]``), summed from its cast without
@@ -128,7 +154,8 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
                       caster.workspace("auto_nodes", (size // m, 2), np.float64),
                       caster.workspace("auto_share", (size // m, 2), np.float64),
                       caster.workspace("auto_kept", (size,), np.int32))
-    rest_sub = np.arange(1, m)
+    left_o = caster.workspace("auto_left_origins32", (size, 3), np.float32)
+    left_d = caster.workspace("auto_left_dirs32", (size, 3), np.float32)
     parts = []
     for p0 in range(0, n_pulses, block):
         p1 = min(n_pulses, p0 + block)
@@ -142,10 +169,9 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
             on_seabed = (axis_prim >= grid.face0) & (axis_prim < grid.face0 + grid.plane.shape[0])
             census["proven"] = census.get("proven", 0) + int(analytic.sum())
             census["axis_on_seabed"] = census.get("axis_on_seabed", 0) + int(on_seabed.sum())
-        cast = np.flatnonzero(~analytic)
-        if cast.size:
-            at = (cast[:, None] * m + rest_sub).ravel()
-            prim[at], tfar[at] = caster.first_hits_raw(o32[at], d32[at])
+        k = _left_to_embree(o32, d32, analytic, m, left_o, left_d)
+        if k:
+            _embree_answers(prim, tfar, analytic, m, *caster.first_hits_raw(left_o[:k], left_d[:k]))
         if collapse:
             k = _collapse_block(caster, prim, tfar, analytic, p0, rays, layout, faces, view, shadow_rays, rows,
                                 shadows, out, figure_scratch)
