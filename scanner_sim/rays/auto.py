@@ -64,7 +64,7 @@ def _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures
     for q in range(analytic.shape[0]):
         first = q * m
         kept[first:first + m] = prim[first:first + m]
-        if analytic[q]:
+        if analytic[q] and prim[first] >= 0:  # (a proven pulse whose axis met nothing met nothing at all)
             beam, rho_mean, cosine, mean_range = cast_pulse_figures(prim[first:first + m], tfar[first:first + m],
                                                                     p0 + q, rays, layout, faces, view, energy, tau,
                                                                     nodes[q], share[q])
@@ -167,7 +167,9 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
         analytic_block(o32, d32, axis_prim, axis_tfar, p0, rays.rx, grid, shadow_rays, prim, tfar, analytic)
         if census is not None:
             on_seabed = (axis_prim >= grid.face0) & (axis_prim < grid.face0 + grid.plane.shape[0])
-            census["proven"] = census.get("proven", 0) + int(analytic.sum())
+            missed = analytic & (axis_prim < 0)
+            census["proven"] = census.get("proven", 0) + int(analytic.sum() - missed.sum())
+            census["proven_missed"] = census.get("proven_missed", 0) + int(missed.sum())
             census["axis_on_seabed"] = census.get("axis_on_seabed", 0) + int(on_seabed.sum())
         k = _left_to_embree(o32, d32, analytic, m, left_o, left_d)
         if k:
@@ -208,7 +210,7 @@ def auto_decisions(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origi
     are collapsed to two (:func:`~scanner_sim.rays.collapse.simple_pulses`); ``no_hit``: pulses none of whose
     sub-rays met anything (no echo to model); ``no_grid``: why no pulse can be proven
     (:func:`~scanner_sim.rays.seabed_grid.no_grid_reason`), None where the scene has its proof grid."""
-    counts = {"pulses": int(beam_origin.shape[0]), "proven": 0, "axis_on_seabed": 0}
+    counts = {"pulses": int(beam_origin.shape[0]), "proven": 0, "proven_missed": 0, "axis_on_seabed": 0}
     hits = cast_seabed_analytic(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
                                 shadow_rays, census=counts)
     counts["simple"] = int(simple_pulses(hits).sum())

@@ -59,10 +59,15 @@ def seabed_grid(scene, caster, z_top_m: float | None = None):
     plane = np.empty((faces.shape[0], 4))
     seabed_planes(caster.vertices, caster.faces, sb.face_start, sb.face_stop, plane)
     z_top = float(caster.vertices[:, 2].max()) if z_top_m is None else z_top_m
+    others = np.concatenate([caster.faces[:sb.face_start], caster.faces[sb.face_stop:]])
+    xy = caster.vertices[np.unique(others), :2]  # the seabed's own lie on the height field's nodes
+    holds_all = bool(np.all((xy[:, 0] >= x0) & (xy[:, 0] <= x0 + (nx - 1) * hf.spacing_m)
+                            & (xy[:, 1] >= y0) & (xy[:, 1] <= y0 + (ny - 1) * hf.spacing_m)))
     return SeabedGrid(float(x0), float(y0), float(hf.spacing_m), int(nx), int(ny), int(sb.face_start), cell_face,
                       int(k),
                       gradient, seabed_top, object_top, z_top + 1e-3, plane,
-                      int(sk), super_top, int(scene.face_object[sb.face_start]))
+                      int(sk), super_top, int(scene.face_object[sb.face_start]),
+                      float(caster.vertices[caster.faces, 2].min()), holds_all)
 
 
 def no_grid_reason(scene) -> str | None:

@@ -324,6 +324,29 @@ def test_a_height_field_with_gaps_is_proven_where_it_holds_seabed():
     assert caster.rays < 0.7 * 4000 * 19
 
 
+def test_a_beam_into_a_gap_with_nothing_below_is_proven_to_meet_nothing():
+    """Over a no-data band with nothing under it, a pulse whose axis meets nothing is proven to meet nothing at all
+    where no 1 m block the bundle passes over, down to the scene's lowest point, holds anything; Embree then casts
+    none of its other sub-rays. Pulses whose footprint straddles the band's edge with the axis in the gap keep the
+    sub-rays that land on the seabed (a proof that skipped the blocks would lose them): every hit equals Embree's."""
+    hf = _field()
+    valid = np.ones((100, 100), bool)
+    valid[40:60, :] = False
+    hf = HeightField(hf.x0_m, hf.y0_m, hf.spacing_m, hf.heights_m, valid=valid)
+    scene = Scene([Part("seabed", "seabed", *hf.mesh(), LABELS["seabed"], 0.2)], heightfield=hf)
+    pulses = _pulses(4000, seed=7)
+    proven, embree, caster = _both(scene, pulses)
+    rows = np.bincount(embree.pulse_index, minlength=4000)
+    axis_missed = np.ones(4000, bool)
+    axis_missed[embree.pulse_index[embree.subray_index == 0]] = False
+    assert (axis_missed & (rows > 0)).sum() > 5  # footprints over the edge, axis in the gap, some sub-rays on seabed
+    _assert_same_hits(proven, embree)
+    target = CastScene(scene, RayCaster.for_scene(scene), seabed_grid(scene, RayCaster.for_scene(scene)))
+    d = auto_level.auto_decisions(target, *pulses, beam_pattern(19), GEOMETRY)
+    assert d["no_hit"] > 400 and d["proven_missed"] > 0.5 * d["no_hit"], d
+    assert caster.rays == 4000 + 18 * (4000 - d["proven"] - d["proven_missed"])  # the axes, the unproven rest
+
+
 def test_shadow_rays_past_gaps_are_proven_clear_as_embree_finds_them():
     """Every level's shadow rays over a height field with a no-data band, plates and a cable: those the grid
     proves clear left out, every hit and receiver check the same bits as with every shadow ray cast."""
