@@ -31,8 +31,9 @@ def seabed_grid(scene, caster, z_top_m: float | None = None):
     faces = scene.faces[sb.face_start:sb.face_stop]
     valid = np.ones((ny - 1, nx - 1), bool) if hf.valid is None else hf.valid
     triangle = np.tile(valid.ravel(), 2)  # the height field's triangles that are seabed faces, in their order
-    cell_face = np.full(2 * cells, -1, np.int64)
-    cell_face[triangle] = np.arange(faces.shape[0])
+    cell_face = np.full(2 * cells if hf.valid is not None else 0, -1, np.int32)
+    if hf.valid is not None:
+        cell_face[triangle] = np.arange(faces.shape[0])
     k = max(1, round(COARSE_CELL_M / hf.spacing_m))
     cy, cx = -(-(ny - 1) // k), -(-(nx - 1) // k)
 

@@ -21,6 +21,7 @@ class SeabedGrid(NamedTuple):
     face; cell_face (2 (nx - 1)(ny - 1),): the seabed face, counted from face0, of each triangle of the height field
     (cell (i, j)'s lower triangle at i (nx - 1) + j, its upper one at that plus (nx - 1)(ny - 1), as
     scanner_sim.world.terrain.HeightField.mesh orders them), -1 where the cell is a gap (no data, no triangle);
+    empty where the height field has no gaps (each triangle is then the face of its own number);
     k: height-field cells per side of a coarse cell. Per coarse cell (cy, cx): gradient (cy, cx, 4), the least and
     greatest dz/dx and dz/dy of its seabed triangles; seabed_top [m], its highest node (-inf: gaps only);
     object_top [m], the highest point of any other triangle whose xy box overlaps it (-inf: none).
@@ -274,6 +275,7 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
     n = axis_prim.shape[0]
     m = origins.shape[0] // n
     plane, face0, cell_face = grid.plane, grid.face0, grid.cell_face
+    gaps = cell_face.shape[0] > 0
     x0, y0, spacing, nx, ny = grid.x0, grid.y0, grid.spacing, grid.nx, grid.ny
     # Segments to test: the m sub-rays back up from their hits, then (shadow) the m hits up to the receiver.
     hx, hy, hz = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
@@ -306,7 +308,7 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
                     t = (plane[f, 3] - (plane[f, 0] * ox + plane[f, 1] * oy + plane[f, 2] * oz)) / (
                         plane[f, 0] * dx + plane[f, 1] * dy + plane[f, 2] * dz)
                     g = seabed_face_at(x0, y0, spacing, nx, ny, ox + t * dx, oy + t * dy) if t > 0.0 else -1
-                    if g >= 0:
+                    if g >= 0 and gaps:
                         g = cell_face[g]
                     if g < 0:  # off the height field, or over a gap: the sub-ray may meet something further on
                         break
