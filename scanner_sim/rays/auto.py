@@ -5,8 +5,9 @@ Embree casts every pulse's axis. Where the axis lands on the seabed's height fie
 (:mod:`scanner_sim.rays.seabed_grid`) proves that nothing else can stand in the sub-rays' way or between their hits
 and the receiver, and that the seabed rises along each sub-ray less steeply than the ray does, each other sub-ray meets
 the seabed exactly once, on the triangle the height field puts under it: its hit is the ray-plane intersection
-(:mod:`scanner_sim.rays.seabed_kernels`) and its shadow ray cannot be blocked. Every other pulse is cast as
-``balanced`` casts it.
+(:mod:`scanner_sim.rays.seabed_kernels`) and its shadow ray cannot be blocked. Where the axis meets nothing and the
+grid proves that nothing stands anywhere below the bundle, no other sub-ray is cast: none would meet anything. Every
+other pulse is cast as ``balanced`` casts it.
 """
 
 from __future__ import annotations
@@ -130,8 +131,9 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
     receiver. The hit rows are made by the same kernel as ``cast_beams``'s, so they differ from it by float32
     rounding of the distances at most. Same arguments and result; a scene without a height field is cast as
     ``cast_beams`` casts it. ``collapse``: each block's hits go through :func:`collapse_simple` while in cache.
-    ``census``: counts added to it, ``"proven"`` (pulses found analytically) and ``"axis_on_seabed"`` (pulses
-    whose axis met the height field first, the proof's precondition)."""
+    ``census``: counts added to it, ``"proven"`` (pulses found analytically), ``"proven_missed"`` (pulses proven to
+    meet nothing) and ``"axis_on_seabed"`` (pulses whose axis met the height field first, the proof's
+    precondition)."""
     grid, caster = target.seabed_grid, target.caster
     if grid is None:
         hits = cast_beams(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry, shadow_rays)
@@ -205,7 +207,8 @@ def cast_auto(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx
 def auto_decisions(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
                    shadow_rays: bool = True) -> dict:
     """What :func:`cast_auto` decides for these pulses (same arguments), counted: ``pulses``; ``proven``: hits
-    found on the height field and no shadow ray cast; ``axis_on_seabed``: axes that met the height field first
+    found on the height field and no shadow ray cast; ``proven_missed``: proven to meet nothing, no sub-ray but the
+    axis cast; ``axis_on_seabed``: axes that met the height field first
     (the others, on an object or on nothing, are cast as ``balanced`` casts them); ``simple``: pulses whose echoes
     are collapsed to two (:func:`~scanner_sim.rays.collapse.simple_pulses`); ``no_hit``: pulses none of whose
     sub-rays met anything (no echo to model); ``no_grid``: why no pulse can be proven

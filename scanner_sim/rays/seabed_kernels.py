@@ -263,7 +263,8 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
     origins, dirs ((n m, 3) float32, pulse-major): the block's sub-rays, sub-ray 0 the beam axis; axis_prim,
     axis_tfar (n,): Embree's first hit of each axis. Writes Embree's answer for the axis into ``prim``/``tfar``
     ((n m,), as Embree's raw output) and, for each pulse it can prove the others of, their hits too, with
-    ``analytic[q]`` True; other pulses' other sub-rays are left to Embree (``analytic[q]`` False).
+    ``analytic[q]`` True; other pulses' other sub-rays are left to Embree (``analytic[q]`` False). A pulse whose axis
+    met nothing is proven, its other sub-rays' ``prim`` -1, where :func:`_bundle_misses` proves none can meet anything.
 
     A pulse is proven when its axis hits the seabed and each sub-ray, followed down the height field's triangles
     (the plane of one, then the triangle under that point, until they agree), lands on a seabed triangle; and
