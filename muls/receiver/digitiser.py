@@ -53,7 +53,8 @@ class Waveforms:
     """Digitised records of a batch (struct of arrays).
 
     reference: (n_pulses, n_ref) uint16 CH0 record from sample 0 (the whole record in ``full`` mode; under
-    :func:`digitise`'s ``ranging_only`` only the samples around its peak, the others 0).
+    :func:`digitise`'s ``ranging_only`` only the samples around its peak, the others 0; under its ``deciding_only``
+    all 0 for a pulse without a window, which has no return for it to time).
     codes: (n_windows, n_channels, n_samples) uint16 signal-channel windows, channel j is
     ``instrument.channels[j]`` (``full`` mode under ``ranging_only``: only the samples the peak search may read, the
     others 0). window_pulse: (n_windows,) batch index of each window's pulse;
@@ -171,7 +172,8 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     ``noise=False`` leaves only quantisation and clipping (closed-form checks); the sampling phase stays.
     ``echoes``: ``model.echoes(batch)`` if already computed. ``deciding_only``: in each window, synthesise only the
     channels that can decide a return (:mod:`muls.receiver.deciding_channels`); the others' codes are 0 and
-    ``Waveforms.synthesised`` says which. ``ranging_only``: only the samples the ranging may read get their codes,
+    ``Waveforms.synthesised`` says which; and the CH0 reference only of the pulses with a window (it times their
+    returns; a pulse without one has none). ``ranging_only``: only the samples the ranging may read get their codes,
     the others 0: of each CH0 record the samples around its peak (:func:`_reference`), and of ``full`` records
     the samples where a run of the peak search may start or go on or a code may clip, and those beside them
     (:func:`muls.receiver.channel_codes.ranging_codes`; windows are mostly echo, and draw faster whole). The same peaks and
@@ -202,10 +204,15 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
         _digitise(codes[a:b], clean[a:b], synthesised[a:b], window_pulse[a:b], window_start[a:b], sampling,
                   model.column, cuts, echoes, signal, settings)
 
+    needed = np.ones(batch.n_pulses, np.bool_)
+    if deciding_only:
+        needed[:] = False
+        needed[window_pulse] = True
+
     def references(a, b):  # the CH0 records of pulses a:b
         _reference(reference[a:b], ref_clean[a:b], sampling._replace(phase_s=phase[a:b], pulse_id=sampling.pulse_id[a:b]),
                    model.basis, pulse.duration_s, lsb_per_density, chans.dark_mean_lsb[0], chans.dark_std_lsb[0],
-                   settings.max_code, settings.noise_scale, ranging_only)
+                   settings.max_code, settings.noise_scale, ranging_only, needed[a:b])
 
     in_blocks(windows, shape[0])
     in_blocks(references, batch.n_pulses)
@@ -216,18 +223,21 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
 
 @kernel(nogil=True)
 def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_mean, dark_std, max_code,
-               noise_scale, peak_only):
+               noise_scale, peak_only, needed):
     """The CH0 records (n_pulses, n_ref) from sample 0 (MULS Eqs. 2, 13 through the photodiode). ``peak_only``:
     only the samples that can hold the record's highest code or flank it (what :func:`muls.ranging.peaks._reference_peaks`
     reads) get their noise and code, the others code 0: a sample whose noise-free level lies more than two noise
     bounds (:data:`muls.infra.noise.NORMAL_BOUND` sigma and a rounding each) under the highest level is below the highest
-    code whatever the draws, and so is 0."""
+    code whatever the draws, and so is 0. ``needed`` (n_pulses,) bool: the pulses whose codes are drawn, the others' all 0."""
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
     bound = noise_scale * dark_std * NORMAL_BOUND + 0.5
     normal, no_low, tails, levels = np.empty(n_ref), np.empty(0), np.empty(n_ref, np.uint64), np.empty(n_ref)
     times = np.empty(n_ref)
     for p in range(n_pulses):
+        if not (needed[p] or keep):
+            reference[p, :] = 0
+            continue
         # the filtered pulse (MULS Eq. 2) from emission, at each sample's own time
         sample_times(times, 0, n_ref, sampling.t0_s, sampling.dt_s, 0, sampling.phase_s[p])
         levels[:] = 0.0
@@ -239,6 +249,9 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
         if keep:
             for k in range(n_ref):
                 clean[p, k] = levels[k] + dark_mean
+        if not needed[p]:
+            reference[p, :] = 0
+            continue
         first, last = 0, n_ref - 1
         if peak_only:
             first, last = _reference_span(levels, dark_mean, bound, max_code)

@@ -106,7 +106,7 @@ def _add_run(p):
     p.add_argument("--seed", type=seed(), help="seed of the pass (default: the scene's survey.seed)")
     p.add_argument("--fidelity", choices=list(FIDELITY_LEVELS), help="fidelity level (default: the scene's)")
     p.add_argument("--max-pulses", type=positive_int(), help="stop after this many pulses")
-    p.add_argument("--chunk-pulses", type=positive_int(), help="pulse slots per chunk (memory vs overhead)")
+    p.add_argument("--chunk-pulses", type=positive_int(), help="pulses per chunk (memory vs overhead)")
     p.add_argument("--waveforms", type=non_negative_int(), default=0,
                    help="also write the full records of N sampled pulses")
     p.add_argument("--altitude-m", type=positive_float(), help="fly at this altitude over the seabed (platform.altitude_m)")

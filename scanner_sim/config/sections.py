@@ -322,7 +322,8 @@ class SurveyConfig(StrictModel):
     max_pulses: Integer(ge=1) | None = None
     """Stop after this many fired pulses."""
     chunk_pulses: Integer(ge=1) = 10000
-    """Pulse slots per chunk: one core simulates a chunk at once (memory against overhead)."""
+    """Pulses per chunk (the slots in which about this many fire): one core simulates a chunk at once (memory
+    against overhead)."""
 
     @property
     def level(self) -> FidelityLevel:

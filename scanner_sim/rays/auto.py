@@ -5,8 +5,9 @@ Embree casts every pulse's axis. Where the axis lands on the seabed's height fie
 (:mod:`scanner_sim.rays.seabed_grid`) proves that nothing else can stand in the sub-rays' way or between their hits
 and the receiver, and that the seabed rises along each sub-ray less steeply than the ray does, each other sub-ray meets
 the seabed exactly once, on the triangle the height field puts under it: its hit is the ray-plane intersection
-(:mod:`scanner_sim.rays.seabed_kernels`) and its shadow ray cannot be blocked. Every other pulse is cast as
-``balanced`` casts it.
+(:mod:`scanner_sim.rays.seabed_kernels`) and its shadow ray cannot be blocked. Where the axis meets nothing and the
+grid proves that nothing stands anywhere below the bundle, no other sub-ray is cast: none would meet anything. Every
+other pulse is cast as ``balanced`` casts it.
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ import numpy as np
 
 from muls.infra.runtime import kernel
 from scanner_sim.rays.cast import BeamCast, CastScene, cast_beams, kernel_inputs
-from scanner_sim.rays.collapse import collapse_simple, emit_rows, pulse_figures, simple_pulses
+from scanner_sim.rays.collapse import cast_pulse_figures, collapse_simple, emit_rows, pulse_figures, simple_pulses
 from scanner_sim.rays.hits import Hits, empty_columns, head
-from scanner_sim.rays.kernels import ShadowRays, clear_blocked, hit_block, subrays_local32
+from scanner_sim.rays.kernels import ShadowRays, hit_block, subrays_local32
 from scanner_sim.rays.seabed_grid import no_grid_reason
 from scanner_sim.rays.seabed_kernels import analytic_block, unproven_shadows
 
@@ -28,44 +29,72 @@ AUTO_BLOCK_RAYS = 32768
 
 
 @kernel(nogil=True)
-def _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, view, rows, shadows):
-    """:func:`scanner_sim.rays.kernels.hit_block` over the block's pulses that ``analytic`` leaves to Embree:
-    their hit rows and shadow rays packed from 0, in pulse order. Returns the row count."""
-    m = layout.xy.shape[0]
+def _left_to_embree(o32, d32, analytic, m, origins, dirs):
+    """The sub-rays but the axis of each pulse of the block that ``analytic`` does not prove, packed in scan order
+    into ``origins`` and ``dirs`` ((k, 3) float32, room for every ray); returns k."""
     c = 0
     for q in range(analytic.shape[0]):
         if not analytic[q]:
-            c += hit_block(prim[q * m:(q + 1) * m], tfar[q * m:(q + 1) * m], (p0 + q) * m, c, rays, layout, faces,
-                           view, rows, ShadowRays(shadows.origin[c:], shadows.direction[c:], shadows.length[c:]))
+            for k in range(q * m + 1, (q + 1) * m):
+                for a in range(3):
+                    origins[c, a], dirs[c, a] = o32[k, a], d32[k, a]
+                c += 1
     return c
 
 
 @kernel(nogil=True)
-def _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, view, unproven, one, out):
-    """The block's rows as :func:`collapse_simple` keeps them, pulse by pulse into ``out`` (room for every
-    sub-ray): a proven pulse's hit rows made (:func:`scanner_sim.rays.kernels.hit_block`, into the m-row scratch
-    ``one``) and collapsed while in cache, the others' collapsed from ``unproven`` (their rows, shadow rays
-    applied, incidence as cosines). Returns the rows written."""
-    m = layout.xy.shape[0]
-    shadows = ShadowRays(np.empty((m, 3), np.float32), np.empty((m, 3), np.float32), np.empty(m, np.float32))
-    energy, tau, nodes, share = np.empty(m), np.empty(m), np.empty(2), np.empty(2)
-    unproven_pulse = unproven.pulse_index
-    o, u = 0, 0
+def _embree_answers(prim, tfar, analytic, m, cast_prim, cast_tfar):
+    """Embree's answers ``cast_prim``, ``cast_tfar`` for the rays :func:`_left_to_embree` packed, put back in place in
+    the block's ``prim`` and ``tfar``."""
+    c = 0
     for q in range(analytic.shape[0]):
-        p = p0 + q
+        if not analytic[q]:
+            for k in range(q * m + 1, (q + 1) * m):
+                prim[k], tfar[k] = cast_prim[c], cast_tfar[c]
+                c += 1
+
+
+@kernel(nogil=True)
+def _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept):
+    """For each pulse of the block that ``analytic`` proves, its collapse figures (:func:`cast_pulse_figures`:
+    ``figures[q]`` = (beam, rho_mean, cosine, mean_range), ``nodes[q]``, ``share[q]``), summed from its cast without
+    making its rows. ``kept`` ((n m,) int32): ``prim`` where a hit row is still to be made (every sub-ray of a pulse
+    left to Embree or not simple, the axis alone of a simple one), -1 elsewhere."""
+    m = layout.xy.shape[0]
+    energy, tau = np.empty(m), np.empty(m)
+    for q in range(analytic.shape[0]):
+        first = q * m
+        kept[first:first + m] = prim[first:first + m]
+        if analytic[q] and prim[first] >= 0:  # (a proven pulse whose axis met nothing met nothing at all)
+            beam, rho_mean, cosine, mean_range = cast_pulse_figures(prim[first:first + m], tfar[first:first + m],
+                                                                    p0 + q, rays, layout, faces, view, energy, tau,
+                                                                    nodes[q], share[q])
+            figures[q, 0], figures[q, 1], figures[q, 2], figures[q, 3] = beam, rho_mean, cosine, mean_range
+            if beam >= 0.0:
+                kept[first + 1:first + m] = -1
+
+
+@kernel(nogil=True)
+def _collapsed_rows(rows, analytic, p0, m, figures, nodes, share, out):
+    """The block's hit ``rows`` (scan order, incidence as cosines) as :func:`collapse_simple` keeps them, into
+    ``out``: a proven pulse's with the figures :func:`_proven_figures` found, another's with its own
+    (:func:`pulse_figures`). Returns the rows written."""
+    pulse = rows.pulse_index
+    energy, tau, own_nodes, own_share = np.empty(m), np.empty(m), np.empty(2), np.empty(2)
+    start, o = 0, 0
+    while start < pulse.shape[0]:
+        stop = start + 1
+        while stop < pulse.shape[0] and pulse[stop] == pulse[start]:
+            stop += 1
+        q = pulse[start] - p0
         if analytic[q]:
-            c = hit_block(prim[q * m:(q + 1) * m], tfar[q * m:(q + 1) * m], p * m, 0, rays, layout, faces,
-                          view, one, shadows)
-            beam, rho_mean, cosine, mean_range = pulse_figures(0, c, m, one, False, energy, tau, nodes, share)
-            o = emit_rows(0, c, one, False, out, o, beam, rho_mean, cosine, mean_range, nodes, share)
+            o = emit_rows(start, stop, rows, False, out, o, figures[q, 0], figures[q, 1], figures[q, 2],
+                          figures[q, 3], nodes[q], share[q])
         else:
-            start = u
-            while u < unproven_pulse.shape[0] and unproven_pulse[u] == p:
-                u += 1
-            if u > start:
-                beam, rho_mean, cosine, mean_range = pulse_figures(start, u, m, unproven, False, energy, tau,
-                                                                   nodes, share)
-                o = emit_rows(start, u, unproven, False, out, o, beam, rho_mean, cosine, mean_range, nodes, share)
+            beam, rho_mean, cosine, mean_range = pulse_figures(start, stop, m, rows, False, energy, tau, own_nodes,
+                                                               own_share)
+            o = emit_rows(start, stop, rows, False, out, o, beam, rho_mean, cosine, mean_range, own_nodes, own_share)
+        start = stop
     return o
 
 
@@ -73,6 +102,24 @@ def _scratch(caster, prefix: str, n: int):
     """:class:`~scanner_sim.rays.hits.HitColumns` of n rows in ``caster``'s per-thread workspace (reused block
     after block: no fresh pages)."""
     return empty_columns(n, lambda name, shape, dtype: caster.workspace(f"{prefix}_{name}", shape, dtype))
+
+
+def _collapse_block(caster, prim, tfar, analytic, p0, rays, layout, faces, view, shadow_rays, rows, shadows, out,
+                    scratch) -> int:
+    """One block's hit rows, collapsed, into ``out`` (rows made and shadow rays cast only where needed: a proven
+    simple pulse's figures come from its cast, and only its axis row is made; a proven pulse's shadow rays are
+    clear). Returns the rows written."""
+    n, m = analytic.shape[0], layout.xy.shape[0]
+    figures, nodes, share = (a[:n] for a in scratch[:3])
+    kept = scratch[3][:n * m]
+    _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept)
+    c = hit_block(kept, tfar, p0 * m, 0, rays, layout, faces, view, rows, shadows)
+    if shadow_rays and c:
+        need = unproven_shadows(rows.pulse_index[:c], p0, analytic, shadows.length[:c])
+        if need.size:
+            occluded = caster.occluded_raw(shadows.origin[need], shadows.direction[need], shadows.length[need])
+            rows.receiver_weight[need[occluded >= 0]] = 0.0
+    return _collapsed_rows(head(rows, c), analytic, p0, m, figures, nodes, share, out)
 
 
 def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
@@ -84,8 +131,9 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
     receiver. The hit rows are made by the same kernel as ``cast_beams``'s, so they differ from it by float32
     rounding of the distances at most. Same arguments and result; a scene without a height field is cast as
     ``cast_beams`` casts it. ``collapse``: each block's hits go through :func:`collapse_simple` while in cache.
-    ``census``: counts added to it, ``"proven"`` (pulses found analytically) and ``"axis_on_seabed"`` (pulses
-    whose axis met the height field first, the proof's precondition)."""
+    ``census``: counts added to it, ``"proven"`` (pulses found analytically), ``"proven_missed"`` (pulses proven to
+    meet nothing) and ``"axis_on_seabed"`` (pulses whose axis met the height field first, the proof's
+    precondition)."""
     grid, caster = target.seabed_grid, target.caster
     if grid is None:
         hits = cast_beams(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry, shadow_rays)
@@ -104,8 +152,12 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
                          caster.workspace("shadow_dirs32", (size, 3), np.float32),
                          caster.workspace("shadow_length32", (size,), np.float32))
     out = _scratch(caster, "auto_out", size) if collapse else None
-    one = empty_columns(m) if collapse else None
-    rest_sub = np.arange(1, m)
+    figure_scratch = (caster.workspace("auto_figures", (size // m, 4), np.float64),
+                      caster.workspace("auto_nodes", (size // m, 2), np.float64),
+                      caster.workspace("auto_share", (size // m, 2), np.float64),
+                      caster.workspace("auto_kept", (size,), np.int32))
+    left_o = caster.workspace("auto_left_origins32", (size, 3), np.float32)
+    left_d = caster.workspace("auto_left_dirs32", (size, 3), np.float32)
     parts = []
     for p0 in range(0, n_pulses, block):
         p1 = min(n_pulses, p0 + block)
@@ -117,18 +169,16 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
         analytic_block(o32, d32, axis_prim, axis_tfar, p0, rays.rx, grid, shadow_rays, prim, tfar, analytic)
         if census is not None:
             on_seabed = (axis_prim >= grid.face0) & (axis_prim < grid.face0 + grid.plane.shape[0])
-            census["proven"] = census.get("proven", 0) + int(analytic.sum())
+            missed = analytic & (axis_prim < 0)
+            census["proven"] = census.get("proven", 0) + int(analytic.sum() - missed.sum())
+            census["proven_missed"] = census.get("proven_missed", 0) + int(missed.sum())
             census["axis_on_seabed"] = census.get("axis_on_seabed", 0) + int(on_seabed.sum())
-        cast = np.flatnonzero(~analytic)
-        if cast.size:
-            at = (cast[:, None] * m + rest_sub).ravel()
-            prim[at], tfar[at] = caster.first_hits_raw(o32[at], d32[at])
+        k = _left_to_embree(o32, d32, analytic, m, left_o, left_d)
+        if k:
+            _embree_answers(prim, tfar, analytic, m, *caster.first_hits_raw(left_o[:k], left_d[:k]))
         if collapse:
-            c = _unproven_rows(prim, tfar, analytic, p0, rays, layout, faces, view, rows, shadows)
-            if shadow_rays and c:
-                occluded = caster.occluded_raw(shadows.origin[:c], shadows.direction[:c], shadows.length[:c])
-                clear_blocked(occluded, shadows.length[:c], rows.receiver_weight, 0)
-            k = _block_collapsed(prim, tfar, analytic, p0, rays, layout, faces, view, head(rows, c), one, out)
+            k = _collapse_block(caster, prim, tfar, analytic, p0, rays, layout, faces, view, shadow_rays, rows,
+                                shadows, out, figure_scratch)
             parts.append(Hits.from_columns(head(out, k), p1 - p0, m, copy=True))
             continue
         c = hit_block(prim, tfar, p0 * m, 0, rays, layout, faces, view, rows, shadows)
@@ -157,12 +207,13 @@ def cast_auto(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx
 def auto_decisions(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
                    shadow_rays: bool = True) -> dict:
     """What :func:`cast_auto` decides for these pulses (same arguments), counted: ``pulses``; ``proven``: hits
-    found on the height field and no shadow ray cast; ``axis_on_seabed``: axes that met the height field first
+    found on the height field and no shadow ray cast; ``proven_missed``: proven to meet nothing, no sub-ray but the
+    axis cast; ``axis_on_seabed``: axes that met the height field first
     (the others, on an object or on nothing, are cast as ``balanced`` casts them); ``simple``: pulses whose echoes
     are collapsed to two (:func:`~scanner_sim.rays.collapse.simple_pulses`); ``no_hit``: pulses none of whose
     sub-rays met anything (no echo to model); ``no_grid``: why no pulse can be proven
     (:func:`~scanner_sim.rays.seabed_grid.no_grid_reason`), None where the scene has its proof grid."""
-    counts = {"pulses": int(beam_origin.shape[0]), "proven": 0, "axis_on_seabed": 0}
+    counts = {"pulses": int(beam_origin.shape[0]), "proven": 0, "proven_missed": 0, "axis_on_seabed": 0}
     hits = cast_seabed_analytic(target, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
                                 shadow_rays, census=counts)
     counts["simple"] = int(simple_pulses(hits).sum())

@@ -9,6 +9,7 @@ construction, and the methods do not branch on a name per call but on the one at
 
 from __future__ import annotations
 
+import math
 import threading
 import warnings
 
@@ -64,7 +65,7 @@ class RayCaster:
         the stage's float32 ray buffers are reused instead (grown when a chunk is larger).
         """
         pool = self._local.__dict__.setdefault("pool", {})
-        size = int(np.prod(shape))
+        size = math.prod(shape)
         buf = pool.get(name)
         if buf is None or buf.size < size or buf.dtype != np.dtype(dtype):
             buf = np.empty(max(size, 1), dtype)

@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from muls.infra.runtime import kernel
+from muls.instrument.overlap_kernels import aperture_share
 from scanner_sim.rays.echoes import echo_energy, echo_range_m
 from scanner_sim.rays.hits import Hits, empty_columns, head
 
@@ -118,6 +119,75 @@ def pulse_figures(start, stop, m, rows, angles, energy, tau, nodes, share):
         w_sum += rows.weight[r]
         rho_sum += rows.weight[r] * rows.reflectance[r]
         r_sum += rows.weight[r] * rows.range_m[r]
+    if total <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    _rule(energy, tau, nodes, share)
+    return w_sum, rho_sum / w_sum, min(1.0, total / rho_sum), r_sum / w_sum
+
+
+@kernel(inline="always")
+def cast_pulse_figures(prim, tfar, p, rays, layout, faces, view, energy, tau, nodes, share):
+    """:func:`pulse_figures` of pulse ``p`` straight from its cast, where every one of its m sub-rays hit: face
+    ``prim`` (m,) at distance ``tfar`` (m,) (as Embree answers; :mod:`scanner_sim.rays.kernels`' inputs). The same
+    numbers as :func:`pulse_figures` of the rows :func:`scanner_sim.rays.kernels.hit_block` would write, without
+    writing them: a simple pulse then needs only its axis row. The incidence, echo range and receiver weight are
+    ``hit_block``'s arithmetic, step for step (a test holds the two to the bit)."""
+    beam_local, beam_dir, u, v, rx_local, rx_dir = rays
+    xy, weights, r_t, tan_h = layout
+    face_normal, surface_id, face_reflectance = faces.normal, faces.surface_id, faces.reflectance
+    m = prim.shape[0]
+    surface = surface_id[prim[0]]
+    rx, ry, rz = rx_local[p, 0], rx_local[p, 1], rx_local[p, 2]
+    kx, ky, kz = rx_dir[p, 0], rx_dir[p, 1], rx_dir[p, 2]
+    lo, hi = np.inf, -np.inf
+    total, w_sum, rho_sum, r_sum = 0.0, 0.0, 0.0, 0.0
+    for j in range(m):
+        f = prim[j]
+        if surface_id[f] != surface:
+            return -1.0, 0.0, 0.0, 0.0
+        x, y = xy[j, 0], xy[j, 1]
+        ax = x * u[p, 0] + y * v[p, 0]
+        ay = x * u[p, 1] + y * v[p, 1]
+        az = x * u[p, 2] + y * v[p, 2]
+        dx = beam_dir[p, 0] + tan_h * ax
+        dy = beam_dir[p, 1] + tan_h * ay
+        dz = beam_dir[p, 2] + tan_h * az
+        inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+        dx *= inv
+        dy *= inv
+        dz *= inv
+        t = np.float64(tfar[j])
+        qx = beam_local[p, 0] + r_t * ax + t * dx
+        qy = beam_local[p, 1] + r_t * ay + t * dy
+        qz = beam_local[p, 2] + r_t * az + t * dz
+        nx, ny, nz = face_normal[f, 0], face_normal[f, 1], face_normal[f, 2]
+        dn = nx * dx + ny * dy + nz * dz
+        if dn > 0.0:
+            nx, ny, nz, dn = -nx, -ny, -nz, -dn
+        cosine = -dn if -dn < 1.0 else 1.0
+        tx, ty, tz = rx - qx, ry - qy, rz - qz
+        dist = math.sqrt(tx * tx + ty * ty + tz * tz)
+        echo = echo_range_m(t, np.float64(np.float32(dist)))
+        along = -(tx * kx + ty * ky + tz * kz)
+        if view.finite:
+            seen = aperture_share(view.aperture_radius, view.tan_half_fov, along,
+                                  math.sqrt(max(dist * dist - along * along, 0.0)))
+        else:
+            behind = along + view.apex_behind
+            wx, wy, wz = qx - (rx - view.apex_behind * kx), qy - (ry - view.apex_behind * ky), qz - (rz - view.apex_behind * kz)
+            seen = 1.0 if behind >= view.cos_half_fov * math.sqrt(wx * wx + wy * wy + wz * wz) else 0.0
+        if not (seen > 0.0 and nx * tx + ny * ty + nz * tz > 0.0):
+            seen = 0.0
+        lo, hi = min(lo, echo), max(hi, echo)
+        weight, reflectance = weights[j], face_reflectance[f]
+        energy[j] = echo_energy(weight, reflectance, cosine, seen)
+        tau[j] = echo
+        total += energy[j]
+        w_sum += weight
+        rho_sum += weight * reflectance
+        r_sum += weight * t
+    if not hi - lo < COLLAPSE_SPAN_M:
+        return -1.0, 0.0, 0.0, 0.0
     if total <= 0.0:
         return 0.0, 0.0, 0.0, 0.0
     _rule(energy, tau, nodes, share)

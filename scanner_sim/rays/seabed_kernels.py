@@ -17,16 +17,19 @@ from muls.infra.runtime import kernel
 class SeabedGrid(NamedTuple):
     """The seabed height field as the proofs of this module see it (scanner_sim.rays.seabed_grid.seabed_grid).
 
-    x0, y0 [m]: local-frame position of node (0, 0); spacing [m]; nx, ny: nodes; face0: the scene face of cell
-    (0, 0)'s lower triangle (cell (i, j) is face0 + i (nx - 1) + j, its upper triangle that plus (nx - 1)(ny - 1),
-    as scanner_sim.world.terrain.HeightField.mesh orders them); k: height-field cells per side of a coarse cell.
-    Per coarse cell (cy, cx): gradient (cy, cx, 4), the least and greatest dz/dx and dz/dy of its seabed
-    triangles; seabed_top [m], its highest
-    node; object_top [m], the highest point of any other triangle whose xy box overlaps it (-inf: none).
-    z_top [m]: above it there is no geometry at all. plane (2 (nx - 1)(ny - 1), 4): each seabed face's plane n . x = w
+    x0, y0 [m]: local-frame position of node (0, 0); spacing [m]; nx, ny: nodes; face0: the scene's first seabed
+    face; cell_face (2 (nx - 1)(ny - 1),): the seabed face, counted from face0, of each triangle of the height field
+    (cell (i, j)'s lower triangle at i (nx - 1) + j, its upper one at that plus (nx - 1)(ny - 1), as
+    scanner_sim.world.terrain.HeightField.mesh orders them), -1 where the cell is a gap (no data, no triangle);
+    empty where the height field has no gaps (each triangle is then the face of its own number);
+    k: height-field cells per side of a coarse cell. Per coarse cell (cy, cx): gradient (cy, cx, 4), the least and
+    greatest dz/dx and dz/dy of its seabed triangles; seabed_top [m], its highest node (-inf: gaps only);
+    object_top [m], the highest point of any other triangle whose xy box overlaps it (-inf: none).
+    z_top [m]: above it there is no geometry at all. plane (seabed faces, 4): each seabed face's plane n . x = w
     as (n, w), n the (unnormalised) cross product of its float32 edges, in face order from face0. super_top
     (sy, sx) [m]: the highest point of any triangle over each block of super_k x super_k coarse cells. object_id: the
-    seabed's index in the scene's objects."""
+    seabed's index in the scene's objects. z_bottom [m]: below it there is no geometry at all; holds_all: every
+    triangle of the scene lies over the height field's extent (nothing beyond it)."""
 
     x0: float
     y0: float
@@ -34,6 +37,7 @@ class SeabedGrid(NamedTuple):
     nx: int
     ny: int
     face0: int
+    cell_face: np.ndarray
     k: int
     gradient: np.ndarray
     seabed_top: np.ndarray
@@ -43,6 +47,8 @@ class SeabedGrid(NamedTuple):
     super_k: int
     super_top: np.ndarray
     object_id: int
+    z_bottom: float
+    holds_all: bool
 
 
 @kernel(nogil=True)
@@ -68,9 +74,9 @@ def rasterise_tops(vertices, faces, first, stop, x0, y0, size, top):
 
 @kernel(inline="always")
 def seabed_face_at(x0, y0, spacing, nx, ny, x, y):
-    """The face under local (x, y) of the height field of ``nx`` x ``ny`` nodes ``spacing`` [m] apart from (x0, y0)
-    (:class:`SeabedGrid`'s), numbered from its ``face0`` (terrain.HeightField.height's choice of triangle), -1 off
-    it. Scalars only: a kernel handed the grid's arrays costs several times more per call."""
+    """The triangle under local (x, y) of the height field of ``nx`` x ``ny`` nodes ``spacing`` [m] apart from
+    (x0, y0) (:class:`SeabedGrid`'s), numbered as its ``cell_face`` numbers them (terrain.HeightField.height's choice
+    of triangle), -1 off it. Scalars only: a kernel handed the grid's arrays costs several times more per call."""
     inv_spacing = 1.0 / spacing
     fx = (x - x0) * inv_spacing
     fy = (y - y0) * inv_spacing
@@ -87,6 +93,8 @@ def seabed_face_at(x0, y0, spacing, nx, ny, x, y):
 
 #: [m] Clearance the analytic-hit tests ask of every bound (far above float32 rounding of the local frame).
 CLEARANCE_M = 1e-3
+#: Most drop [blocks of ``super_top``] :func:`_bundle_misses` takes in one step (fewer where the rays run sideways).
+MISS_STEP_BLOCKS = 4.0
 
 
 @kernel(nogil=True)
@@ -191,13 +199,72 @@ def _rising_toward(x, y, z, tx, ty, tz):
 
 
 @kernel(nogil=True, error_model="numpy")
+def _bundle_misses(grid, origins, dirs, first, m):
+    """Can none of the m rays ``origins``, ``dirs`` [first, first + m) ((k, 3) local float32, a pulse's sub-rays)
+    meet anything?
+
+    True when every ray descends and, down to where all of them lie below ``z_bottom``, no block of
+    :class:`SeabedGrid`'s ``super_top`` the bundle passes over holds anything as high as the lowest the bundle can be
+    there; beyond the height field's extent there is nothing (``holds_all``). Each ray is followed by its drop: at
+    drop h below its origin a ray lies within r0 + h g of the axis's point at drop h (r0: the farthest origin from
+    the axis's, g: the most a ray's horizontal run per metre of drop differs from the axis's), so the drop is
+    stepped by at most half a block of the axis's run, and over each step the bundle lies within that much of the
+    axis's segment, no lower than the lowest origin less the step's end."""
+    if not grid.holds_all:
+        return False
+    c = first
+    cx, cy = np.float64(origins[c, 0]), np.float64(origins[c, 1])
+    z_low, z_high, r0, g = np.inf, -np.inf, 0.0, 0.0
+    gcx, gcy = 0.0, 0.0
+    for j in range(m):
+        k = first + j
+        dz = np.float64(dirs[k, 2])
+        if not dz < 0.0:
+            return False
+        gx, gy = np.float64(dirs[k, 0]) / -dz, np.float64(dirs[k, 1]) / -dz
+        if j == 0:
+            gcx, gcy = gx, gy
+        oz = np.float64(origins[k, 2])
+        z_low, z_high = min(z_low, oz), max(z_high, oz)
+        r0 = max(r0, (np.float64(origins[k, 0]) - cx) ** 2 + (np.float64(origins[k, 1]) - cy) ** 2)
+        g = max(g, (gx - gcx) ** 2 + (gy - gcy) ** 2)
+    r0, g = math.sqrt(r0), math.sqrt(g)
+    depth = z_high - grid.z_bottom + CLEARANCE_M  # every ray is below all geometry once it has dropped this far
+    size = grid.super_k * grid.k * grid.spacing
+    run = math.sqrt(gcx * gcx + gcy * gcy)
+    step = min(MISS_STEP_BLOCKS * size, 0.5 * size / run) if run > 0.0 else MISS_STEP_BLOCKS * size
+    sy, sx = grid.super_top.shape
+    x_end, y_end = grid.x0 + sx * size, grid.y0 + sy * size
+    h0 = 0.0
+    while h0 < depth:
+        h1 = min(h0 + step, depth)
+        r = r0 + h1 * g + CLEARANCE_M
+        x_lo, x_hi = cx + min(h0 * gcx, h1 * gcx) - r, cx + max(h0 * gcx, h1 * gcx) + r
+        y_lo, y_hi = cy + min(h0 * gcy, h1 * gcy) - r, cy + max(h0 * gcy, h1 * gcy) + r
+        # Past an edge of the blocks and drawing away from it faster than it widens: nothing further on.
+        if ((x_lo > x_end and gcx >= g) or (x_hi < grid.x0 and -gcx >= g) or (y_lo > y_end and gcy >= g)
+                or (y_hi < grid.y0 and -gcy >= g)):
+            return True
+        j0, j1 = max(0, math.floor((x_lo - grid.x0) / size)), min(sx - 1, math.floor((x_hi - grid.x0) / size))
+        i0, i1 = max(0, math.floor((y_lo - grid.y0) / size)), min(sy - 1, math.floor((y_hi - grid.y0) / size))
+        low = z_low - h1 - CLEARANCE_M  # the lowest any ray can be over this step
+        for i in range(i0, i1 + 1):
+            for j in range(j0, j1 + 1):
+                if grid.super_top[i, j] >= low:
+                    return False
+        h0 = h1
+    return True
+
+
+@kernel(nogil=True, error_model="numpy")
 def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shadow, prim, tfar, analytic):
     """The ``auto`` level's analytic sub-ray hits on the seabed, for one block of pulses.
 
     origins, dirs ((n m, 3) float32, pulse-major): the block's sub-rays, sub-ray 0 the beam axis; axis_prim,
     axis_tfar (n,): Embree's first hit of each axis. Writes Embree's answer for the axis into ``prim``/``tfar``
     ((n m,), as Embree's raw output) and, for each pulse it can prove the others of, their hits too, with
-    ``analytic[q]`` True; other pulses' other sub-rays are left to Embree (``analytic[q]`` False).
+    ``analytic[q]`` True; other pulses' other sub-rays are left to Embree (``analytic[q]`` False). A pulse whose axis
+    met nothing is proven, its other sub-rays' ``prim`` -1, where :func:`_bundle_misses` proves none can meet anything.
 
     A pulse is proven when its axis hits the seabed and each sub-ray, followed down the height field's triangles
     (the plane of one, then the triangle under that point, until they agree), lands on a seabed triangle; and
@@ -208,9 +275,9 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
     rising: then no shadow ray of the pulse can be blocked, and none is cast."""
     n = axis_prim.shape[0]
     m = origins.shape[0] // n
-    plane, face0 = grid.plane, grid.face0
+    plane, face0, cell_face = grid.plane, grid.face0, grid.cell_face
+    gaps = cell_face.shape[0] > 0
     x0, y0, spacing, nx, ny = grid.x0, grid.y0, grid.spacing, grid.nx, grid.ny
-    cells = (nx - 1) * (ny - 1)
     # Segments to test: the m sub-rays back up from their hits, then (shadow) the m hits up to the receiver.
     hx, hy, hz = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
     z_end, wx, wy, rise = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
@@ -218,7 +285,12 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
         f0 = axis_prim[q]
         prim[q * m] = f0
         tfar[q * m] = axis_tfar[q]
-        ok = face0 <= f0 < face0 + 2 * cells
+        if f0 < 0:  # the axis met nothing: proven when nothing can meet any sub-ray either
+            analytic[q] = _bundle_misses(grid, origins, dirs, q * m, m)
+            if analytic[q]:
+                prim[q * m + 1:(q + 1) * m] = -1
+            continue
+        ok = face0 <= f0 < face0 + plane.shape[0]
         for j in range(m):
             if not ok:
                 break
@@ -237,7 +309,9 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
                     t = (plane[f, 3] - (plane[f, 0] * ox + plane[f, 1] * oy + plane[f, 2] * oz)) / (
                         plane[f, 0] * dx + plane[f, 1] * dy + plane[f, 2] * dz)
                     g = seabed_face_at(x0, y0, spacing, nx, ny, ox + t * dx, oy + t * dy) if t > 0.0 else -1
-                    if g < 0:
+                    if g >= 0 and gaps:
+                        g = cell_face[g]
+                    if g < 0:  # off the height field, or over a gap: the sub-ray may meet something further on
                         break
                     if g == f:
                         found = True

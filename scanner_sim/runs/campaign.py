@@ -125,7 +125,7 @@ class CampaignOptions(StrictModel):
     max_pulses: Integer(ge=1) | None = None
     """Stop each pass after this many pulses (survey.max_pulses)."""
     chunk_pulses: Integer(ge=1) | None = None
-    """Pulse slots per chunk (survey.chunk_pulses; does not change the results)."""
+    """Pulses per chunk (survey.chunk_pulses; does not change the results)."""
     segments: Integer(ge=1) = 1
     """Cut each pass into this many runs of pulse slots, each a task (byte-identical results)."""
     render: bool = True

@@ -153,14 +153,15 @@ def run_level(base: PassSetup, level: FidelityLevel, waveform_pulses: int) -> Le
 def level_decisions(setup: PassSetup, slots: list, records) -> dict | None:
     """What an adaptive level (``auto``) decided on the pulses of ``slots`` (arrays of slots), after its timed
     passes, as shares of the pulses: sub-ray hits found on the height field, no shadow ray cast (``proven``); axis
-    met the height field first (``axis_on_seabed``: the others are cast as ``balanced`` casts them); echoes
+    met the height field first (``axis_on_seabed``: the others are cast as ``balanced`` casts them); proven to
+    meet nothing, no sub-ray but the axis cast (``proven_missed``); echoes
     collapsed to two (``simple``); no sub-ray met anything (``no_hit``). Then the channels digitised per record
     window of ``records`` (``channels_per_window`` of ``channels``) and ``falls_back``: why no pulse is proven
     where that is so. None for a level that decides nothing, or whose ray stage cannot say (a site's windows)."""
     decide = getattr(setup.rays, "decisions", None)
     if not setup.level.adaptive or decide is None:
         return None
-    counts = {"pulses": 0, "proven": 0, "axis_on_seabed": 0, "simple": 0, "no_hit": 0}
+    counts = {"pulses": 0, "proven": 0, "proven_missed": 0, "axis_on_seabed": 0, "simple": 0, "no_hit": 0}
     reason = None
     for chunk in slots:
         poses = setup.trajectory.poses(chunk / setup.scanner.pulse_rate_hz)
@@ -170,7 +171,8 @@ def level_decisions(setup: PassSetup, slots: list, records) -> dict | None:
             counts[key] += found[key]
     n = max(counts["pulses"], 1)
     kept = records.synthesised
-    return {"proven": counts["proven"] / n, "axis_on_seabed": counts["axis_on_seabed"] / n,
+    return {"proven": counts["proven"] / n, "proven_missed": counts["proven_missed"] / n,
+            "axis_on_seabed": counts["axis_on_seabed"] / n,
             "simple": counts["simple"] / n, "no_hit": counts["no_hit"] / n,
             "channels_per_window": None if kept is None or kept.size == 0 else float(kept.sum(axis=1).mean()),
             "channels": int(records.codes.shape[1]), "falls_back": reason}
@@ -317,14 +319,18 @@ def markdown_table(result: dict) -> str:
 def decisions_note(name: str, d: dict) -> str:
     """One paragraph: what the adaptive level ``name`` decided (:func:`level_decisions`'s ``d``), and where it
     falls back to ``balanced``'s way, why."""
-    cast = 1.0 - d["proven"]
+    missed = d["proven_missed"]
+    cast = 1.0 - d["proven"] - missed
     text = (f"`{name}` decided: sub-ray hits found on the height field, no shadow ray cast, for {d['proven']:.1%} of "
             f"pulses; ")
+    if missed > 0:
+        text += f"proven to meet nothing, no sub-ray but the axis cast, for {missed:.1%}; "
     if d["falls_back"]:
         text += f"the rest cast by Embree as `balanced` casts them, because {d['falls_back']}; "
     elif cast > 0:
-        text += (f"the rest ({cast:.1%}) cast by Embree as `balanced` casts them: {1.0 - d['axis_on_seabed']:.1%} "
-                 f"whose axis met an object or nothing first, {d['axis_on_seabed'] - d['proven']:.1%} where "
+        text += (f"the rest ({cast:.1%}) cast by Embree as `balanced` casts them: "
+                 f"{1.0 - d['axis_on_seabed'] - missed:.1%} whose axis met an object or nothing first (and not proven "
+                 f"clear), {d['axis_on_seabed'] - d['proven']:.1%} where "
                  "something might stand in a sub-ray's or the receiver's way or the seabed rises more steeply than "
                  "a ray; ")
     text += (f"echoes collapsed to two for {d['simple']:.1%}, one echo per sub-ray kept for "

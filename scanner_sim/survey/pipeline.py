@@ -149,7 +149,7 @@ def pass_facts(setup: PassSetup, options: PassOptions) -> sinks.PassFacts:
         instrument=setup.model.instrument.name, channels=tuple(ch.name for ch in setup.model.instrument.channels),
         record_mode=level.record_mode, subrays=setup.pattern.count, shadow_rays=level.shadow_rays,
         attenuation_model=setup.model.water.attenuation_model, multiple_scattering=setup.model.multiple_scattering,
-        chunk_pulses=setup.chunk_slots, max_pulses=setup.max_pulses,
+        chunk_pulses=setup.config.survey.chunk_pulses, max_pulses=setup.max_pulses,
         scene_file=str(config.source_path) if config.source_path else None, altitude_m=config.platform.altitude_m,
         gate_delay_ns=gate[0], gate_width_ns=gate[1], crs=crs_label(config.crs), seabed=setup.scene.seabed_info,
         provenance=provenance.pass_provenance(config, setup.model.water, setup.model.instrument, level, fingerprint))
@@ -195,8 +195,9 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     there are workers is in flight.
     """
     keep = kept_slots(setup, options.waveforms, setup.config.output.waveform_every_n_pulses)
-    bar = tqdm(total=setup.expected_pulses(), unit="pulse", unit_scale=True, disable=not options.progress,
-               desc=setup.config.name)
+    # The total counts every fired slot of the pass (6 ms on real_site): only for a bar that shows it.
+    bar = tqdm(total=setup.expected_pulses() if options.progress else None, unit="pulse", unit_scale=True,
+               disable=not options.progress, desc=setup.config.name)
     workers = chunk_workers()
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="chunk") as pool:
         in_flight: deque[Future] = deque()

@@ -313,7 +313,9 @@ class PassSetup:
 
     @property
     def chunk_slots(self) -> int:
-        return self.config.survey.chunk_pulses
+        """Pulse slots per chunk: those in which ``survey.chunk_pulses`` pulses fire (a sector scan fires a share of
+        its slots, 90 deg of 360: a quarter), so that a chunk holds about that many pulses whatever the scan."""
+        return max(1, round(self.config.survey.chunk_pulses / self.scanner.active_fraction))
 
     def expected_pulses(self) -> int:
         """The pulses the pass fires: its slots that fire (exactly, as :meth:`slot_chunks` yields them), at most
@@ -322,7 +324,8 @@ class PassSetup:
         return min(n, self.max_pulses) if self.max_pulses else n
 
     def slot_chunks(self):
-        """Yield (n,) int64 slot numbers of the fired pulses, ``chunk_slots`` slots at a time."""
+        """Yield (n,) int64 slot numbers of the fired pulses, ``chunk_slots`` slots at a time (about
+        ``survey.chunk_pulses`` pulses)."""
         rate, fired = self.scanner.pulse_rate_hz, 0
         for k0 in range(self.first_slot, self.end_slot, self.chunk_slots):
             k1 = min(self.end_slot, k0 + self.chunk_slots)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from muls.infra.runtime import kernel
 from muls.ranging.returns import DROPOUT_CAUSES
 from scanner_sim import io
 from scanner_sim.io.copc import CopcWriter
@@ -28,8 +29,6 @@ from scanner_sim.survey.provenance import point_cloud_provenance
 from scanner_sim.version import __version__
 
 NO_HIT = DROPOUT_CAUSES.index("no_hit")
-#: Beams followed down to the seabed at a time when counting the ``no_hit`` aimed where it has no data.
-RAY_BLOCK = 512
 
 #: Resolution and extent of the streaming |range error| histogram behind the summary's quantiles [m].
 ERROR_BIN_M = 5e-4
@@ -304,27 +303,8 @@ class PassStats:
         x0, x1, y0, y1 = hf.extent_m
         reach = min(float(np.max((self.seabed_low_m - origin[:, 2]) / direction[:, 2])), math.hypot(x1 - x0, y1 - y0))
         t = np.arange(0.0, reach + hf.spacing_m, hf.spacing_m)  # (steps,) [m] along each beam
-        count = 0
-        for start in range(0, origin.shape[0], RAY_BLOCK):  # blocks of beams bound the (beams, steps) arrays
-            o, d = origin[start:start + RAY_BLOCK], direction[start:start + RAY_BLOCK]
-            x, y, z = (o[:, None, k] + t[None, :] * d[:, None, k] for k in range(3))
-            inside, height = self._inner_data(x, y)
-            under = z <= height  # the gaps' heights are their nearest data's: a surface without holes
-            first = np.argmax(under, axis=1)
-            count += int(np.count_nonzero(~(under.any(axis=1) & inside[np.arange(first.size), first])))
-        return count
-
-    def _inner_data(self, x, y) -> tuple[np.ndarray, np.ndarray]:
-        """bool and float (shape of x): whether (x, y) [m] lies in a seabed cell with data whose 8 neighbours hold
-        data too (the mesh's edge along a gap is ragged within a node of it), and the height [m] of the cell's
-        lower-left node (the node spacing's precision is enough to tell where a beam crosses the seabed's level)."""
-        hf, inner = self.heightfield, self._inner_cells
-        i = np.floor((np.asarray(y) - hf.y0_m) / hf.spacing_m)
-        j = np.floor((np.asarray(x) - hf.x0_m) / hf.spacing_m)
-        ok = (i >= 0) & (i < inner.shape[0]) & (j >= 0) & (j < inner.shape[1])
-        i = np.clip(i, 0, inner.shape[0] - 1).astype(np.int64)
-        j = np.clip(j, 0, inner.shape[1] - 1).astype(np.int64)
-        return ok & inner[i, j], hf.heights_m[i, j]
+        return _count_over_no_data(origin, direction, t, hf.x0_m, hf.y0_m, hf.spacing_m, hf.heights_m,
+                                   self._inner_cells)
 
     def error_quantile_m(self, q: float) -> float | None:
         total = self.error_counts.sum()
@@ -372,6 +352,32 @@ class WaveformSink:
         channels = {"ch0": np.concatenate(self._reference)}
         channels.update({name: codes[:, i, :] for i, name in enumerate(self.channel_names)})
         io.write_waveforms_npz(path, np.concatenate(self._slots), np.concatenate(self._time_ns), channels)
+
+
+@kernel(nogil=True)
+def _count_over_no_data(origin, direction, t, x0, y0, spacing, heights, inner):
+    """How many beams (``origin``, ``direction`` (n, 3) [m], descending) first reach the seabed's level, stepping
+    ``t`` (steps,) [m] along each, where the seabed holds no data: beyond the height field, or in a cell that has
+    no data or a neighbour without (``inner`` (ny - 1, nx - 1) bool: the mesh's edge along a gap is ragged within a
+    node of it); a beam that never reaches it counts too. The level at a step is the ``heights`` of its cell's
+    lower-left node (the node spacing's precision is enough to tell where a beam crosses it; a gap's heights are
+    its nearest data's, a surface without holes)."""
+    ny, nx = inner.shape
+    count = 0
+    for b in range(origin.shape[0]):
+        counted = True  # until the beam reaches the level over data
+        for s in range(t.shape[0]):
+            x = origin[b, 0] + t[s] * direction[b, 0]
+            y = origin[b, 1] + t[s] * direction[b, 1]
+            z = origin[b, 2] + t[s] * direction[b, 2]
+            i, j = math.floor((y - y0) / spacing), math.floor((x - x0) / spacing)
+            ok = 0 <= i < ny and 0 <= j < nx
+            i, j = min(max(i, 0), ny - 1), min(max(j, 0), nx - 1)
+            if z <= heights[i, j]:
+                counted = not (ok and inner[i, j])
+                break
+        count += counted
+    return count
 
 
 def _valid_heights(heightfield) -> np.ndarray:

@@ -164,3 +164,22 @@ def test_a_channel_the_backscatter_blinds_is_left_out_and_would_have_found_nothi
     assert gate_open.any() and np.all(baseline_lsb[gate_open] >= model.instrument.digitizer.max_code)
     assert not kept.synthesised[:, 2].any()
     assert not np.any(ranged_every.peaks.channel == 3)
+
+
+def test_a_pulse_without_a_window_draws_no_reference_and_keeps_its_dropout():
+    """Under deciding_only the CH0 reference is synthesised only for the pulses with a record window: it times their
+    returns, and a pulse without one (its beam lit nothing: here targets of zero reflectance) has no return to time.
+    Those pulses' CH0 codes are 0, where every channel's digitisation draws them; every other pulse's reference is
+    that digitisation's to the bit, and every pulse keeps its first return and its dropout cause."""
+    model = _model("coastal_ocean")
+    ranges = np.repeat(np.linspace(2.0, 20.0, 40), 6)
+    batch = PulseBatch.flat_target(model.instrument, ranges, reflectance=np.tile([0.0, 0.1, 0.0, 0.5, 0.0, 0.9], 40))
+    every, ranged_every = simulate(model, batch, seed=5)
+    kept, ranged_kept = simulate(model, batch, seed=5, deciding_only=True)
+    windowed = np.zeros(batch.n_pulses, bool)
+    windowed[kept.window_pulse] = True
+    assert 100 <= windowed.sum() < batch.n_pulses
+    assert every.reference[~windowed].any() and not kept.reference[~windowed].any()
+    np.testing.assert_array_equal(kept.reference[windowed], every.reference[windowed])
+    assert _first_returns(ranged_kept) == _first_returns(ranged_every)
+    np.testing.assert_array_equal(ranged_kept.dropout_cause, ranged_every.dropout_cause)

@@ -18,7 +18,7 @@ from scanner_sim.rays.caster import RayCaster
 from scanner_sim.rays.collapse import COLLAPSE_SPAN_M, simple_pulses, two_point_rule
 from scanner_sim.rays.echoes import echo_energy
 from scanner_sim.rays.hits import HIT_FIELDS, Hits
-from scanner_sim.rays.seabed_grid import no_grid_reason, seabed_grid
+from scanner_sim.rays.seabed_grid import seabed_grid
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.objects import panel_mesh, tube
 from scanner_sim.world.scene import LABELS, Part, Scene
@@ -288,25 +288,78 @@ def test_auto_decides_and_counts_what_it_proves_on_a_height_field():
     assert d["axis_on_seabed"] == 500 and 400 < d["proven"] <= 500 and 400 < d["simple"] <= 500
 
 
-def test_a_height_field_with_gaps_falls_back_to_embree_and_says_why():
-    """A height field with no-data cells (as a surveyed raster has, real_site) gets no proof grid: the proofs
-    number the seabed's faces by cell, which the gaps break. auto then casts every sub-ray and shadow ray as
-    balanced does (the same hits), proves no pulse, and the reason is what the trade-off prints."""
+def _gapped_scene():
+    """:func:`_plates_and_cable_scene` (seed 3) with a 1 m no-data band across the field (y 202-203 m, as a surveyed
+    raster's gaps) and a plate 1 m under the seabed below the band, which the sub-rays through the gap meet."""
+    scene = _plates_and_cable_scene(seed=3)
+    hf = scene.heightfield
+    valid = np.ones((100, 100), bool)
+    valid[40:60, :] = False
+    hf = HeightField(hf.x0_m, hf.y0_m, hf.spacing_m, hf.heights_m, valid=valid)
+    parts = [Part("seabed", "seabed", *hf.mesh(), LABELS["seabed"], 0.2),
+             Part("below", "panel", *panel_mesh([102.5, 202.5, -21.0], (5.0, 1.4), (0, 0, 1), (0, 1, 0)),
+                  LABELS["panel"], 0.5)]
+    for o in scene.objects[1:]:
+        faces = scene.faces[o.face_start:o.face_stop]
+        used = np.unique(faces)
+        parts.append(Part(o.name, o.kind, scene.vertices[used], np.searchsorted(used, faces), o.label, o.reflectance))
+    return Scene(parts, heightfield=hf)
+
+
+def test_a_height_field_with_gaps_is_proven_where_it_holds_seabed():
+    """A height field with no-data cells (a surveyed raster's, as real_site's) has its proof grid: a gap holds no
+    seabed, so it bounds nothing, and a sub-ray that reaches one may go on to what lies below (a plate 1 m under
+    the gap here), so its pulse is left to Embree. Every hit, facet and receiver check equals Embree's (a proof that
+    took a gap for seabed would put hits on the missing seabed where Embree finds the plate), most pulses off the
+    gap are proven, and the trade-off has no fall-back to report."""
+    scene = _gapped_scene()
+    pulses = _pulses(4000, seed=2)
+    proven, embree, caster = _both(scene, pulses)
+    below = scene.object_named("below").object_id
+    assert (embree.object_id == below).sum() > 5000  # sub-rays through the gap
+    _assert_same_hits(proven, embree)
+    target = CastScene(scene, RayCaster.for_scene(scene), seabed_grid(scene, RayCaster.for_scene(scene)))
+    d = auto_level.auto_decisions(target, *pulses, beam_pattern(19), GEOMETRY)
+    assert d["no_grid"] is None and 0.4 * 4000 < d["proven"] < d["axis_on_seabed"] < 0.8 * 4000
+    assert caster.rays < 0.7 * 4000 * 19
+
+
+def test_a_beam_into_a_gap_with_nothing_below_is_proven_to_meet_nothing():
+    """Over a no-data band with nothing under it, a pulse whose axis meets nothing is proven to meet nothing at all
+    where no 1 m block the bundle passes over, down to the scene's lowest point, holds anything; Embree then casts
+    none of its other sub-rays. Pulses whose footprint straddles the band's edge with the axis in the gap keep the
+    sub-rays that land on the seabed (a proof that skipped the blocks would lose them): every hit equals Embree's."""
     hf = _field()
     valid = np.ones((100, 100), bool)
-    valid[40:60, :] = False  # a no-data band across the middle
+    valid[40:60, :] = False
     hf = HeightField(hf.x0_m, hf.y0_m, hf.spacing_m, hf.heights_m, valid=valid)
-    v, f = hf.mesh()
-    scene = Scene([Part("seabed", "seabed", v, f, LABELS["seabed"], 0.2)], heightfield=hf)
-    caster = RayCaster.for_scene(scene)
-    assert seabed_grid(scene, caster) is None
-    assert "gaps" in no_grid_reason(scene) and no_grid_reason(_seabed_scene()) is None
-    pulses = _pulses(300, seed=6)
-    d = auto_level.auto_decisions(CastScene(scene, caster, None), *pulses, beam_pattern(19), GEOMETRY)
-    assert d["proven"] == 0 and "gaps" in d["no_grid"] and 0 < d["no_hit"] < 300
-    proven, embree, _ = _both(scene, pulses)
-    for field in HIT_FIELDS:
-        np.testing.assert_array_equal(getattr(proven, field.name), getattr(embree, field.name))
+    scene = Scene([Part("seabed", "seabed", *hf.mesh(), LABELS["seabed"], 0.2)], heightfield=hf)
+    pulses = _pulses(4000, seed=7)
+    proven, embree, caster = _both(scene, pulses)
+    rows = np.bincount(embree.pulse_index, minlength=4000)
+    axis_missed = np.ones(4000, bool)
+    axis_missed[embree.pulse_index[embree.subray_index == 0]] = False
+    assert (axis_missed & (rows > 0)).sum() > 5  # footprints over the edge, axis in the gap, some sub-rays on seabed
+    _assert_same_hits(proven, embree)
+    target = CastScene(scene, RayCaster.for_scene(scene), seabed_grid(scene, RayCaster.for_scene(scene)))
+    d = auto_level.auto_decisions(target, *pulses, beam_pattern(19), GEOMETRY)
+    assert d["no_hit"] > 400 and d["proven_missed"] > 0.5 * d["no_hit"], d
+    assert caster.rays == 4000 + 18 * (4000 - d["proven"] - d["proven_missed"])  # the axes, the unproven rest
+
+
+def test_shadow_rays_past_gaps_are_proven_clear_as_embree_finds_them():
+    """Every level's shadow rays over a height field with a no-data band, plates and a cable: those the grid
+    proves clear left out, every hit and receiver check the same bits as with every shadow ray cast."""
+    scene = _gapped_scene()
+    pulses = _pulses(4000, seed=6)
+    every, proving = CountingCaster(RayCaster.for_scene(scene)), CountingCaster(RayCaster.for_scene(scene))
+    cast = cast_beams(CastScene(scene, every, seabed_grid(scene, every)), *pulses, beam_pattern(19), GEOMETRY,
+                      prove_shadows=False)
+    proven = cast_beams(CastScene(scene, proving, seabed_grid(scene, proving)), *pulses, beam_pattern(19), GEOMETRY)
+    assert ((cast.receiver_weight == 0) & (_seen_without_shadow_rays(scene, pulses) > 0)).sum() > 20
+    for f in HIT_FIELDS:
+        np.testing.assert_array_equal(getattr(proven, f.name), getattr(cast, f.name), err_msg=f.name)
+    assert proving.shadow_rays < 0.6 * every.shadow_rays, (proving.shadow_rays, every.shadow_rays)
 
 
 def test_the_seabed_bounds_hold_every_triangle():

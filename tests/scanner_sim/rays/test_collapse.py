@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from muls.presets import mul2023
-from scanner_sim.rays.collapse import COLLAPSE_SPAN_M, two_point_rule
+from scanner_sim.rays.beams import beam_pattern
+from scanner_sim.rays.cast import kernel_inputs
+from scanner_sim.rays.caster import RayCaster
+from scanner_sim.rays.collapse import COLLAPSE_SPAN_M, cast_pulse_figures, pulse_figures, two_point_rule
+from scanner_sim.rays.hits import empty_columns
+from scanner_sim.rays.kernels import ShadowRays, hit_block, subrays_local32
+from scanner_sim.world.objects import panel_mesh
+from scanner_sim.world.scene import LABELS, Part, Scene
 
 #: [m/s] Light in sea water (n = 1.34): an echo range r is a delay 2 r / V.
 V = 2.998e8 / 1.34
@@ -56,3 +63,46 @@ def test_the_bound_grows_past_the_span_so_wider_footprints_keep_their_sub_ray_ec
     nodes, share = two_point_rule(energy[None], delay[None])
     two = _echoes(energy.sum() * share[0], nodes[0], pulse, t)
     assert np.abs(two - full).max() > 5e-3 * full.max()
+
+
+def test_a_cast_pulses_figures_are_those_of_its_hit_rows_to_the_bit():
+    """cast_pulse_figures sums a pulse's collapse figures straight from its cast, without the 19 hit rows, by
+    hit_block's arithmetic: on footprints on a tilted plane (simple) and over a plate's edge (two surfaces, kept),
+    its beam share, reflectance, cosine, mean range, nodes and shares are those pulse_figures gives from
+    hit_block's rows, bit for bit."""
+    plane = panel_mesh([0.0, 0.0, -3.0], (8.0, 8.0), (0.3, 0.1, 1.0), (0, 1, 0))
+    plate = panel_mesh([0.3, 0.2, -2.4], (0.5, 0.5), (0, 0, 1), (0, 1, 0))
+    scene = Scene([Part("floor", "seabed", *plane, LABELS["seabed"], 0.2),
+                   Part("plate", "panel", *plate, LABELS["panel"], 0.6)])
+    rng = np.random.default_rng(4)
+    n, pattern, geometry = 600, beam_pattern(SUBRAYS), mul2023().geometry
+    tilt, azimuth = np.radians(75.0) * np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
+    direction = np.c_[np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), -np.cos(tilt)]
+    origin = np.c_[rng.uniform(-0.5, 0.5, (n, 2)), np.zeros(n)]
+    edge = slice(0, n // 2)  # half straight down onto the plate's edge x = 0.55 m, within their 1-2 cm footprint
+    direction[edge] = [0.0, 0.0, -1.0]
+    origin[edge, 0] = 0.55 + rng.uniform(-0.008, 0.008, n // 2)
+    rays, layout, faces, view = kernel_inputs(scene, origin, direction, np.tile([1.0, 0.0, 0.0], (n, 1)),
+                                              origin + [0.0, geometry.offset_m, 0.0], direction, pattern, geometry)
+    caster = RayCaster.for_scene(scene)
+    o32, d32 = np.empty((n * SUBRAYS, 3), np.float32), np.empty((n * SUBRAYS, 3), np.float32)
+    subrays_local32(rays, 0, n, layout, o32, d32)
+    prim, tfar = caster.first_hits_raw(o32, d32)
+    rows, shadows = empty_columns(SUBRAYS), ShadowRays(*(np.empty((SUBRAYS, 3), np.float32) for _ in range(2)),
+                                                       np.empty(SUBRAYS, np.float32))
+    scratch = [np.empty(SUBRAYS), np.empty(SUBRAYS), np.empty(2), np.empty(2)]
+    kinds = []
+    for q in range(n):
+        at = slice(q * SUBRAYS, (q + 1) * SUBRAYS)
+        if np.any(prim[at] < 0):
+            continue
+        c = hit_block(prim[at], tfar[at], q * SUBRAYS, 0, rays, layout, faces, view, rows, shadows)
+        expected = pulse_figures(0, c, SUBRAYS, rows, False, *scratch)
+        nodes, share = scratch[2].copy(), scratch[3].copy()
+        got = cast_pulse_figures(prim[at], tfar[at], q, rays, layout, faces, view, *scratch)
+        assert got == expected, q
+        if expected[0] > 0:
+            np.testing.assert_array_equal(scratch[2], nodes)
+            np.testing.assert_array_equal(scratch[3], share)
+        kinds.append("simple" if expected[0] > 0 else "kept")
+    assert kinds.count("simple") > 100 and kinds.count("kept") > 50, (kinds.count("simple"), kinds.count("kept"))

@@ -172,3 +172,15 @@ def test_memory_does_not_grow_with_the_pass(tmp_path):
     rss = [int(subprocess.run([sys.executable, "-c", code, str(tmp_path / n), n], check=True, capture_output=True,
                               text=True).stdout.strip().splitlines()[-1]) for n in ("20000", "200000")]
     assert rss[1] < 1.25 * rss[0], rss
+
+
+@pytest.mark.parametrize("scene", ["real_site", "cable_survey", "pool_panel"])
+def test_a_chunk_holds_about_chunk_pulses_pulses_whatever_share_of_slots_fires(scene):
+    """survey.chunk_pulses is the pulses a chunk holds: a sector scan fires a share of its slots (real_site's 90 deg
+    a quarter), so its chunks span that many more slots. Each chunk but the last holds chunk_pulses within the
+    rounding of a slot on the sector's edge, whatever the scan; it was a quarter of it on real_site when the key
+    counted slots, which made a sector scan's chunks carry four times the per-chunk overhead per pulse."""
+    setup = PassSetup.build(load_scene(scene), PassOptions(max_pulses=9000, chunk_pulses=2000, fidelity="fast"))
+    sizes = [slots.size for slots in setup.slot_chunks()]
+    assert sum(sizes) == 9000 and len(sizes) >= 5
+    assert all(abs(n - 2000) <= 0.01 * 2000 for n in sizes[:-1]), (setup.scanner.active_fraction, sizes)
