@@ -104,6 +104,17 @@ def _scratch(caster, prefix: str, n: int):
     return empty_columns(n, lambda name, shape, dtype: caster.workspace(f"{prefix}_{name}", shape, dtype))
 
 
+def _cast_unproven_shadows(caster, rows, shadows, c, p0, analytic) -> None:
+    """The shadow rays of the block's first ``c`` hit ``rows`` that the proof grid did not prove clear, cast by Embree;
+    a blocked one's receiver weight set to 0."""
+    if not c:
+        return
+    need = unproven_shadows(rows.pulse_index[:c], p0, analytic, shadows.length[:c])
+    if need.size:
+        occluded = caster.occluded_raw(shadows.origin[need], shadows.direction[need], shadows.length[need])
+        rows.receiver_weight[need[occluded >= 0]] = 0.0
+
+
 def _collapse_block(caster, prim, tfar, analytic, p0, rays, layout, faces, view, shadow_rays, rows, shadows, out,
                     scratch) -> int:
     """One block's hit rows, collapsed, into ``out`` (rows made and shadow rays cast only where needed: a proven
@@ -114,11 +125,8 @@ def _collapse_block(caster, prim, tfar, analytic, p0, rays, layout, faces, view,
     kept = scratch[3][:n * m]
     _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept)
     c = hit_block(kept, tfar, p0 * m, 0, rays, layout, faces, view, rows, shadows)
-    if shadow_rays and c:
-        need = unproven_shadows(rows.pulse_index[:c], p0, analytic, shadows.length[:c])
-        if need.size:
-            occluded = caster.occluded_raw(shadows.origin[need], shadows.direction[need], shadows.length[need])
-            rows.receiver_weight[need[occluded >= 0]] = 0.0
+    if shadow_rays:
+        _cast_unproven_shadows(caster, rows, shadows, c, p0, analytic)
     return _collapsed_rows(head(rows, c), analytic, p0, m, figures, nodes, share, out)
 
 
@@ -182,11 +190,8 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
             parts.append(Hits.from_columns(head(out, k), p1 - p0, m, copy=True))
             continue
         c = hit_block(prim, tfar, p0 * m, 0, rays, layout, faces, view, rows, shadows)
-        if shadow_rays and c:
-            need = unproven_shadows(rows.pulse_index[:c], p0, analytic, shadows.length[:c])
-            if need.size:
-                occluded = caster.occluded_raw(shadows.origin[need], shadows.direction[need], shadows.length[need])
-                rows.receiver_weight[need[occluded >= 0]] = 0.0
+        if shadow_rays:
+            _cast_unproven_shadows(caster, rows, shadows, c, p0, analytic)
         part = Hits.from_columns(head(rows, c), p1 - p0, m, copy=True)
         np.arccos(part.incidence_rad, out=part.incidence_rad)
         parts.append(part)
