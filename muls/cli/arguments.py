@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from ..infra.command import output_file
+from ..infra.command import nonempty, output_file
 from ..presets import WATER_PRESETS
 
 
@@ -41,6 +41,15 @@ def attenuation_rule(name: str) -> str:
     from ..water.properties import ATTENUATION_MODELS
 
     return one_of("--attenuation", name, ATTENUATION_MODELS)
+
+
+def add_attenuation_option(p) -> None:
+    """``--attenuation``, the water's attenuation rule, ``monte_carlo`` unless given (:func:`attenuation_rule` checks
+    it)."""
+    from ..water.properties import ATTENUATION_MODELS
+
+    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
+                   help=f"attenuation rule ({', '.join(ATTENUATION_MODELS)})")
 
 
 def table_cell(v, digits: int = 3) -> str:

@@ -23,6 +23,7 @@ from ..infra.command import (
 )
 from ..studies.common import check_pulse_memory
 from .arguments import (
+    add_attenuation_option,
     add_output_options,
     attenuation_rule,
     count_option,
@@ -284,8 +285,7 @@ def _add_waveform(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gate-delay-ns", type=non_negative_float(), default=None,
                    help="CH3 gate delay [ns] (default: that water's experiment)")
     p.add_argument("--gate-width-ns", type=positive_float(), default=None, help="CH3 gate width [ns]")
-    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
-                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    add_attenuation_option(p)
     add_output_options(p)
     p.set_defaults(run=_cmd_waveform)
 
@@ -296,8 +296,7 @@ def _add_maxrange(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--waters", nargs="+", type=nonempty(), default=list(studies.MAXRANGE_WATERS),
                    help=f"water presets ({water_names()})")
-    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
-                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    add_attenuation_option(p)
     p.add_argument("--band", action="store_true",
                    help="each figure's band over the family of phase functions (the study once per member)")
     add_output_options(p)
@@ -312,8 +311,7 @@ def _add_precision(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reflectance", type=fraction(), default=0.1)
     p.add_argument("--gate-delay-ns", type=non_negative_float(), default=None)
     p.add_argument("--gate-width-ns", type=positive_float(), default=None)
-    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
-                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    add_attenuation_option(p)
     add_output_options(p)
     p.set_defaults(run=_cmd_precision)
 
@@ -325,8 +323,7 @@ def _add_edge_bias(p: argparse.ArgumentParser) -> None:
     p.add_argument("--shots", type=positive_int(), default=200, help="noisy pulses per range and water")
     p.add_argument("--seed", type=seed(), default=0)
     p.add_argument("--reflectance", type=fraction(), default=0.1)
-    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
-                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    add_attenuation_option(p)
     add_output_options(p, plot=False)
     p.set_defaults(run=_cmd_edge_bias, no_plot=True, out=None)
 
@@ -337,8 +334,7 @@ def _add_experiment(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed(), default=0)
     p.add_argument("--ranging", default="prototype", type=nonempty(),
                    help="prototype (plain peak detection on the 1 GS/s record) or template (pulse-shape fit)")
-    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
-                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    add_attenuation_option(p)
     p.add_argument("--no-band", action="store_true",
                    help="skip the band over the family of phase functions (one more run per member)")
     add_output_options(p, out_type=output_dir)  # a folder: experiment.json and experiment.png
@@ -346,16 +342,14 @@ def _add_experiment(p: argparse.ArgumentParser) -> None:
 
 
 def _add_budget(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
-                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    add_attenuation_option(p)
     add_output_options(p, plot=False)
     p.set_defaults(run=_cmd_budget)
 
 
 def _add_coaxial(p: argparse.ArgumentParser) -> None:
     p.add_argument("--water", default="turbid_harbor", type=nonempty(), help=f"water preset ({water_names()})")
-    p.add_argument("--attenuation", default="monte_carlo", type=nonempty(),
-                   help="attenuation rule (monte_carlo, k_lidar, c, kd, small_angle)")
+    add_attenuation_option(p)
     add_output_options(p)
     p.set_defaults(run=_cmd_coaxial)
 
