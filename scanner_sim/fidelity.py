@@ -24,7 +24,7 @@ class FidelityLevel:
     subrays: beam sub-rays per pulse (one of ``rays.beams.SUBRAY_COUNTS``). shadow_rays: cast a visibility ray
     from each hit to the receiver aperture (parallax shadows); without them only the FOV cone is checked.
     record_mode: ``"windowed"`` (samples around the echoes) or ``"full"`` (every sample of every channel),
-    ``muls.receiver.digitiser.RECORD_MODES``. column_cut: where the water column stops, one of :data:`COLUMN_CUTS`
+    ``muls.receiver.record_windows.RECORD_MODES``. column_cut: where the water column stops, one of :data:`COLUMN_CUTS`
     (:func:`scanner_sim.survey.handoff.column_cuts`). adaptive: decide per pulse (:mod:`scanner_sim.rays.auto`):
     where all ``subrays`` hit one surface within 0.10 m of range (:data:`scanner_sim.rays.collapse.COLLAPSE_SPAN_M`),
     two echoes with their delays' energy, mean, variance and skewness, else one per sub-ray. deciding_only:

@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from muls.infra.errors import ParameterError
-from muls.receiver.digitiser import RECORD_MODES
+from muls.receiver.record_windows import RECORD_MODES
 from scanner_sim.config import (
     SCENES_DIR,
     ConfigError,
