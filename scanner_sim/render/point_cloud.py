@@ -50,12 +50,19 @@ HEIGHT_BAR_TITLE = "height z [m]"
 _BACKGROUND = "#0b1a2a"  # deep-water navy: white panels and the grey truth mesh stay visible
 
 
+#: zlib level of the point-cloud PNGs: level 1 encodes a 1600 x 1000 render 3 to 4 times faster than matplotlib's
+#: ``imsave`` (RGBA at zlib's default 6, the PNG's last 0.2 to 0.9 s after a pass) for a file of the same size
+#: (a picture of points compresses poorly at any level: 891 against 904 KiB).
+PNG_COMPRESS_LEVEL = 1
+
+
 def _write_png(path_png, rgb: np.ndarray) -> None:
-    from matplotlib import image as mpimg
+    """``rgb`` (height, width, 3) uint8 to an RGB PNG, atomically."""
+    from PIL import Image
 
     with atomic_path(path_png) as tmp:
         with open(tmp, "wb") as fh:
-            mpimg.imsave(fh, rgb, format="png")
+            Image.fromarray(rgb).save(fh, format="png", compress_level=PNG_COMPRESS_LEVEL)
 
 
 def text_width_px(text: str, font_size: int) -> int:
