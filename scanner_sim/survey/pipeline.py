@@ -189,10 +189,10 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     pass's pulse count as its total.
 
     Chunks run side by side, one per core: each of :func:`chunk_workers` threads takes the next chunk and runs
-    it whole (ray stage, then physics) on one numba thread; Embree and the kernels release the GIL. The last chunk
-    is cut in one part per worker (:func:`last_cut`). Each chunk is a pure function of its slots, so the bits do
-    not depend on which thread ran it, how many there are or how the slots were cut; at most one chunk more than
-    there are workers is in flight.
+    it whole (ray stage, then physics) on one numba thread; Embree and the kernels release the GIL. The pass's
+    last round is cut in one part per worker (:func:`last_round_cut`). Each chunk is a pure function of its slots,
+    so the bits do not depend on which thread ran it, how many there are or how the slots were cut; at most one
+    chunk more than there are workers is in flight.
     """
     keep = kept_slots(setup, options.waveforms, setup.config.output.waveform_every_n_pulses)
     # The total counts every fired slot of the pass (6 ms on real_site): only for a bar that shows it.
@@ -201,7 +201,7 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     workers = chunk_workers()
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="chunk") as pool:
         in_flight: deque[Future] = deque()
-        for slots in last_cut(setup.slot_chunks(), workers):
+        for slots in last_round_cut(setup.slot_chunks(), workers):
             in_flight.append(pool.submit(_whole_chunk, setup, slots, keep))
             if len(in_flight) > workers:
                 yield _finished(in_flight.popleft(), bar)
@@ -210,15 +210,30 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     bar.close()
 
 
-def last_cut(chunks, parts: int):
-    """``chunks`` (arrays of slots) as they come, the last one cut into ``parts`` near-equal chunks, so that the
-    cores share the pass's end instead of one running its last chunk alone (the bits do not depend on the cut)."""
-    current = next(chunks, None)
-    for following in chunks:
-        yield current
-        current = following
-    if current is not None:
-        yield from (part for part in np.array_split(current, parts) if part.size)
+def last_round_cut(chunks, parts: int):
+    """``chunks`` (arrays of slots) as they come, the pass's last round cut into ``parts`` near-equal chunks, so that
+    the cores share the pass's end instead of some running its last chunks alone while the others wait (the bits do
+    not depend on the cut).
+
+    The last round is what follows the pass's last whole round of ``parts`` chunks: the last ``K mod parts``
+    chunks of K, or the last chunk alone when K is a multiple of ``parts``. A last chunk under half the size of the
+    one before it (the few pulses a pass's ``max_pulses`` leaves after a whole chunk) is counted with that one. Three
+    chunks on two workers thus end in two halves of the third: the pass takes one and a half chunks' time, not two
+    with one core idle for the last."""
+    held: list[np.ndarray] = []  # the last ``parts`` chunks, handed on once a later one shows they are not the last
+    handed = 0
+    for chunk in chunks:
+        held.append(chunk)
+        if len(held) > parts:
+            handed += 1
+            yield held.pop(0)
+    if len(held) > 1 and 2 * held[-1].size < held[-2].size:
+        held[-2:] = [np.concatenate(held[-2:])]
+    last = (handed + len(held)) % parts or 1
+    yield from held[:len(held) - last]
+    if held:
+        tail = np.concatenate(held[len(held) - last:])
+        yield from (part for part in np.array_split(tail, parts) if part.size)
 
 
 #: Chunk workers from which a pass's sinks take their chunks on threads of their own. With fewer, the chunks keep

@@ -14,7 +14,7 @@ import trimesh
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
 from scanner_sim.records.point_records import DROPOUT_CAUSES
-from scanner_sim.survey.pipeline import last_cut, run_pass
+from scanner_sim.survey.pipeline import last_round_cut, run_pass
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import LABELS
 
@@ -93,15 +93,24 @@ def test_same_seed_same_points_whatever_the_chunk_size(cable_survey, tmp_path):
     assert not np.array_equal(np.asarray(a.z), np.asarray(c.z)[: len(a.z)]) and other["seed"] == 2
 
 
-@pytest.mark.parametrize("sizes", [[10, 10, 10], [10, 10, 1], [7], [3], []])
-def test_the_last_chunk_is_shared_by_the_workers_and_no_slot_is_lost(sizes):
-    """The pass's chunks in order, every slot once; the last chunk in up to two near-equal parts (two workers)."""
+@pytest.mark.parametrize(("sizes", "parts", "expected"), [
+    ([10, 10, 10], 2, [10, 10, 5, 5]),  # three chunks, two workers: the third in halves (1.5 chunks' time, not 2)
+    ([10, 10, 10, 1], 2, [10, 10, 6, 5]),  # a max_pulses remainder counts with the chunk before it
+    ([10, 10, 10, 10], 2, [10, 10, 10, 5, 5]),  # a whole last round: its last chunk in halves, as the cores end
+    ([10, 10, 10, 10, 10], 4, [10, 10, 10, 10, 3, 3, 2, 2]),
+    ([10, 10, 10, 10, 10, 10], 4, [10, 10, 10, 10, 5, 5, 5, 5]),  # two chunks past the round, four workers: in quarters
+    ([10, 10, 1], 2, [10, 6, 5]),
+    ([7], 2, [4, 3]),
+    ([1], 2, [1]),
+    ([], 2, []),
+])
+def test_the_last_round_is_shared_by_the_workers_and_no_slot_is_lost(sizes, parts, expected):
+    """The pass's chunks in order, every slot once; what follows the last whole round of ``parts`` chunks is cut into
+    ``parts`` near-equal chunks, so no worker idles while another runs the pass's last chunks alone."""
     chunks = [np.arange(sum(sizes[:i]), sum(sizes[: i + 1])) for i in range(len(sizes))]
-    out = list(last_cut(iter(chunks), 2))
+    out = list(last_round_cut(iter(chunks), parts))
     assert np.array_equal(np.concatenate(out) if out else np.zeros(0), np.arange(sum(sizes)))
-    assert [c.size for c in out[: max(len(sizes) - 1, 0)]] == sizes[:-1]
-    last = [c.size for c in out[len(sizes) - 1:]]
-    assert all(n > 0 for n in last) and (not last or max(last) - min(last) <= 1 and len(last) == min(2, sizes[-1]))
+    assert [c.size for c in out] == expected
 
 
 def test_same_seed_same_points_whatever_the_thread_count(tmp_path):
