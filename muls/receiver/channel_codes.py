@@ -23,11 +23,14 @@ def quantise(u, max_code):
 @kernel(nogil=True, error_model="numpy")
 def channel_codes(out, power, times, dark_normal, shot_normal, chans, c, max_code, noise_scale):
     """One channel's codes (n,) of a window from the power [W] at its sample times [s] and its two normals: no
-    branch but selects, so the loop runs on SIMD lanes."""
+    branch but selects, so the loop runs on SIMD lanes. The channel's constants in locals, as in
+    :func:`ranging_codes` (the expressions are gate_open_at and level_lsb): 5 to 8 % of ``fast``'s digitiser."""
     dark_std, shot = chans.dark_std_lsb[c], chans.shot_lsb2_per_w[c]
+    gate_open, gate_close = chans.gate_open_s[c], chans.gate_close_s[c]
+    dark_mean, lsb_per_w = chans.dark_mean_lsb[c], chans.lsb_per_w[c]
     for k in range(out.shape[0]):
-        gated = power[k] if gate_open_at(chans, c, times[k]) else 0.0
-        level = level_lsb(chans, c, gated)
+        gated = power[k] if (gate_open <= times[k]) & (times[k] < gate_close) else 0.0
+        level = dark_mean + lsb_per_w * gated
         noise = dark_std * dark_normal[k] + math.sqrt(shot * gated) * shot_normal[k]
         out[k] = quantise(level + noise_scale * noise, max_code)  # MULS Eq. 13
 

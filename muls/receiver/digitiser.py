@@ -267,6 +267,7 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
         # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
         sa, s1, sb = 0.0, 0.0, 0.0
         nxt = offsets[p]
+        bg, b2, b3, b4 = cuts.background_w[p], basis[2], basis[3], basis[4]
         # The column's cuts by two-way time (insertion sort: a handful). Before a cut its share of the beam
         # sees the full column; from the cut on, its share is the module doc's tail of waveform.py, of the same
         # form as an echo, so it joins the three sums; ``ahead[i]``: the share of cuts i and later.
@@ -314,12 +315,13 @@ def _digitise(codes, clean, synthesised, window_pulse, window_start, sampling, c
                 s1 += (u * v0a + v1a) * ea
                 sb += cut_s[next_cut] * v0b * math.exp(-basis[1] * u)
                 next_cut += 1
-            power[k] = cuts.background_w[p] + basis[2] * s1 + basis[3] * sa + basis[4] * sb
+            power[k] = bg + b2 * s1 + b3 * sa + b4 * sb
             if next_cut < n_cut:
                 power[k] += ahead[next_cut] * uncut[k]
         if settings.deciding_only or settings.read_samples_only:
+            background = cuts.background_w[p]
             for k in range(n_samples):  # the processor's calibrated baseline, as baseline_values gives it
-                baseline[k] = cuts.background_w[p] + uncut[k]
+                baseline[k] = background + uncut[k]
         if settings.deciding_only:
             first_echo, last_echo = np.inf, -np.inf
             for j in range(offsets[p], offsets[p + 1]):

@@ -194,6 +194,10 @@ def _set_extra_bytes_ranges(header: laspy.LasHeader, ranges: Mapping[str, tuple[
         struct_.options |= bits
 
 
+def _ranges_tracked_by_the_writer(points) -> None:
+    """Stands in for laspy's ``ExtraBytesVlr.grow`` on a :class:`LasWriter`'s header: nothing to do."""
+
+
 class LasWriter(StreamingWriter):
     """Streaming, atomic LAS 1.4 writer (point data record format 6 plus extra dimensions).
 
@@ -314,6 +318,10 @@ class LasWriter(StreamingWriter):
             self._fh = open(tmp, "w+b")  # noqa: SIM115 - closed in close() or _discard()
             self._writer = laspy.open(self._fh, mode="w", header=self._header, do_compress=self._compress,
                                       closefd=False)
+            # The extra dimensions' ranges are this writer's own (_pack tracks them, close writes them): laspy's
+            # per-chunk growth of them (see _set_extra_bytes_ranges) is overwritten, and cost as much as packing.
+            for vlr in self._writer.header.vlrs.get("ExtraBytesVlr"):
+                vlr.grow = _ranges_tracked_by_the_writer
         except BaseException as exc:
             self._discard(exc)
             raise

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from muls.infra.errors import ParameterError
+from muls.infra.runtime import kernel
 
 
 @dataclass(frozen=True)
@@ -154,7 +155,7 @@ class Scanner:
         bo, bd, ro, _ = self.directions(times_s)
         R, p = poses.rotation, poses.position
         beam_dir = _rotate(R, bd)
-        shaft = np.einsum("nij,j->ni", R, self.shaft_axis)
+        shaft = _rotate(R, np.broadcast_to(self.shaft_axis, bd.shape))
         return p + _rotate(R, bo), beam_dir, shaft, p + _rotate(R, ro), beam_dir.copy()  # the axes are parallel
 
     def beam_rays(self, poses):
@@ -165,4 +166,16 @@ class Scanner:
 
 def _rotate(rotation, vectors):
     """(n, 3): each of ``vectors`` (n, 3) turned by its matrix of ``rotation`` (n, 3, 3)."""
-    return np.einsum("nij,nj->ni", rotation, vectors)
+    out = np.empty(np.shape(vectors))
+    _turn(np.ascontiguousarray(rotation, np.float64), np.ascontiguousarray(vectors, np.float64), out)
+    return out
+
+
+@kernel(nogil=True)
+def _turn(rotation, vectors, out):
+    """out[n] = rotation[n] @ vectors[n], each row's three terms added as numpy's einsum adds them,
+    (r_0 v_0 + r_2 v_2) + r_1 v_1 onto 0 (the same bits as the einsum this replaced, without its set-up)."""
+    for n in range(out.shape[0]):
+        v0, v1, v2 = vectors[n, 0], vectors[n, 1], vectors[n, 2]
+        for i in range(3):
+            out[n, i] = 0.0 + ((rotation[n, i, 0] * v0 + rotation[n, i, 2] * v2) + rotation[n, i, 1] * v1)

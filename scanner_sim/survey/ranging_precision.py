@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from muls.infra.runtime import kernel
 from muls.optics.optical_model import PulseBatch
 from scanner_sim.rays.echoes import echo_range_m
 
@@ -70,23 +71,13 @@ class RangingPrecision:
         between the two panels whose measured ranges bracket the point's (the end panels' beyond them): near the
         gate's opening, where part of an echo's rise is shut out, the bias grows by a few centimetres over a
         decimetre of range, more than a nearest panel's step allows."""
-        channels, _, _, panels, bins = self.bias_m.shape
-        # Each return's cell at panel 0, as an index into the flattened (C-ordered) tables; panel i is i * bins on.
-        # One flat gather instead of five broadcast index arrays: the same values at a fraction of the cost.
-        first = ((np.clip(np.asarray(channel, np.int64), 0, channels - 1) * 2 + np.asarray(saturated, np.int64)) * 2
-                 + np.asarray(later, np.int64)) * (panels * bins) + snr_bin(self.snr_edges, snr)
-        cells = first[:, None] + bins * np.arange(panels)
-        bias, std = self.bias_m.reshape(-1)[cells], self.std_m.reshape(-1)[cells]  # (n, panels)
-        measured = np.asarray(self.ranges_m, float)[None, :] + bias  # ascending: a farther panel's echo comes later
-        rho = np.asarray(range_m, float)
-        if panels == 1:
-            return bias[:, 0], std[:, 0]
-        lo = np.clip(np.count_nonzero(measured <= rho[:, None], axis=1) - 1, 0, panels - 2)
-        lo = np.arange(rho.size) * panels + lo  # flat index of each return's nearer bracketing panel
-        measured, bias, std = measured.reshape(-1), bias.reshape(-1), std.reshape(-1)
-        gap = measured[lo + 1] - measured[lo]
-        w = np.clip((rho - measured[lo]) / np.where(gap > 0, gap, np.inf), 0.0, 1.0)
-        return (1 - w) * bias[lo] + w * bias[lo + 1], (1 - w) * std[lo] + w * std[lo + 1]
+        n = len(range_m)
+        bias, std = np.empty(n), np.empty(n)
+        _look_up(self.bias_m.reshape(-1), self.std_m.reshape(-1), self.bias_m.shape[0], self.bias_m.shape[-1],
+                 np.asarray(self.ranges_m, float), self.snr_edges, np.asarray(channel, np.int64),
+                 np.asarray(snr, float), np.asarray(saturated, np.int64), np.asarray(later, np.int64),
+                 np.asarray(range_m, float), bias, std)
+        return bias, std
 
     def as_dict(self) -> dict:
         """The table as JSON-ready lists (the summary's ``uncertainty.ranging``): per channel, state and panel range,
@@ -102,6 +93,45 @@ class RangingPrecision:
         return {"snr_edges": [round(float(e), 4) for e in self.snr_edges], "ranges_m": [round(r, 3) for r in self.ranges_m],
                 "reflectances": list(REFLECTANCES), "shots_per_panel": SHOTS,
                 "bias_m": rows(self.bias_m, 4), "std_m": rows(self.std_m, 4), "count": rows(self.count, 0)}
+
+
+@kernel(nogil=True)
+def _look_up(bias_m, std_m, channels, bins, ranges_m, edges, channel, snr, saturated, later, range_m, bias, std):
+    """:meth:`RangingPrecision.of` point by point into ``bias`` and ``std`` (n,), from the flattened (C-ordered)
+    tables ``bias_m`` and ``std_m`` of ``channels`` channels, ``ranges_m`` (panels,) and ``bins`` SNR bins of
+    ``edges``. Each return's cell at panel 0 is an index into the flat tables (panel i lies i * bins on)."""
+    panels = ranges_m.shape[0]
+    measured = np.empty(panels)
+    for i in range(range_m.shape[0]):
+        first = ((min(max(channel[i], 0), channels - 1) * 2 + saturated[i]) * 2 + later[i]) * (panels * bins) \
+            + _snr_bin(edges, snr[i])
+        if panels == 1:
+            bias[i], std[i] = bias_m[first], std_m[first]
+            continue
+        rho, below = range_m[i], 0
+        for k in range(panels):  # ascending: a farther panel's echo comes later
+            measured[k] = ranges_m[k] + bias_m[first + k * bins]
+            below += measured[k] <= rho
+        lo = min(max(below - 1, 0), panels - 2)
+        gap = measured[lo + 1] - measured[lo]
+        w = (rho - measured[lo]) / (gap if gap > 0 else np.inf)
+        if w == w:  # clipped to [0, 1] as numpy clips: a NaN stays NaN, -0 becomes 0
+            w = w if w > 0.0 else 0.0
+            w = w if w < 1.0 else 1.0
+        a, b = first + lo * bins, first + (lo + 1) * bins
+        bias[i] = (1 - w) * bias_m[a] + w * bias_m[b]
+        std[i] = (1 - w) * std_m[a] + w * std_m[b]
+
+
+@kernel(inline="always")
+def _snr_bin(edges, snr):
+    """:func:`snr_bin` of one ``snr``: the edges at or below it, less one, within the bins (a NaN lies above all)."""
+    count = edges.shape[0]
+    if snr == snr:
+        count = 0
+        while count < edges.shape[0] and edges[count] <= snr:
+            count += 1
+    return min(max(count - 1, 0), edges.shape[0] - 2)
 
 
 def snr_edges() -> np.ndarray:

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr, ndtri
 
+from muls.infra.runtime import kernel
 from scanner_sim.survey.georeference import GRAZING_COS
 from scanner_sim.survey.ranging_precision import RangingPrecision
 
@@ -108,24 +109,26 @@ class TpuModel:
         ``attitude_rad`` (n, 3) roll, pitch, yaw, with range standard uncertainty ``range_sigma_m`` (n,) [m]
         (ranging and footprint together). An axis need not be a unit vector: the surface reading's is not
         (:func:`surface_axis`)."""
+        return self._propagated(lever_m, direction, attitude_rad, range_sigma_m, axes, np.zeros(0))[1]
+
+    def _propagated(self, lever_m, direction, attitude_rad, range_sigma_m, axes, bias) -> tuple[np.ndarray, np.ndarray]:
+        """(mean (n, m) [m], variances (n, m) [m^2]) along ``axes``, the mean the ranging's ``bias`` (n,) [m] along the
+        beam (an empty ``bias``: no mean, (0, m)); the rest as :meth:`variances`, whose sums :func:`_propagate` does
+        point by point. The turns' sines and cosines are numpy's, as they were before the loop was compiled."""
         nav = self.navigation
-        u = np.asarray(direction, np.float64)
-        a = np.broadcast_to(np.eye(3), (len(u), 3, 3)) if axes is None else np.asarray(axes, np.float64)
-
-        def along(jacobian):  # (n, m): a . J for a Jacobian (n, 3)
-            return np.einsum("nmk,nk->nm", a, jacobian)
-
-        var = (range_sigma_m[:, None] * along(u)) ** 2
-        var += nav.position_m**2 * (a[..., 0] ** 2 + a[..., 1] ** 2) + nav.depth_m**2 * a[..., 2] ** 2
-        yaw, pitch = attitude_rad[:, 2], attitude_rad[:, 1]
-        if nav.heading_rad:  # z x v
-            var += (nav.heading_rad * along(_cross((0.0, 0.0, 1.0), lever_m))) ** 2
+        u = np.ascontiguousarray(direction, np.float64)
+        n = len(u)
+        a = np.ascontiguousarray(np.broadcast_to(np.eye(3), (n, 3, 3)) if axes is None else axes, np.float64)
         if nav.attitude_rad:
-            sin_yaw, cos_yaw, cos_pitch = np.sin(yaw), np.cos(yaw), np.cos(pitch)
-            for axis in ((sin_yaw, -cos_yaw, np.zeros_like(yaw)),  # pitch: -Rz(yaw) y
-                         (cos_yaw * cos_pitch, sin_yaw * cos_pitch, np.sin(pitch))):  # roll: R x
-                var += (nav.attitude_rad * along(_cross(axis, lever_m))) ** 2
-        return var
+            yaw, pitch = attitude_rad[:, 2], attitude_rad[:, 1]
+            turns = np.stack([np.sin(yaw), np.cos(yaw), np.sin(pitch), np.cos(pitch)], axis=1)
+        else:
+            turns = np.zeros((0, 4))
+        mean, var = np.empty((n if bias.size else 0, a.shape[1])), np.empty((n, a.shape[1]))
+        _propagate(np.ascontiguousarray(lever_m, np.float64), u, a, np.ascontiguousarray(range_sigma_m, np.float64),
+                   np.ascontiguousarray(bias, np.float64), nav.position_m**2, nav.depth_m**2, nav.heading_rad,
+                   nav.attitude_rad, turns, mean, var)
+        return mean, var
 
     def error_model(self, lever_m, direction, attitude_rad, channel, snr, saturated, later, range_m, incidence_deg,
                     normal=None) -> tuple[np.ndarray, np.ndarray]:
@@ -136,10 +139,10 @@ class TpuModel:
         bias, std = self.ranging.of(channel, snr, saturated, later, range_m)
         sigma_range = std * np.hypot(1.0, self.footprint_sigma_m(range_m, incidence_deg) / self.pulse_sigma_m)
         n = len(bias)
-        axes = np.concatenate([np.broadcast_to(np.eye(3), (n, 3, 3)),
-                               surface_axis(np.full((n, 3), np.nan) if normal is None else normal)[:, None]], axis=1)
-        return (bias[:, None] * np.einsum("nmk,nk->nm", axes, direction),
-                self.variances(lever_m, direction, attitude_rad, sigma_range, axes))
+        axes = np.empty((n, 4, 3))
+        axes[:, :3] = np.eye(3)
+        axes[:, SURFACE] = surface_axis(np.full((n, 3), np.nan) if normal is None else normal)
+        return self._propagated(lever_m, direction, attitude_rad, sigma_range, axes, bias)
 
     def predict(self, points, sight, normal=None) -> tuple[np.ndarray, np.ndarray]:
         """The predicted error (:meth:`error_model`) of a chunk's ``points`` (:class:`PointRecords`) from its lines of
@@ -154,15 +157,52 @@ class TpuModel:
                                 normal)
 
 
-def _cross(a, b) -> np.ndarray:
-    """(n, 3) a x b of ``a`` given by its three components (each a scalar or (n,)) and ``b`` (n, 3): numpy's cross
-    product, term for term, without its axis juggling (which costs more than the arithmetic on a chunk's points)."""
-    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    out = np.empty((len(b), 3))
-    out[:, 0] = a[1] * b2 - a[2] * b1
-    out[:, 1] = a[2] * b0 - a[0] * b2
-    out[:, 2] = a[0] * b1 - a[1] * b0
-    return out
+@kernel(nogil=True)
+def _propagate(lever, u, axes, range_sigma, bias, position_var, depth_var, heading, attitude, turns, mean, var):
+    """Fill ``mean`` (n, m) with bias . (a . u) (unless ``bias`` is empty) and ``var`` (n, m) with the variances of
+    :meth:`TpuModel.variances`, point by point: the ranging along the beam, the navigation's position
+    (``position_var``, ``depth_var`` [m^2]) along the unit axes, and each turn (``heading``, ``attitude`` [rad], 0:
+    none) through a x v, v the ``lever``. ``turns`` (n, 4): sin and cos of yaw, sin and cos of pitch (when
+    ``attitude``). The same numbers as the arrays' arithmetic it replaces: each sum in that order, each a . J as
+    numpy's einsum adds its three terms, (a_0 J_0 + a_2 J_2) + a_1 J_1 onto 0."""
+    n, m = axes.shape[0], axes.shape[1]
+    for i in range(n):
+        l0, l1, l2 = lever[i, 0], lever[i, 1], lever[i, 2]
+        heading_v = (0.0 * l2 - 1.0 * l1, 1.0 * l0 - 0.0 * l2, 0.0 * l1 - 0.0 * l0)  # z x v
+        pitch_v, roll_v = heading_v, heading_v
+        if attitude:
+            sin_yaw, cos_yaw, sin_pitch, cos_pitch = turns[i, 0], turns[i, 1], turns[i, 2], turns[i, 3]
+            pitch_v = _cross(sin_yaw, -cos_yaw, 0.0, l0, l1, l2)  # pitch: about -Rz(yaw) y
+            roll_v = _cross(cos_yaw * cos_pitch, sin_yaw * cos_pitch, sin_pitch, l0, l1, l2)  # roll: about R x
+        for j in range(m):
+            a = (axes[i, j, 0], axes[i, j, 1], axes[i, j, 2])
+            along = _dot(a, (u[i, 0], u[i, 1], u[i, 2]))
+            if bias.shape[0]:
+                mean[i, j] = bias[i] * along
+            s = range_sigma[i] * along
+            v = s * s
+            v += position_var * (a[0] * a[0] + a[1] * a[1]) + depth_var * (a[2] * a[2])
+            if heading:
+                s = heading * _dot(a, heading_v)
+                v += s * s
+            if attitude:
+                s = attitude * _dot(a, pitch_v)
+                v += s * s
+                s = attitude * _dot(a, roll_v)
+                v += s * s
+            var[i, j] = v
+
+
+@kernel(inline="always")
+def _dot(a, b):
+    """a . b of two 3-tuples, its terms added as numpy's einsum adds them (and so the same bits)."""
+    return 0.0 + ((a[0] * b[0] + a[2] * b[2]) + a[1] * b[1])
+
+
+@kernel(inline="always")
+def _cross(a0, a1, a2, b0, b1, b2):
+    """a x b of two vectors given by their components, term for term."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
 def surface_axis(normal) -> np.ndarray:
@@ -172,14 +212,23 @@ def surface_axis(normal) -> np.ndarray:
     slope of a facet of unit ``normal`` (n, 3). A normal unknown (NaN) gives (0, 0, 1), the plain vertical; a facet
     within :data:`~scanner_sim.survey.georeference.GRAZING_COS` of vertical has no surface under (x, y) to read, and
     gives NaN."""
-    normal = np.asarray(normal, np.float64)
-    known = np.isfinite(normal).all(axis=1)
-    nz = np.where(known, normal[:, 2], 1.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        g = np.where(known[:, None], -normal[:, :2] / nz[:, None], 0.0)
-    axis = np.c_[-g, np.ones(len(normal))]
-    axis[np.abs(nz) < GRAZING_COS] = np.nan
+    normal = np.ascontiguousarray(normal, np.float64)
+    axis = np.empty_like(normal)
+    _surface_axis(normal, GRAZING_COS, axis)
     return axis
+
+
+@kernel(nogil=True, error_model="numpy")
+def _surface_axis(normal, grazing_cos, axis):
+    """:func:`surface_axis` of each row of ``normal`` (n, 3) into ``axis`` (n, 3)."""
+    for i in range(normal.shape[0]):
+        n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        known = np.isfinite(n0) and np.isfinite(n1) and np.isfinite(n2)
+        nz = n2 if known else 1.0
+        g0, g1 = (-n0 / nz, -n1 / nz) if known else (0.0, 0.0)
+        axis[i, 0], axis[i, 1], axis[i, 2] = -g0, -g1, 1.0
+        if abs(nz) < grazing_cos:
+            axis[i, :] = np.nan
 
 
 def with_uncertainty(points, mean, var):
