@@ -174,7 +174,7 @@ def _rotate(rotation, vectors):
 @kernel(nogil=True)
 def _turn(rotation, vectors, out):
     """out[n] = rotation[n] @ vectors[n], each row's three terms added as numpy's einsum adds them,
-    (r_0 v_0 + r_2 v_2) + r_1 v_1 onto 0 (the same bits as the einsum this replaced, without its set-up)."""
+    (r_0 v_0 + r_2 v_2) + r_1 v_1 onto 0: the bits of ``numpy.einsum("nij,nj->ni", ...)`` without its set-up."""
     for n in range(out.shape[0]):
         v0, v1, v2 = vectors[n, 0], vectors[n, 1], vectors[n, 2]
         for i in range(3):

@@ -114,7 +114,8 @@ class TpuModel:
     def _propagated(self, lever_m, direction, attitude_rad, range_sigma_m, axes, bias) -> tuple[np.ndarray, np.ndarray]:
         """(mean (n, m) [m], variances (n, m) [m^2]) along ``axes``, the mean the ranging's ``bias`` (n,) [m] along the
         beam (an empty ``bias``: no mean, (0, m)); the rest as :meth:`variances`, whose sums :func:`_propagate` does
-        point by point. The turns' sines and cosines are numpy's, as they were before the loop was compiled."""
+        point by point. The turns' sines and cosines are numpy's (its own vectorised routines, whose last bits a compiled
+        call to the C library need not share)."""
         nav = self.navigation
         u = np.ascontiguousarray(direction, np.float64)
         n = len(u)
@@ -163,8 +164,9 @@ def _propagate(lever, u, axes, range_sigma, bias, position_var, depth_var, headi
     :meth:`TpuModel.variances`, point by point: the ranging along the beam, the navigation's position
     (``position_var``, ``depth_var`` [m^2]) along the unit axes, and each turn (``heading``, ``attitude`` [rad], 0:
     none) through a x v, v the ``lever``. ``turns`` (n, 4): sin and cos of yaw, sin and cos of pitch (when
-    ``attitude``). The same numbers as the arrays' arithmetic it replaces: each sum in that order, each a . J as
-    numpy's einsum adds its three terms, (a_0 J_0 + a_2 J_2) + a_1 J_1 onto 0."""
+    ``attitude``). Each sum is taken in the order numpy takes it over arrays, each a . J as numpy's einsum adds its
+    three terms, (a_0 J_0 + a_2 J_2) + a_1 J_1 onto 0: the figures equal numpy's evaluation of the same formulas, bit
+    for bit."""
     n, m = axes.shape[0], axes.shape[1]
     for i in range(n):
         l0, l1, l2 = lever[i, 0], lever[i, 1], lever[i, 2]
