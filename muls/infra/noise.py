@@ -144,19 +144,34 @@ def fill_hashes(base, first_index, out):
         out[k] = hash_at(base, first_index + k)
 
 
+@kernel(nogil=True, error_model="numpy")
+def fill_normals_of(hashes, half, at, out, tails):
+    """out[i] = :func:`normal_of_bits` (:func:`half_bits` (hashes[at[i]], half)) for i < at.shape[0], bit for bit;
+    ``tails`` (m,) bool scratch. As :func:`fill_normal_pairs`: a loop without a branch for the central formula, then
+    the draws in the tails patched."""
+    for i in range(at.shape[0]):
+        p = centred_unit(half_bits(hashes[at[i]], half))
+        out[i] = _central_normal(p)
+        tails[i] = _in_tail(p)
+    for i in range(at.shape[0]):
+        if tails[i]:
+            out[i] = _tail_normal(centred_unit(half_bits(hashes[at[i]], half)))
+
+
 #: :func:`normal_upper_bound` reads a table of the top 12 bits of a half: 4,096 cells of 2^20 values each.
 UPPER_BOUND_SHIFT = np.uint64(20)
 
 
-@kernel
-def _upper_bounds():
+def _upper_bounds() -> np.ndarray:
     """(4096,) the normal of each cell's last value, plus 1e-6: more than the inverse CDF's approximation can wiggle
-    (its relative error is 1.2e-9, |x| < 6.34), so each value bounds every normal of its cell from above."""
+    (its relative error is 1.2e-9, |x| < 6.34), so each value bounds every normal of its cell from above. The normals
+    come from :func:`fill_normals_of`, a kernel the pass compiles anyway (as the low halves of hashes that hold those
+    values), not from a kernel of its own: one kernel less to compile on a first run."""
     cells = 1 << (32 - int(UPPER_BOUND_SHIFT))
-    out = np.empty(cells)
-    for i in range(cells):
-        out[i] = normal_of_bits(np.uint64((i + 1) << int(UPPER_BOUND_SHIFT)) - np.uint64(1)) + 1e-6
-    return out
+    last_of_cell = (np.arange(1, cells + 1, dtype=np.uint64) << UPPER_BOUND_SHIFT) - np.uint64(1)
+    normals = np.empty(cells)
+    fill_normals_of(last_of_cell, 1, np.arange(cells, dtype=np.int64), normals, np.empty(cells, np.bool_))
+    return normals + 1e-6
 
 
 # Built at import, as a global: numba freezes a global array into the kernels that read it, which then know it aliases
@@ -211,20 +226,6 @@ def fill_normal_pairs(base, first_index, high, low, tails):
             p = centred_unit(half_bits(h, 1))
             if both and _in_tail(p):
                 low[k] = _tail_normal(p)
-
-
-@kernel(nogil=True, error_model="numpy")
-def fill_normals_of(hashes, half, at, out, tails):
-    """out[i] = :func:`normal_of_bits` (:func:`half_bits` (hashes[at[i]], half)) for i < at.shape[0], bit for bit;
-    ``tails`` (m,) bool scratch. As :func:`fill_normal_pairs`: a loop without a branch for the central formula, then
-    the draws in the tails patched."""
-    for i in range(at.shape[0]):
-        p = centred_unit(half_bits(hashes[at[i]], half))
-        out[i] = _central_normal(p)
-        tails[i] = _in_tail(p)
-    for i in range(at.shape[0]):
-        if tails[i]:
-            out[i] = _tail_normal(centred_unit(half_bits(hashes[at[i]], half)))
 
 
 @kernel
