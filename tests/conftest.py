@@ -1,6 +1,6 @@
 """What the tests share: the repository's root, the command lines run in process, a small scene in UTM coordinates,
-the waters and models of the muls detection tests, the Chromium of the browser tests. Test files import these by name
-(``from conftest import run_cli``).
+the waters and models of the muls detection tests, the Chromium of the browser tests, a signal that Python drops.
+Test files import these by name (``from conftest import run_cli``).
 
 Where a test file goes: tests/muls/<stage>/ or tests/scanner_sim/<stage>/ for the module it tests, named
 ``test_<module>.py`` when it tests one module (a stage's README.md says where the others are); tests/system/ for
@@ -12,7 +12,9 @@ import contextlib
 import io
 import os
 import shutil
+import signal
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +35,28 @@ def run_cli(argv, main=None) -> tuple[int, str]:
     with contextlib.redirect_stdout(printed):
         code = main(argv)
     return code, printed.getvalue()
+
+
+class _SignalWhenCollected:
+    def __init__(self, signum: int):
+        self.signum = signum
+
+    def __del__(self):
+        signal.raise_signal(self.signum)
+        sum(range(100))  # bytecode after the signal: the handler runs here, inside the finaliser
+
+
+def drop_a_signal(signum: int = signal.SIGINT) -> list[type]:
+    """Send this process ``signum`` from inside a finaliser, so that a guarded command's handler raises where Python
+    cannot propagate it: the exception is dropped, as one raised in a ``__del__`` or a garbage-collector callback.
+    Returns the types of the exceptions dropped (sys.unraisablehook is replaced while it runs)."""
+    dropped, hook = [], sys.unraisablehook
+    sys.unraisablehook = lambda unraisable: dropped.append(type(unraisable.exc_value))
+    try:
+        _SignalWhenCollected(signum)  # collected at once
+    finally:
+        sys.unraisablehook = hook
+    return dropped
 
 
 def run_muls(capsys, *argv) -> tuple[int, str, str]:

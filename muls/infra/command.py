@@ -200,12 +200,31 @@ class Terminated(BaseException):
     """SIGTERM, raised in the main thread so that every ``finally`` and atomic writer cleans up."""
 
 
+#: The signals the running command received, kept after the first was raised: Python drops an exception raised
+#: where it cannot propagate (in a ``__del__``, a weakref or garbage-collector callback it only prints "Exception
+#: ignored in ..."), and the first signal set both to be ignored, so a command would go on past its Ctrl-C.
+#: :func:`stop_if_signalled` raises it again.
+_received: list[int] = []
+
+
+def _signal_exception(signum: int) -> BaseException:
+    return KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
+
+
 def _raise_on_signal(signum, frame):
     for s in (signal.SIGINT, signal.SIGTERM):  # a second signal during the clean-up is ignored
         signal.signal(s, signal.SIG_IGN)
-    if signum == signal.SIGINT:
-        raise KeyboardInterrupt
-    raise Terminated(signum)
+    _received.append(signum)
+    raise _signal_exception(signum)
+
+
+def stop_if_signalled() -> None:
+    """Raise again the Ctrl-C (KeyboardInterrupt) or SIGTERM (:class:`Terminated`) the running command received, in
+    case its first raise was dropped where Python cannot propagate an exception. Loops that run long (a pass's
+    chunks, a dataset's scenes) call it between their steps; :func:`run_guarded` calls it when the command returns.
+    Does nothing outside a guarded command or when no signal came."""
+    if _received:
+        raise _signal_exception(_received[0])
 
 
 @contextlib.contextmanager
@@ -213,12 +232,14 @@ def _signals_as_exceptions():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    _received.clear()
     previous = {s: signal.signal(s, _raise_on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
+        _received.clear()
 
 
 def _signal_behind(exc: BaseException) -> BaseException | None:
@@ -255,7 +276,9 @@ def run_guarded(prog: str, func, bad_input=()) -> int:
             warnings.simplefilter("default")
             warnings.showwarning = _show_warning(prog)
             try:
-                return int(func() or 0)
+                code = int(func() or 0)
+                stop_if_signalled()  # a signal whose exception was dropped: the command did not end as asked
+                return code
             except Exception as exc:
                 if isinstance(exc, bad_input() if callable(bad_input) else bad_input):
                     raise ValueError(_one_line(exc)) from None

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from muls.infra.command import stop_if_signalled
 from scanner_sim import io
 from scanner_sim.config import ConfigError, SceneConfig
 from scanner_sim.io.run_dir import hold_output
@@ -136,6 +137,7 @@ def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retri
     bar = tqdm(total=len(jobs), initial=len(jobs) - len(todo), unit="pass", disable=not progress, desc="passes")
     if client is None:
         for k in todo:
+            stop_if_signalled()
             bar.set_postfix_str(jobs[k].name)
             outcomes[k] = PassOutcome(jobs[k], "ran", write_pass(out / jobs[k].name, compute_pass(jobs[k])))
             bar.update()
@@ -145,6 +147,7 @@ def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retri
         token = uuid.uuid4().hex[:8]
         futures = {submit_pass(client, jobs[k], retries=retries, token=token): k for k in todo}
         for future in as_completed(futures):
+            stop_if_signalled()
             k = futures[future]
             try:
                 files = future.result()

@@ -22,6 +22,7 @@ import numba
 import numpy as np
 from tqdm import tqdm
 
+from muls.infra.command import stop_if_signalled
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.config.crs import crs_label
@@ -199,7 +200,8 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     it whole (ray stage, then physics) on one numba thread; Embree and the kernels release the GIL. The pass's
     last round is cut in one part per worker (:func:`last_round_cut`). Each chunk is a pure function of its slots,
     so the bits do not depend on which thread ran it, how many there are or how the slots were cut; at most
-    :data:`CHUNKS_IN_FLIGHT_PER_WORKER` chunks a worker are in flight.
+    :data:`CHUNKS_IN_FLIGHT_PER_WORKER` chunks a worker are in flight. A Ctrl-C or SIGTERM whose first raise Python
+    dropped stops the pass at its next chunk (:func:`~muls.infra.command.stop_if_signalled`).
     """
     keep = kept_slots(setup, options.waveforms, setup.config.output.waveform_every_n_pulses)
     # The total counts every fired slot of the pass (6 ms on real_site): only for a bar that shows it.
@@ -209,6 +211,7 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="chunk") as pool:
         in_flight: deque[Future] = deque()
         for slots in last_round_cut(setup.slot_chunks(), workers):
+            stop_if_signalled()
             in_flight.append(pool.submit(_whole_chunk, setup, slots, keep))
             if len(in_flight) >= CHUNKS_IN_FLIGHT_PER_WORKER * workers:
                 yield _finished(in_flight.popleft(), bar)

@@ -10,11 +10,13 @@ import laspy
 import numpy as np
 import pytest
 import trimesh
+from conftest import drop_a_signal
 
+from muls.infra.command import EXIT_SIGINT, run_guarded
 from scanner_sim.cli import main
 from scanner_sim.config import load_scene
 from scanner_sim.records.point_records import DROPOUT_CAUSES
-from scanner_sim.survey.pipeline import last_round_cut, run_pass
+from scanner_sim.survey.pipeline import last_round_cut, pass_chunks, run_pass
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import LABELS
 
@@ -111,6 +113,25 @@ def test_the_last_round_is_shared_by_the_workers_and_no_slot_is_lost(sizes, part
     out = list(last_round_cut(iter(chunks), parts))
     assert np.array_equal(np.concatenate(out) if out else np.zeros(0), np.arange(sum(sizes)))
     assert [c.size for c in out] == expected
+
+
+def test_regression_a_pass_stops_at_its_next_chunk_after_a_dropped_ctrl_c(cable_survey):
+    """Root cause as in tests/muls/infra/test_signals.py: a Ctrl-C raised where Python drops the exception (a
+    finaliser) left the pass running to its end, and a dataset to its millionth scene. The chunk loop now stops
+    before it submits another chunk: of a 20-chunk pass, no chunk is taken after the one during which it came."""
+    options = PassOptions(max_pulses=2000, progress=False, render=False)
+    setup = PassSetup.build(cable_survey.with_overrides({"survey.chunk_pulses": 100}), options)
+    taken = []
+
+    def consume():
+        for chunk in pass_chunks(setup, options):
+            taken.append(chunk.slots.size)
+            if len(taken) == 1:
+                assert drop_a_signal() == [KeyboardInterrupt]
+        return 0
+
+    assert run_guarded("scanner-sim run", consume) == EXIT_SIGINT
+    assert taken == [100]
 
 
 def test_same_seed_same_points_whatever_the_thread_count(tmp_path):
