@@ -12,10 +12,11 @@ import math
 import os
 import signal
 import sys
-import threading
 import warnings
 from importlib import metadata
 from pathlib import Path
+
+from .signals import Terminated, signal_behind, signals_as_exceptions, stop_if_signalled
 
 EXIT_FAILURE = 1  # a run that could not finish: a full disk, no permission, not enough memory
 EXIT_USAGE = 2  # bad input: an option, a scene, a file
@@ -196,62 +197,6 @@ def checked_types(parser: argparse.ArgumentParser) -> None:
 
 
 # -- running a command: every error one line, signals an exit code, never a traceback ------------------------
-class Terminated(BaseException):
-    """SIGTERM, raised in the main thread so that every ``finally`` and atomic writer cleans up."""
-
-
-#: The signals the running command received, kept after the first was raised: Python drops an exception raised
-#: where it cannot propagate (in a ``__del__``, a weakref or garbage-collector callback it only prints "Exception
-#: ignored in ..."), and the first signal set both to be ignored, so a command would go on past its Ctrl-C.
-#: :func:`stop_if_signalled` raises it again.
-_received: list[int] = []
-
-
-def _signal_exception(signum: int) -> BaseException:
-    return KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
-
-
-def _raise_on_signal(signum, frame):
-    for s in (signal.SIGINT, signal.SIGTERM):  # a second signal during the clean-up is ignored
-        signal.signal(s, signal.SIG_IGN)
-    _received.append(signum)
-    raise _signal_exception(signum)
-
-
-def stop_if_signalled() -> None:
-    """Raise again the Ctrl-C (KeyboardInterrupt) or SIGTERM (:class:`Terminated`) the running command received, in
-    case its first raise was dropped where Python cannot propagate an exception. Loops that run long (a pass's
-    chunks, a dataset's scenes) call it between their steps; :func:`run_guarded` calls it when the command returns.
-    Does nothing outside a guarded command or when no signal came."""
-    if _received:
-        raise _signal_exception(_received[0])
-
-
-@contextlib.contextmanager
-def _signals_as_exceptions():
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    _received.clear()
-    previous = {s: signal.signal(s, _raise_on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-        _received.clear()
-
-
-def _signal_behind(exc: BaseException) -> BaseException | None:
-    """The KeyboardInterrupt or :class:`Terminated` that ``exc`` was raised from, if any (its cause chain)."""
-    seen = exc.__cause__ or exc.__context__
-    while seen is not None:
-        if isinstance(seen, (KeyboardInterrupt, Terminated)):
-            return seen
-        seen = seen.__cause__ or seen.__context__
-    return None
-
-
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split()) or type(exc).__name__
 
@@ -272,7 +217,7 @@ def run_guarded(prog: str, func, bad_input=()) -> int:
     (the ``finally`` blocks and atomic writers have removed the temporary files by then); anything else exit 1 as
     an internal error (``MULS_TRACEBACK=1`` shows its traceback). Warnings print as one line each."""
     try:
-        with _signals_as_exceptions(), warnings.catch_warnings():
+        with signals_as_exceptions(), warnings.catch_warnings():
             warnings.simplefilter("default")
             warnings.showwarning = _show_warning(prog)
             try:
@@ -283,7 +228,7 @@ def run_guarded(prog: str, func, bad_input=()) -> int:
                 if isinstance(exc, bad_input() if callable(bad_input) else bad_input):
                     raise ValueError(_one_line(exc)) from None
                 if isinstance(exc, SystemError):  # a signal raised while a compiled kernel returned: numba wraps it
-                    raise _signal_behind(exc) or exc from None
+                    raise signal_behind(exc) or exc from None
                 raise
     except KeyboardInterrupt:
         print(f"{prog}: interrupted (Ctrl-C); temporary files removed, earlier outputs kept", file=sys.stderr)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..infra.errors import ParameterError, check_fraction, check_positive
+from ..infra.signals import stop_if_signalled
 from ..instrument.description import Instrument
 from ..water.phase import PhaseFunction, check_phase
 from ..water.properties import Water
@@ -177,6 +178,7 @@ def in_parts(trace, per_batch: int) -> None:
     sized to last about :data:`PART_S` at the pace of the one before: a signal ends the run between two parts."""
     start, size = 0, FIRST_PART_PACKETS
     while start < per_batch:
+        stop_if_signalled()  # a signal whose exception was dropped (muls.infra.signals)
         stop = min(per_batch, start + size)
         t0 = time.perf_counter()
         trace((start, stop))

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from muls.infra.command import stop_if_signalled
+from muls.infra.signals import stop_if_signalled
 from scanner_sim import io
 from scanner_sim.config import ConfigError, SceneConfig
 from scanner_sim.io.run_dir import hold_output

@@ -22,7 +22,7 @@ import numba
 import numpy as np
 from tqdm import tqdm
 
-from muls.infra.command import stop_if_signalled
+from muls.infra.signals import stop_if_signalled
 from scanner_sim import io
 from scanner_sim.config import SceneConfig
 from scanner_sim.config.crs import crs_label
@@ -201,7 +201,7 @@ def pass_chunks(setup: PassSetup, options: PassOptions):
     last round is cut in one part per worker (:func:`last_round_cut`). Each chunk is a pure function of its slots,
     so the bits do not depend on which thread ran it, how many there are or how the slots were cut; at most
     :data:`CHUNKS_IN_FLIGHT_PER_WORKER` chunks a worker are in flight. A Ctrl-C or SIGTERM whose first raise Python
-    dropped stops the pass at its next chunk (:func:`~muls.infra.command.stop_if_signalled`).
+    dropped stops the pass at its next chunk (:func:`~muls.infra.signals.stop_if_signalled`).
     """
     keep = kept_slots(setup, options.waveforms, setup.config.output.waveform_every_n_pulses)
     # The total counts every fired slot of the pass (6 ms on real_site): only for a bar that shows it.

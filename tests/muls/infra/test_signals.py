@@ -6,7 +6,8 @@ import signal
 import pytest
 from conftest import drop_a_signal
 
-from muls.infra.command import EXIT_SIGINT, EXIT_SIGTERM, Terminated, run_guarded, stop_if_signalled
+from muls.infra.command import EXIT_SIGINT, EXIT_SIGTERM, run_guarded
+from muls.infra.signals import Terminated, stop_if_signalled
 
 
 @pytest.mark.parametrize("signal_exc, code", [(KeyboardInterrupt(), EXIT_SIGINT), (Terminated(15), EXIT_SIGTERM)])
