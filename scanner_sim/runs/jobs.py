@@ -23,13 +23,13 @@ from scanner_sim.runs.tasks import (
     PassFiles,
     PassJob,
     Refused,
-    cached_scene,
     compute_pass,
     submit_pass,
 )
 from scanner_sim.survey.pipeline import PassResult
 from scanner_sim.survey.provenance import inputs_fingerprint
 from scanner_sim.survey.setup import PassOptions, PassPlan, checked_trajectory
+from scanner_sim.survey.setup_cache import cached_scene
 
 #: Keys of summary.json that time the pass: they differ from run to run.
 TIMING_KEYS = ("wall_s", "setup_s", "compile_s", "pulses_per_s")

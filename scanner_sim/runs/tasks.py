@@ -28,7 +28,7 @@ from scanner_sim.config import SceneConfig
 from scanner_sim.survey.chunk import Chunk
 from scanner_sim.survey.pipeline import kept_slots, pass_chunk, run_pass, stream_to_files
 from scanner_sim.survey.setup import PassOptions, PassSetup
-from scanner_sim.world.scene import Scene, build_scene
+from scanner_sim.survey.setup_cache import cached_scene
 
 #: Times a task that raised is tried again (a task whose worker died is rescheduled by the scheduler
 #: itself, up to ``distributed.scheduler.allowed-failures`` times).
@@ -56,24 +56,6 @@ class Segment(NamedTuple):
 
     chunks: list[Chunk]
     wall_s: float
-
-
-_SCENES: dict[str, Scene] = {}
-
-
-def cached_scene(config: SceneConfig) -> Scene:
-    """The built scene of ``config``, kept per process: the scene depends only on its CRS, the seabed, the objects
-    (and the folder mesh files are found in) and, over a raster seabed, the plan's bounds (the raster is read in a
-    window around them), so passes that differ in water, instrument, scanner or survey share one build. One scene
-    is kept."""
-    from scanner_sim.world.raster import plan_bounds
-
-    window = plan_bounds(config) if getattr(config.seabed, "raster", None) is not None else None
-    key = config.model_dump_json(include={"crs", "seabed", "objects"}) + str(config.source_path) + str(window)
-    if key not in _SCENES:
-        _SCENES.clear()
-        _SCENES[key] = build_scene(config)
-    return _SCENES[key]
 
 
 def _read_files(folder: Path) -> PassFiles:

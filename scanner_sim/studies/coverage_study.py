@@ -24,8 +24,9 @@ from scanner_sim.metrics import s44
 from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.runs.cluster import maybe_client
 from scanner_sim.runs.jobs import run_jobs
-from scanner_sim.runs.tasks import PassJob, cached_scene
+from scanner_sim.runs.tasks import PassJob
 from scanner_sim.survey.setup import PassOptions
+from scanner_sim.survey.setup_cache import cached_scene
 
 INSTRUMENTS = ("mul2023", "single_channel", "coaxial")
 GATE_MODES = ("follow", "fixed")

@@ -53,7 +53,7 @@ def write_plan_files(plan: SurveyPlan, out: Path, render: bool = True) -> dict:
         name = f"scene-{water}.yaml"
         io.write_text(out / name, scene_yaml(config.with_overrides({"output.dir": str(out / f"run-{water}")})))
         scenes[water] = name
-    from scanner_sim.runs.tasks import cached_scene
+    from scanner_sim.survey.setup_cache import cached_scene
 
     crs = cached_scene(plan.config).crs  # a site without a CRS is in a local frame: no GIS file, as for a pass
     lines_file = None

@@ -40,7 +40,7 @@ from scanner_sim.metrics import s44
 from scanner_sim.metrics.coverage import GAP_CAUSES
 from scanner_sim.runs.cluster import maybe_client
 from scanner_sim.runs.jobs import run_jobs
-from scanner_sim.runs.tasks import PassJob, cached_scene
+from scanner_sim.runs.tasks import PassJob
 from scanner_sim.studies.planning_confirmation import DEFAULT_FEATURE_CUBES, confirm_plans, confirmed_cause
 from scanner_sim.studies.planning_prediction import Candidate, best_order_and_cause, ladder_candidates
 from scanner_sim.studies.planning_sampling import (
@@ -57,6 +57,7 @@ from scanner_sim.studies.planning_sampling import (
     site_area,
 )
 from scanner_sim.survey.setup import PassOptions
+from scanner_sim.survey.setup_cache import cached_scene
 
 #: Share of the planned area on which the order must hold, by default.
 DEFAULT_REQUIRED_SHARE = 0.95  # assumption: S-44's 95 % confidence read over the area (docs/assumptions.md)

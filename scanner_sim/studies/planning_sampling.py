@@ -15,9 +15,9 @@ from scanner_sim.config import SceneConfig
 from scanner_sim.metrics import s44
 from scanner_sim.metrics.coverage import COVERED, GAP_CAUSES, CoverageSettings
 from scanner_sim.runs.jobs import PassOutcome
-from scanner_sim.runs.tasks import cached_scene
 from scanner_sim.studies.coverage_study import combination_config
 from scanner_sim.survey.setup import PassOptions
+from scanner_sim.survey.setup_cache import cached_scene
 
 #: Across-track bins of the profiles [m]: the coverage grid's plan cell.
 BIN_M = CoverageSettings().cell_m

@@ -258,7 +258,7 @@ class PassSetup:
         water = config.water_model()
         scene = cached_scene(config) if scene is None else scene
         # The Embree BVH and the seabed's proof grid: set-up, not part of the pass (a site's: per window, as it goes).
-        target = TiledTarget(scene) if isinstance(scene, SiteScene) else CastScene.build(scene)
+        target = TiledTarget(scene) if isinstance(scene, SiteScene) else CastScene.of(scene)
         trajectory = checked_trajectory(config, scene)
         scanner = Scanner.from_config(config.scanner, config.instrument.to_instrument(water))
         rate = scanner.pulse_rate_hz

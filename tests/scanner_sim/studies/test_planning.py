@@ -65,7 +65,7 @@ def test_the_chosen_plan_meets_special_order_and_the_next_cheaper_falls_short(sp
     run_pass(plan_config(plan.config, "clean_ocean", plan.area, nxt), tmp_path,
              PassOptions(progress=False, render=False, write_scene=False))
     grid = read_coverage_grid_npz(tmp_path / "coverage_grid.npz")
-    from scanner_sim.runs.tasks import cached_scene
+    from scanner_sim.survey.setup_cache import cached_scene
 
     scene = cached_scene(plan.config)
     reading = judged(grid, area_cells(grid, plan.area, nxt.spacing_m, scene), 1)
@@ -120,7 +120,7 @@ def test_cached_scene_over_a_raster_is_not_reused_for_another_plan():
     """A raster seabed is read in a window around the plan, but a process kept one built scene keyed by the CRS,
     seabed and objects only: the planner's confirmation over the whole real site reused the window of a 20 m sample
     line a worker had just flown (a 48 x 48 m grid instead of 72 x 56 m), and judged the plan on the wrong cells."""
-    from scanner_sim.runs.tasks import cached_scene
+    from scanner_sim.survey.setup_cache import cached_scene
 
     site = load_scene("real_site")
     line = site.with_overrides({"platform.mode": "waypoints", "platform.lawnmower": None,

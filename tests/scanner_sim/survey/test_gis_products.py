@@ -278,7 +278,7 @@ def test_a_gap_takes_the_cause_of_most_of_its_pulses_and_its_cells_edges():
 def test_cached_scene_of_another_crs_is_not_reused():
     """A campaign's process kept one built scene keyed by the seabed and objects only, so a pass of the same seabed
     under another CRS reused a scene whose ``crs`` was the first pass's, and wrote its products in that CRS."""
-    from scanner_sim.runs.tasks import cached_scene
+    from scanner_sim.survey.setup_cache import cached_scene
 
     first = cached_scene(parse_scene(utm_scene_data(32631)))
     second = cached_scene(parse_scene(utm_scene_data(25831)))  # ETRS89 / UTM zone 31N
