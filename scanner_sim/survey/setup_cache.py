@@ -149,8 +149,9 @@ def scene_key(config) -> str:
 
 #: The scene this process built or read last, by its key: passes of one scene in a row (a campaign's, a study's, a
 #: segmented pass's) share one scene object, and with it the BVH built over it
-#: (:meth:`~scanner_sim.rays.cast.CastScene.of`). One is kept: a dataset's scenes each differ.
-_LAST_SCENE: dict[str, Scene | SiteScene] = {}
+#: (:meth:`~scanner_sim.rays.cast.CastScene.of`). One is kept, and never a site's (:class:`SiteScene`: gigabytes, its
+#: windows built pass by pass), so what stays in memory after a pass is at most one scene of the usual size.
+_LAST_SCENE: dict[str, Scene] = {}
 
 
 def cached_scene(config) -> Scene | SiteScene:
@@ -160,7 +161,8 @@ def cached_scene(config) -> Scene | SiteScene:
     if scene is None:
         scene = stored_scene(config, key)
         _LAST_SCENE.clear()
-        _LAST_SCENE[key] = scene
+        if not isinstance(scene, SiteScene):
+            _LAST_SCENE[key] = scene
     return scene
 
 
