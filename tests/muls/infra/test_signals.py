@@ -38,11 +38,12 @@ def test_a_system_error_of_its_own_stays_an_internal_error(capsys):
 
 @pytest.mark.parametrize("signum, code", [(signal.SIGINT, EXIT_SIGINT), (signal.SIGTERM, EXIT_SIGTERM)])
 def test_regression_signal_dropped_in_a_finaliser_still_stops_the_command(signum, code):
-    """Root cause: a dataset of a million scenes went on after its Ctrl-C (one run in about fifty on a loaded
-    machine, the CI test waiting 124 s). The handler raised KeyboardInterrupt where Python cannot propagate it, in a
-    finaliser run by the garbage collector, which prints and drops it; the handler had already set both signals
-    to be ignored, so nothing stopped the run. The handler now records the signal: the pass's chunk loop and the
-    jobs' loop raise it again at their next step, and the guard when the command returns."""
+    """Root cause: a dataset of a million scenes went on after its Ctrl-C, rarely (once in CI, the test waiting 124 s;
+    a repro script on a loaded machine, in a few of some two hundred trials). The handler raised KeyboardInterrupt
+    where Python cannot propagate it, in a finaliser run by the garbage collector, which prints and drops it; the
+    handler had already set both signals to be ignored, so nothing stopped the run. The handler now records the
+    signal: the pass's chunk loop and the jobs' loop raise it again at their next step, and the guard when the
+    command returns."""
     steps, dropped = [], []
 
     def long_loop():
