@@ -36,8 +36,7 @@ def stop_if_signalled() -> None:
     """Raise again the Ctrl-C (KeyboardInterrupt) or SIGTERM (:class:`Terminated`) the running command received, in
     case its first raise was dropped where Python cannot propagate an exception. Loops that run long (a pass's
     chunks, a dataset's scenes) call it between their steps; :func:`muls.infra.command.run_guarded` calls it when the
-    command returns.
-    Does nothing outside a guarded command or when no signal came."""
+    command returns. Does nothing outside a guarded command or when no signal came."""
     if _received:
         raise _signal_exception(_received[0])
 

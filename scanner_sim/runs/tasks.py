@@ -28,7 +28,6 @@ from scanner_sim.config import SceneConfig
 from scanner_sim.survey.chunk import Chunk
 from scanner_sim.survey.pipeline import kept_slots, pass_chunk, run_pass, stream_to_files
 from scanner_sim.survey.setup import PassOptions, PassSetup
-from scanner_sim.survey.setup_cache import cached_scene
 
 #: Times a task that raised is tried again (a task whose worker died is rescheduled by the scheduler
 #: itself, up to ``distributed.scheduler.allowed-failures`` times).
@@ -68,7 +67,7 @@ def pass_files(config: SceneConfig, options: PassOptions) -> PassFiles:
     """Task: one whole pass with :func:`run_pass`, in a private temporary folder; returns its files."""
     configure_process()
     with tempfile.TemporaryDirectory(prefix="muls-pass-") as tmp:
-        run_pass(config, tmp, replace(options, progress=False), scene=cached_scene(config))
+        run_pass(config, tmp, replace(options, progress=False))
         return _read_files(Path(tmp))
 
 
@@ -82,7 +81,7 @@ def segment_chunks(setup: PassSetup, index: int, count: int) -> list:
 def simulate_segment(config: SceneConfig, options: PassOptions, index: int, count: int) -> Segment:
     """Task: segment ``index`` of ``count`` of the pass, simulated chunk by chunk."""
     configure_process()
-    setup = PassSetup.build(config, options, cached_scene(config))
+    setup = PassSetup.build(config, options)
     started = time.perf_counter()
     keep = kept_slots(setup, options.waveforms, setup.config.output.waveform_every_n_pulses)
     chunks = [pass_chunk(setup, slots, keep)._replace(waveforms=None) for slots in segment_chunks(setup, index, count)]
@@ -97,7 +96,7 @@ def merge_segments(config: SceneConfig, options: PassOptions, *segments: Segment
     """
     configure_process()
     t_setup = time.perf_counter()
-    setup = PassSetup.build(config, options, cached_scene(config))
+    setup = PassSetup.build(config, options)
     setup_s = time.perf_counter() - t_setup
     chunks = [chunk for segment in segments for chunk in segment.chunks]
     expected = [slots.size for slots in setup.slot_chunks()]
