@@ -7,7 +7,7 @@ excluded), the signatures compiled, and the total. A kernel loaded from numba's 
 is not listed, so a second run with the same cache lists none. ``XDG_CACHE_HOME`` (or ``NUMBA_CACHE_DIR``) pointed at
 an empty folder measures a first run (:mod:`muls.infra.runtime`). For example::
 
-    XDG_CACHE_HOME=$(mktemp -d) python -m muls.infra.compile_times scanner_sim run cable_survey --out /tmp/run
+    XDG_CACHE_HOME=$(mktemp -d) python -m muls.infra.compile_times scanner_sim.cli run cable_survey --out /tmp/run
 """
 
 from __future__ import annotations
