@@ -83,7 +83,7 @@ def _column_many(t, cut_tau, col):
     return out
 
 
-@kernel(inline="always")
+@kernel
 def cut_column_power(t, p, col, cuts):
     """Power [W] at time t [s] of batch pulse p's column as its targets cut it, plus background (MULS Eq. 1 less
     the echoes, which :func:`add_pulse_steps` adds)."""
