@@ -62,20 +62,20 @@ RECORD_BYTES_PER_PULSE = 12_000
 
 @dataclass(frozen=True)
 class LevelRun:
-    """One level's run: its speed [pulses/s], points, the coverage it reached (covered share of the reached
-    seabed cells, or without a seabed the share of pulses with a point an echo explains), which points lie on a
-    surface the receiver cannot see, the waveform records of the first pulses, and for an adaptive level what it
-    decided (:func:`level_decisions`)."""
+    """One level's run: its speed [pulses/s] (the fastest of its timed passes and their median), points, the coverage
+    it reached (covered share of the reached seabed cells, or without a seabed the share of pulses with a point an
+    echo explains), which points lie on a surface the receiver cannot see, the waveform records of the first pulses,
+    and for an adaptive level what it decided (:func:`level_decisions`)."""
 
     level: FidelityLevel
     pulses_per_s: float
+    median_pulses_per_s: float
     n_pulses: int
     points: PointRecords
     coverage: float | None
     hidden: np.ndarray
     records: object
     decisions: dict | None = None
-    median_pulses_per_s: float | None = None
 
 
 def knob_level(name: str) -> FidelityLevel:
@@ -147,7 +147,7 @@ def run_level(base: PassSetup, level: FidelityLevel, waveform_pulses: int) -> Le
         covered = np.unique(points.pulse_index[points.object_id >= 0]).size / max(n, 1)
     first = np.concatenate(slots)[:waveform_pulses]
     records = setup.simulate_chunk(first, whole_records=True).waveforms  # every sample, for the waveforms' R^2
-    return LevelRun(level, n / wall_s, n, points, covered, hidden_from_receiver(setup, points), records,
+    return LevelRun(level, n / wall_s, n / wall_s, n, points, covered, hidden_from_receiver(setup, points), records,
                     level_decisions(setup, slots, records))
 
 
@@ -213,8 +213,7 @@ def level_metrics(run: LevelRun, reference: LevelRun) -> dict:
     vs_ref["coverage_diff"] = accuracy.coverage_difference(run.coverage, reference.coverage)
     vs_ref["waveform_r2"] = fit.r2
     lv = run.level
-    median = run.pulses_per_s if run.median_pulses_per_s is None else run.median_pulses_per_s
-    entry = {"pulses_per_s": round(run.pulses_per_s, 1), "median_pulses_per_s": round(median, 1),
+    entry = {"pulses_per_s": round(run.pulses_per_s, 1), "median_pulses_per_s": round(run.median_pulses_per_s, 1),
              "subrays": lv.subrays, "shadow_rays": lv.shadow_rays,
              "record_mode": lv.record_mode, "column_cut": lv.column_cut, "multiple_scattering": lv.multiple_scattering,
              "coverage": run.coverage,
