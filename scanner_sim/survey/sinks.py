@@ -12,7 +12,6 @@ decimated copy of the points one of them shows, are :mod:`scanner_sim.survey.pic
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -276,28 +275,13 @@ class PassStats:
         self.channels += np.bincount(chunk.points.channel, minlength=self.channels.size)
         signed = chunk.points.range_error_m[np.isfinite(chunk.points.range_error_m)].astype(np.float64)
         e = np.abs(signed)
-        np.add.at(self.error_counts, np.minimum((e / ERROR_BIN_M).astype(np.int64), self.error_counts.size - 1), 1)
-        half = self.error_counts.size
-        k = np.clip(np.floor(signed / ERROR_BIN_M).astype(np.int64) + half, 0, self.signed_counts.size - 1)
-        np.add.at(self.signed_counts, k, 1)
+        size = self.error_counts.size
+        self.error_counts += np.bincount(np.minimum((e / ERROR_BIN_M).astype(np.int64), size - 1), minlength=size)
+        k = np.clip(np.floor(signed / ERROR_BIN_M).astype(np.int64) + size, 0, self.signed_counts.size - 1)
+        self.signed_counts += np.bincount(k, minlength=self.signed_counts.size)
         self.short += int((signed < 0).sum())
         if self.heightfield is not None:
             self.no_hit_over_no_seabed += self._aimed_at_no_seabed(chunk.dropouts)
-
-    # The seabed's lowest height and its inner cells are read only for a no_hit dropout aimed down, which most passes
-    # never have: built then, not with every pass's sinks (the erosion alone is 1.7 ms on cable_survey's seabed).
-    @functools.cached_property
-    def _seabed_low_m(self) -> float:
-        return float(np.min(_valid_heights(self.heightfield)))
-
-    @functools.cached_property
-    def _inner_cells(self) -> np.ndarray:
-        """(ny - 1, nx - 1) bool: the seabed's cells with data whose eight neighbours have data too."""
-        from scipy import ndimage
-
-        hf = self.heightfield
-        cells = np.ones(np.subtract(hf.shape, 1), bool) if hf.valid is None else hf.valid
-        return ndimage.binary_erosion(cells, np.ones((3, 3), bool), border_value=0)
 
     def _aimed_at_no_seabed(self, dropouts) -> int:
         """``no_hit`` dropouts whose beam, followed down in steps of the seabed's node spacing (to its lowest height,
@@ -311,10 +295,9 @@ class PassStats:
         if not origin.shape[0]:
             return 0
         x0, x1, y0, y1 = hf.extent_m
-        reach = min(float(np.max((self._seabed_low_m - origin[:, 2]) / direction[:, 2])), math.hypot(x1 - x0, y1 - y0))
+        reach = min(float(np.max((hf.lowest_m - origin[:, 2]) / direction[:, 2])), math.hypot(x1 - x0, y1 - y0))
         t = np.arange(0.0, reach + hf.spacing_m, hf.spacing_m)  # (steps,) [m] along each beam
-        return _count_over_no_data(origin, direction, t, hf.x0_m, hf.y0_m, hf.spacing_m, hf.heights_m,
-                                   self._inner_cells)
+        return _count_over_no_data(origin, direction, t, hf.x0_m, hf.y0_m, hf.spacing_m, hf.heights_m, hf.inner_cells)
 
     def error_quantile_m(self, q: float) -> float | None:
         total = self.error_counts.sum()
@@ -388,14 +371,6 @@ def _count_over_no_data(origin, direction, t, x0, y0, spacing, heights, inner):
                 break
         count += counted
     return count
-
-
-def _valid_heights(heightfield) -> np.ndarray:
-    """The heights [m] of the nodes at the corners of the seabed's cells that hold data (all nodes without gaps)."""
-    h = heightfield.heights_m
-    if heightfield.valid is None:
-        return h.ravel()
-    return h[:-1, :-1][heightfield.valid]
 
 
 def pass_summary(facts: PassFacts, stats: PassStats, n_points: int, dropout_counts: dict, wall_s: float,

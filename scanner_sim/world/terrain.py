@@ -7,6 +7,7 @@ level is ``z = -depth_m``.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -72,6 +73,22 @@ class HeightField:
         j = np.clip(np.nan_to_num(fx).astype(np.int64), 0, nx - 2)
         i = np.clip(np.nan_to_num(fy).astype(np.int64), 0, ny - 2)
         return inside & self.valid[i, j]
+
+    # The two figures below are built on first use and kept with the height field, which a process's passes of one
+    # scene share (survey.setup_cache.cached_scene): a pass's sinks read them for its no_hit dropouts aimed down.
+    @functools.cached_property
+    def lowest_m(self) -> float:
+        """[m] The lowest height of the nodes at the corners of the cells that hold seabed."""
+        h = self.heights_m
+        return float(np.min(h if self.valid is None else h[:-1, :-1][self.valid]))
+
+    @functools.cached_property
+    def inner_cells(self) -> np.ndarray:
+        """(ny - 1, nx - 1) bool: the cells that hold seabed and whose eight neighbours hold seabed too."""
+        from scipy import ndimage
+
+        cells = np.ones(np.subtract(self.shape, 1), bool) if self.valid is None else self.valid
+        return ndimage.binary_erosion(cells, np.ones((3, 3), bool), border_value=0)
 
     def mesh(self) -> tuple[np.ndarray, np.ndarray]:
         """Vertices (ny nx, 3) float64 world and faces (2 (ny-1)(nx-1), 3) int64, normals pointing up (the faces
