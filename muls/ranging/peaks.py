@@ -121,12 +121,15 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoe
     settings = PeakSettings(proc.threshold_sigma, proc.tail_tolerance, float(dig.max_code), fit,
                             ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)))
     synthesised = records.synthesised if records.synthesised is not None else np.ones((n_windows, n_chan), np.bool_)
+    handed = records.baseline_w is not None
+    baselines = records.baseline_w if handed else np.empty((0, 0))
     signal = chans.signal()
 
     def windows(a, b):  # windows a:b into their slots; their pulses index the whole batch
         _peaks(records.codes[a:b], synthesised[a:b], records.window_pulse[a:b], records.window_start[a:b],
                records.phase_s, -dig.pretrigger_s, dig.sample_interval_s, model.column, batch.background_w, signal,
-               settings, model.fit_table, model.clip_table, out.blocks(a, b, n_chan), records.mode == "full")
+               settings, model.fit_table, model.clip_table, out.blocks(a, b, n_chan), records.mode == "full",
+               baselines[a:b] if handed else baselines)
 
     in_blocks(windows, n_windows)
     ref_index = np.concatenate(in_blocks(
@@ -194,10 +197,12 @@ def _reference_peaks(reference, dark_mean, fit, table):
 
 @kernel(nogil=True)
 def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
-           clip_table, out, sparse):
+           clip_table, out, sparse, baselines):
     """The peak search over every window and channel (module doc), into ``out``. ``sparse``: records mostly 0 (full
     records coded where the search reads, :func:`muls.receiver.channel_codes.ranging_codes`): a channel's residuals are
-    computed, and its runs looked for, only within a sample of its nonzero codes (:func:`_code_segments`)."""
+    computed, and its runs looked for, only within a sample of its nonzero codes (:func:`_code_segments`).
+    ``baselines``: each window's calibrated baseline [W] ((n_windows, n_samples), the digitiser's, the numbers
+    ``baseline_values`` gives), or empty: computed here."""
     n_windows, n_chan, n_samples = codes.shape
     cap = out.index.shape[0] // max(1, n_windows * n_chan)
     basis = col.basis
@@ -217,7 +222,10 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
             continue
         if not sparse:
             sample_times(times, 0, n_samples, t0, dt, window_start[w], phase[p])
-            baseline_values(base_w, times, background[p], col)
+            if baselines.shape[0] > 0:
+                base_w[:] = baselines[w]
+            else:
+                baseline_values(base_w, times, background[p], col)
         for c in range(first, n_chan):
             slot = w * n_chan + c
             if c > first and not _may_run(codes, synthesised, w, c, chans, k_sigma):

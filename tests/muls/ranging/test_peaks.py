@@ -90,3 +90,41 @@ def test_sample_maximum_times_a_clipped_echo_at_its_first_clipped_sample():
     _, fitted = simulate(_model(), batch, seed=2)
     ch1_fit = fitted.peaks.select(fitted.peaks.channel == 1)
     assert np.all(np.abs(ch1_fit.range_m - 5.0) < 0.1)
+
+
+@pytest.mark.parametrize("water", ["pool", "coastal_ocean", "turbid_harbor"])
+def test_the_baseline_the_digitiser_hands_the_peak_search_is_its_own_to_the_bit(water):
+    """Where the digitiser decides the channels on the processor's calibrated baseline (``deciding_only``), it hands
+    that baseline to the peak search (``Waveforms.baseline_w``) instead of the search computing it again. Checked
+    against ``baseline_values`` at the windows' sample times as ``Waveforms.sample_times_s`` gives them (numpy, not
+    the kernel's loop), with each pulse's background: equal to the bit; and the peaks, returns and dropouts of the
+    records with the baseline handed equal those of the same records without it."""
+    import dataclasses
+
+    from muls import mul2023, water_preset
+    from muls.optics.sample_kernels import baseline_values
+    from muls.ranging.returns import range_batch
+    from muls.receiver.digitiser import digitise
+
+    model = OpticalModel.build(mul2023(60e-9, 400e-9), water_preset(water))
+    ranges = np.repeat(np.linspace(1.5, 30.0, 40), 5)
+    batch = PulseBatch.flat_target(model.instrument, ranges, reflectance=np.tile([0.03, 0.1, 0.3, 0.6, 0.9], 40),
+                                   background_w=np.linspace(0.0, 2e-7, ranges.size))  # daylight from none to bright
+    echoes = model.echoes(batch)
+    records = digitise(model, batch, 5, echoes=echoes, deciding_only=True, ranging_only=True)
+    assert records.baseline_w is not None and records.baseline_w.shape == (len(records.window_pulse),
+                                                                            records.codes.shape[2])
+    times = records.sample_times_s(model)
+    for w in range(times.shape[0]):
+        expected = np.empty(times.shape[1])
+        baseline_values(expected, times[w], batch.background_w[records.window_pulse[w]], model.column)
+        assert np.array_equal(records.baseline_w[w], expected), w
+    handed = range_batch(model, batch, records, echoes)
+    own = range_batch(model, batch, dataclasses.replace(records, baseline_w=None), echoes)
+    assert len(handed.peaks.pulse) > 40  # (turbid water ranges the near targets only)
+    for name in ("peaks", "returns"):
+        for field in dataclasses.fields(getattr(own, name)):
+            assert np.array_equal(getattr(getattr(handed, name), field.name), getattr(getattr(own, name), field.name),
+                                  equal_nan=True), (name, field.name)
+    assert np.array_equal(handed.dropout_cause, own.dropout_cause)
+    assert digitise(model, batch, 5, echoes=echoes, ranging_only=True).baseline_w is None  # every channel: not decided
