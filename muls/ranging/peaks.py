@@ -220,10 +220,11 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
             first += 1
         if first == n_chan:
             continue
+        window_base = base_w
         if not sparse:
             sample_times(times, 0, n_samples, t0, dt, window_start[w], phase[p])
             if baselines.shape[0] > 0:
-                base_w[:] = baselines[w]
+                window_base = baselines[w]
             else:
                 baseline_values(base_w, times, background[p], col)
         for c in range(first, n_chan):
@@ -235,7 +236,8 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
             n_seg, seen = 1, 0
             if not sparse:
                 seg_first[0], seg_end[0] = 0, n_samples
-                seen = _residuals(codes[w, c], times, base_w, chans, c, max_code, open_, blind, sigma, resid, echoes)
+                seen = _residuals(codes[w, c], times, window_base, chans, c, max_code, open_, blind, sigma, resid,
+                                  echoes)
             else:
                 n_seg = _code_segments(codes[w, c], seg_first, seg_end)
                 for g in range(n_seg):  # the same numbers as the whole window's, sample by sample

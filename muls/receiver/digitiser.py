@@ -334,7 +334,8 @@ def _digitise(codes, clean, synthesised, baselines, window_pulse, window_start, 
             for k in range(n_samples):  # the processor's calibrated baseline, as baseline_values gives it
                 baseline[k] = background + uncut[k]
             if baselines.shape[0] > 0:
-                baselines[w, :] = baseline
+                for k in range(n_samples):  # (a loop: an array assignment compiles numba's shape-error formatting)
+                    baselines[w, k] = baseline[k]
         if settings.deciding_only:
             first_echo, last_echo = np.inf, -np.inf
             for j in range(offsets[p], offsets[p + 1]):
