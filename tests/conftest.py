@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import os
 import shutil
 import signal
@@ -57,6 +58,25 @@ def drop_a_signal(signum: int = signal.SIGINT) -> list[type]:
     finally:
         sys.unraisablehook = hook
     return dropped
+
+
+def cold_compiled_kernels(code: str, tmp_path: Path) -> list[str]:
+    """The kernels numba compiles while ``code`` (Python source) runs its last statement in a fresh process with empty
+    kernel caches under ``tmp_path``: ``code`` binds ``run``, a function of no arguments that calls them."""
+    script = (code + "\nimport json\nfrom numba.core import event\nfrom muls.infra.compile_times import CompileTimes\n"
+              "times = CompileTimes()\nwith event.install_listener('numba:compile', times):\n    run()\n"
+              "print(json.dumps(sorted(times.own_s)))\n")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(NUMBA_CACHE_DIR=str(tmp_path / "numba"), XDG_CACHE_HOME=str(tmp_path / "xdg"))
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def string_formatting(kernels: list[str]) -> list[str]:
+    """The kernels of ``kernels`` (names) that format strings: numba compiles them for an error message, such as an
+    array assigned to an array slice inside a kernel (its shape-mismatch error), and they cost a first run seconds."""
+    return [name for name in kernels if "unicode" in name or "shape_context" in name or "str_generic" in name]
 
 
 def run_muls(capsys, *argv) -> tuple[int, str, str]:

@@ -64,7 +64,8 @@ def _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures
     energy, tau = np.empty(m), np.empty(m)
     for q in range(analytic.shape[0]):
         first = q * m
-        kept[first:first + m] = prim[first:first + m]
+        for k in range(first, first + m):  # (a loop: an array assignment compiles numba's shape-error formatting)
+            kept[k] = prim[k]
         if analytic[q] and prim[first] >= 0:  # (a proven pulse whose axis met nothing met nothing at all)
             beam, rho_mean, cosine, mean_range = cast_pulse_figures(prim[first:first + m], tfar[first:first + m],
                                                                     p0 + q, rays, layout, faces, view, energy, tau,

@@ -1,12 +1,8 @@
 """muls/infra/compile_times.py: each kernel's own compile time from numba's compile events."""
 
-import json
-import os
-import subprocess
-import sys
-
 import numba
 import pytest
+from conftest import cold_compiled_kernels, string_formatting
 from numba.core import event
 
 from muls.infra.compile_times import CompileTimes
@@ -44,23 +40,14 @@ def test_regression_the_physics_kernels_compile_no_string_formatting(tmp_path):
     (``base_w[:] = baselines[w]``) compiles numba's shape-mismatch error, which formats the shapes: its unicode,
     repr and str helpers, 18 kernels and 37 signatures, about 1.5 s more of the first run's compile, for a message
     no valid input can raise. Copy in a loop, or pass the row itself."""
-    code = (
-        "import json, numpy as np\n"
-        "from numba.core import event\n"
+    names = cold_compiled_kernels(
+        "import numpy as np\n"
         "from muls import mul2023, water_preset\n"
-        "from muls.infra.compile_times import CompileTimes\n"
         "from muls.optics.optical_model import OpticalModel, PulseBatch\n"
         "from muls.simulate import simulate\n"
         "model = OpticalModel.build(mul2023(60e-9, 400e-9), water_preset('coastal_ocean'))\n"
         "batch = PulseBatch.flat_target(model.instrument, np.linspace(2.0, 20.0, 50))\n"
-        "times = CompileTimes()\n"
-        "with event.install_listener('numba:compile', times):\n"
-        "    simulate(model, batch, 1, deciding_only=True, ranging_only=True)\n"
-        "print(json.dumps(sorted(times.own_s)))\n")
-    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR",)}
-    env.update(NUMBA_CACHE_DIR=str(tmp_path / "numba"), XDG_CACHE_HOME=str(tmp_path / "xdg"))
-    out = subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True, text=True).stdout
-    names = json.loads(out.strip().splitlines()[-1])
+        "def run():\n"
+        "    simulate(model, batch, 1, deciding_only=True, ranging_only=True)\n", tmp_path)
     assert any(name.endswith("._digitise") for name in names) and any(name.endswith("._peaks") for name in names)
-    formatting = [name for name in names if "unicode" in name or "shape_context" in name or "str_generic" in name]
-    assert not formatting, formatting
+    assert not string_formatting(names)

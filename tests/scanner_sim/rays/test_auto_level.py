@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import cold_compiled_kernels, string_formatting
 
 from muls.presets import mul2023
 from scanner_sim.config import load_scene
@@ -427,3 +428,27 @@ def test_shadow_rays_proven_clear_leave_every_hit_as_embree_finds_it(ridges):
     for f in HIT_FIELDS:
         np.testing.assert_array_equal(getattr(proven, f.name), getattr(cast, f.name), err_msg=f.name)
     assert proving.shadow_rays < (0.6 if ridges else 0.4) * every.shadow_rays, (proving.shadow_rays, every.shadow_rays)
+
+
+@pytest.mark.slow
+def test_regression_the_auto_ray_kernels_compile_no_string_formatting(tmp_path):
+    """A cold ``auto`` ray stage (proof, analytic hits, collapse) compiles no string formatting. Root cause:
+    ``_proven_figures`` copied a pulse's face indices with an array assigned to a slice (``kept[a:b] = prim[a:b]``),
+    so numba compiled its shape-mismatch error with the unicode, repr and str helpers that format it, seconds of an
+    ``auto`` first run for a message no valid input raises."""
+    names = cold_compiled_kernels(
+        "import sys\n"
+        f"sys.path[:0] = [{str(Path(__file__).parent)!r}, {str(Path(__file__).parents[2])!r}]\n"
+        "from test_auto_level import GEOMETRY, _pulses, _seabed_scene\n"
+        "from scanner_sim.rays.auto import cast_auto\n"
+        "from scanner_sim.rays.beams import beam_pattern\n"
+        "from scanner_sim.rays.cast import CastScene\n"
+        "from scanner_sim.rays.caster import RayCaster\n"
+        "from scanner_sim.rays.seabed_grid import seabed_grid\n"
+        "scene, pulses = _seabed_scene(), _pulses(200, seed=1)\n"
+        "caster = RayCaster.for_scene(scene)\n"
+        "target = CastScene(scene, caster, seabed_grid(scene, caster))\n"
+        "def run():\n"
+        "    cast_auto(target, *pulses, beam_pattern(19), GEOMETRY)\n", tmp_path)
+    assert any(name.endswith("._proven_figures") for name in names), names
+    assert not string_formatting(names)
