@@ -101,3 +101,16 @@ def test_seed_key_accepts_ints_and_generators_and_names_what_it_refuses():
     for bad in (-1, True, 1.5, "3"):
         with pytest.raises(ValueError, match="seed"):
             seed_key(bad)
+
+
+def test_the_bound_table_built_in_numpy_is_the_kernels_normals_to_the_bit():
+    """The table of :func:`normal_upper_bound` is built at import with numpy (no kernel to compile on a first run that
+    never reads it): each cell's value is the compiled ``fill_normals_of``'s normal of the cell's last half, plus
+    1e-6, bit for bit."""
+    from muls.infra.noise import _NORMAL_UPPER, UPPER_BOUND_SHIFT, fill_normals_of
+
+    cells = 1 << (32 - int(UPPER_BOUND_SHIFT))
+    last = ((np.arange(1, cells + 1, dtype=np.uint64) << UPPER_BOUND_SHIFT) - np.uint64(1))
+    normals = np.empty(cells)
+    fill_normals_of(last, 1, np.arange(cells, dtype=np.int64), normals, np.empty(cells, np.bool_))
+    assert np.array_equal(_NORMAL_UPPER, normals + 1e-6)
