@@ -28,7 +28,8 @@ from ..infra.runtime import kernel
 from ..instrument.channels import processor_sigma_lsb
 from ..optics.optical_model import Echoes, OpticalModel, PulseBatch
 from ..optics.sample_kernels import add_pulse_steps, baseline_values, pulse_value
-from ..receiver.digitiser import Waveforms, sample_times
+from ..receiver.digitiser import Waveforms
+from ..receiver.window_signal import sample_times
 from .peak_echoes import dominant_echo
 from .peak_order import peak_order
 

@@ -9,7 +9,6 @@ samples where they overlap.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -28,12 +27,11 @@ from ..infra.noise import (
     uniform_at,
 )
 from ..infra.runtime import kernel
-from ..instrument.channels import gate_open_at, level_lsb
 from ..optics.optical_model import Echoes, OpticalModel, PulseBatch
-from ..optics.sample_kernels import add_pulse_steps, baseline_values, column_integrals_at
+from ..optics.sample_kernels import add_pulse_steps
 from .channel_codes import channel_codes, quantise, ranging_codes
-from .deciding_channels import deciding_channels
 from .record_windows import plan_windows
+from .window_signal import sample_times, window_scratch, window_signal
 
 #: Windowed mode: samples of the CH0 reference record (the emitted pulse peaks ~21 samples in).
 REFERENCE_SAMPLES = 40
@@ -254,14 +252,13 @@ def _digitise(codes, clean, synthesised, baselines, window_pulse, window_start, 
     ``synthesised`` and, where ``baselines`` is not empty ((n_windows, n_samples)), each window's calibrated baseline
     [W] (:func:`digitise`)."""
     n_windows, n_chan, n_samples = codes.shape
-    n_pairs, shot_needed, scratch = _window_scratch(codes, cuts, chans)
-    steps = math.exp(-col.basis[0] * sampling.dt_s), math.exp(-col.basis[1] * sampling.dt_s)
+    n_pairs, n_shot_pairs, shot_needed, scratch, steps = window_scratch(codes, cuts, chans, col, sampling.dt_s)
     dark_normal = np.empty((2 * n_pairs, n_samples))
-    shot_normal = np.empty((2 * ((shot_needed.shape[0] + 1) // 2), n_samples))
+    shot_normal = np.empty((2 * n_shot_pairs, n_samples))
     tails, no_low = np.empty(n_samples, np.uint64), np.empty(0)
     times, power = scratch[0], scratch[1]
     for w in range(n_windows):
-        p = _window(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
+        p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
                     chans, settings, shot_needed, scratch, steps)
         # Every sample: drawn a window at once for the pairs a synthesised channel needs.
         first_index = window_start[w]
@@ -281,16 +278,16 @@ def _digitise_read_samples(codes, clean, synthesised, baselines, window_pulse, w
                            echoes, chans, settings):
     """:func:`_digitise` with only the samples the peak search may read coded, the others 0
     (:func:`muls.receiver.channel_codes.ranging_codes`; :func:`digitise`'s ``ranging_only`` of full records). A kernel
-    of its own so that a run which never asks for it does not compile it and the draws by list it calls."""
+    of its own so that a run which never asks for it does not compile it and the draws by list it calls; the window up
+    to its noise is :mod:`.window_signal`'s, as :func:`_digitise`'s."""
     n_windows, n_chan, n_samples = codes.shape
-    n_pairs, shot_needed, scratch = _window_scratch(codes, cuts, chans)
-    steps = math.exp(-col.basis[0] * sampling.dt_s), math.exp(-col.basis[1] * sampling.dt_s)
-    hashes = np.empty((n_pairs + (shot_needed.shape[0] + 1) // 2, n_samples), np.uint64)
+    n_pairs, n_shot_pairs, shot_needed, scratch, steps = window_scratch(codes, cuts, chans, col, sampling.dt_s)
+    hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
     read, in_tail, listed = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
     dark_normal, shot_normal = np.empty(n_samples), np.empty(n_samples)
     times, power, baseline = scratch[0], scratch[1], scratch[2]
     for w in range(n_windows):
-        p = _window(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
+        p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
                     chans, settings, shot_needed, scratch, steps)
         first_index = window_start[w]
         _hash_pairs(hashes[:n_pairs], synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index)
@@ -303,129 +300,6 @@ def _digitise_read_samples(codes, clean, synthesised, baselines, window_pulse, w
                               dark_normal, shot_normal, in_tail)
             else:
                 codes[w, c, :] = 0
-
-
-@kernel(inline="always")
-def _window_scratch(codes, cuts, chans):
-    """(stream pairs of the channels' dark noise, (detectors,) bool scratch, (times, power, baseline, uncut (n,) each,
-    then the column cuts' times, shares and shares ahead, and the deciding test's (3, channels) bool)) for the windows
-    of ``codes`` (n_windows, n_channels, n)."""
-    n_chan, n_samples = codes.shape[1], codes.shape[2]
-    n_detectors = 0
-    for c in range(n_chan):
-        n_detectors = max(n_detectors, chans.detector[c] + 1)
-    k = cuts.cut_tau_s.shape[1]
-    scratch = (np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(k),
-               np.empty(k), np.empty(k + 1), np.empty((3, n_chan), np.bool_))
-    return (n_chan + 1) // 2, np.empty(n_detectors, np.bool_), scratch
-
-
-@kernel(inline="always")
-def _window(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes, chans,
-            settings, shot_needed, scratch, steps):
-    """Window w up to its noise: its sample times and noise-free power (MULS Eq. 1: echoes, the column as its targets
-    cut it, background), the calibrated baseline where the channels are decided or the samples the search reads are
-    chosen (into ``baselines`` too where it is not empty), the channels synthesised, their noise-free levels into
-    ``clean`` (when kept) and the detectors whose shot noise is needed. Into ``scratch`` (:func:`_window_scratch`);
-    ``steps``: the pulse basis's two exponentials' factors over a sample interval. Returns the window's pulse."""
-    times, power, baseline, uncut, cut_t, cut_s, ahead, deciding_scratch = scratch
-    n_chan, n_samples = codes.shape[1], codes.shape[2]
-    basis, dt = col.basis, sampling.dt_s
-    offsets, delay, energy = echoes.offsets, echoes.delay_s, echoes.energy_j
-    cut_tau, cut_w = cuts.cut_tau_s, cuts.cut_weight
-    ra, rb = steps
-    p = window_pulse[w]
-    # Echoes of pulse p (by delay) as three running sums over those started by time t:
-    # sa = sum E exp(-a u), s1 = sum E u exp(-a u), sb = sum E exp(-b u), u = t - delay; then the echo
-    # power is A s1 + B0 sa + C sb (the pulse basis), and a sample step only rescales the sums.
-    sa, s1, sb = 0.0, 0.0, 0.0
-    nxt = offsets[p]
-    bg, b2, b3, b4 = cuts.background_w[p], basis[2], basis[3], basis[4]
-    # The column's cuts by two-way time (insertion sort: a handful). Before a cut its share of the beam
-    # sees the full column; from the cut on, its share is the module doc's tail of waveform.py, of the same
-    # form as an echo, so it joins the three sums; ``ahead[i]``: the share of cuts i and later.
-    n_cut = 0
-    for c in range(cut_tau.shape[1]):
-        if cut_w[p, c] != 0.0:
-            i = n_cut
-            while i > 0 and cut_t[i - 1] > cut_tau[p, c]:
-                cut_t[i], cut_s[i] = cut_t[i - 1], cut_s[i - 1]
-                i -= 1
-            cut_t[i], cut_s[i] = cut_tau[p, c], cut_w[p, c]
-            n_cut += 1
-    ahead[n_cut] = 0.0
-    for i in range(n_cut - 1, -1, -1):
-        ahead[i] = ahead[i + 1] + cut_s[i]
-    next_cut = 0
-    sample_times(times, 0, n_samples, sampling.t0_s, dt, window_start[w], sampling.phase_s[p])
-    # The uncut column, on SIMD lanes (uncut_column_value's numbers): where a cut is still ahead, and for the
-    # baseline wherever that is needed.
-    uncut_until = 0
-    if settings.deciding_only or settings.read_samples_only:
-        uncut_until = n_samples
-    elif n_cut > 0:
-        while uncut_until < n_samples and times[uncut_until] < cut_t[n_cut - 1]:
-            uncut_until += 1
-    baseline_values(uncut[:uncut_until], times[:uncut_until], 0.0, col)
-    for k in range(n_samples):
-        t = times[k]
-        if k > 0:
-            s1 = (s1 + dt * sa) * ra
-            sa *= ra
-            sb *= rb
-        while nxt < offsets[p + 1] and delay[nxt] <= t:
-            u = t - delay[nxt]
-            ea = energy[nxt] * math.exp(-basis[0] * u)
-            sa += ea
-            s1 += u * ea
-            sb += energy[nxt] * math.exp(-basis[1] * u)
-            nxt += 1
-        while next_cut < n_cut and cut_t[next_cut] <= t:
-            u = t - cut_t[next_cut]
-            v0a, v1a, v0b = column_integrals_at(max(cut_t[next_cut], 0.0), col)
-            ea = cut_s[next_cut] * math.exp(-basis[0] * u)
-            sa += v0a * ea
-            s1 += (u * v0a + v1a) * ea
-            sb += cut_s[next_cut] * v0b * math.exp(-basis[1] * u)
-            next_cut += 1
-        power[k] = bg + b2 * s1 + b3 * sa + b4 * sb
-        if next_cut < n_cut:
-            power[k] += ahead[next_cut] * uncut[k]
-    if settings.deciding_only or settings.read_samples_only:
-        background = cuts.background_w[p]
-        for k in range(n_samples):  # the processor's calibrated baseline, as baseline_values gives it
-            baseline[k] = background + uncut[k]
-        if baselines.shape[0] > 0:
-            for k in range(n_samples):  # (a loop: an array assignment compiles numba's shape-error formatting)
-                baselines[w, k] = baseline[k]
-    if settings.deciding_only:
-        first_echo, last_echo = np.inf, -np.inf
-        for j in range(offsets[p], offsets[p + 1]):
-            if energy[j] > 0.0:
-                first_echo, last_echo = min(first_echo, delay[j]), max(last_echo, delay[j])
-        deciding_channels(synthesised[w], power, baseline, times, chans, settings.max_code, settings.k_sigma,
-                          last_echo - first_echo, deciding_scratch)
-    else:
-        synthesised[w, :] = True
-    if clean.shape[0] > 0:
-        for c in range(n_chan):
-            for k in range(n_samples):
-                clean[w, c, k] = level_lsb(chans, c, power[k] if gate_open_at(chans, c, times[k]) else 0.0)
-    # Dark noise: one normal per channel, half c % 2 of its pair's stream; shot noise: one normal per
-    # detector (streams after those), shared by the channels of that detector (CH1 and CH2 split PMT1's
-    # current).
-    shot_needed[:] = False
-    for c in range(n_chan):
-        shot_needed[chans.detector[c]] |= synthesised[w, c]
-    return p
-
-
-@kernel(inline="always")
-def sample_times(out, first, end, t0_s, dt_s, first_index, phase_s):
-    """out[k] = t0_s + (first_index + k) dt_s + phase_s [s] for first <= k < end: the times of samples of a window
-    whose sample 0 is sample ``first_index`` of its record (:class:`Sampling`; :meth:`Waveforms.sample_times_s`)."""
-    for k in range(first, end):
-        out[k] = t0_s + (first_index + k) * dt_s + phase_s
 
 
 @kernel(inline="always")
