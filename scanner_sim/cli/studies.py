@@ -82,7 +82,8 @@ def _add_tradeoff(p):
                    metavar="LEVEL", help=f"levels to run, of {', '.join(FIDELITY_LEVELS)} (default: all)")
     p.add_argument("--knobs", nargs="*", choices=list(KNOBS), default=list(KNOBS), metavar="KNOB",
                    help=f"single changes to balanced, of {', '.join(KNOBS)} (default: all; none: --knobs)")
-    p.add_argument("--pulses", type=positive_int(), default=DEFAULT_PULSES, help="pulses per run (default: %(default)s)")
+    p.add_argument("--pulses", type=positive_int(), default=DEFAULT_PULSES,
+                   help="pulses per run, in stretches spread over the pass when it fires more (default: %(default)s)")
     p.add_argument("--waveform-pulses", type=positive_int(), default=DEFAULT_WAVEFORM_PULSES,
                    help="pulses whose records are compared (default: %(default)s)")
     p.add_argument("--repeat", type=positive_int(), default=DEFAULT_REPEAT,

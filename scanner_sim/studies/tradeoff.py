@@ -3,9 +3,10 @@ run on the same pulses of the same seed, timed, and measured against the truth m
 level (:mod:`scanner_sim.studies.accuracy`).
 
 Each run is the pass's own chunk loop (:func:`scanner_sim.survey.pipeline.pass_chunks`, with the nominal footprint and
-coverage tally where the scene has a seabed) over the scene's first ``pulses`` pulses; ``pulses_per_s`` times that loop
+coverage tally where the scene has a seabed) over ``pulses`` of the pass's pulses, in stretches spread evenly over it
+(:func:`sampled_pass`); ``pulses_per_s`` times that loop
 alone, after a short untimed warm-up, the fastest of ``repeat`` passes taken round-robin over the runs. The
-waveform R^2 is measured on the first ``waveform_pulses`` pulses, simulated again with their records kept (the
+waveform R^2 is measured on the sample's first ``waveform_pulses`` pulses, simulated again with their records kept (the
 full reference records take 6 kB a pulse).
 """
 
@@ -256,15 +257,24 @@ def check_tradeoff_memory(config: SceneConfig, levels, knobs, pulses: int, wavef
                  "machine", available_bytes)
 
 
+def sampled_pass(config: SceneConfig, pulses: int) -> PassSetup:
+    """The pass of ``config`` cut to ``pulses`` of its pulses, in stretches of consecutive pulses spread evenly over it,
+    one a chunk's worth (``survey.chunk_pulses``), each about the middle of its share of the pass
+    (:meth:`~scanner_sim.survey.setup.PassSetup.spread_sample`): the timed passes run the chunks a pass runs, over
+    ground like the whole survey's rather than its start's; the whole pass when it fires no more."""
+    whole = PassSetup.build(config, PassOptions(), build_scene(config))
+    return whole.spread_sample(pulses, max(1, round(pulses / config.survey.chunk_pulses)))
+
+
 def tradeoff(config: SceneConfig, levels=tuple(FIDELITY_LEVELS), knobs=tuple(KNOBS), pulses: int = DEFAULT_PULSES,
              waveform_pulses: int = DEFAULT_WAVEFORM_PULSES, progress=None, convergence: bool = True,
              repeat: int = DEFAULT_REPEAT) -> dict:
-    """Every level of ``levels`` and knob of ``knobs`` on the scene's first ``pulses`` pulses, against the
+    """Every level of ``levels`` and knob of ``knobs`` on ``pulses`` of the pass's pulses (:func:`sampled_pass`), against the
     reference level run on the same pulses and seed. Returns the JSON-ready result (:func:`write_tradeoff`).
     ``convergence``: also run the reference at :data:`CONVERGENCE_SUBRAYS` sub-rays and compare it with the
     reference (``reference_convergence``). ``progress``: called with each run's name as it starts. ``repeat``:
     timed passes per run, the fastest kept (:func:`best_speed`)."""
-    base = PassSetup.build(config, PassOptions(max_pulses=pulses), build_scene(config))
+    base = sampled_pass(config, pulses)
     plan = run_plan(levels, knobs, convergence)
     finer = f"reference, {CONVERGENCE_SUBRAYS} sub-rays"
     runs = {}
@@ -277,7 +287,8 @@ def tradeoff(config: SceneConfig, levels=tuple(FIDELITY_LEVELS), knobs=tuple(KNO
     runs = best_speed(base, runs, repeat)
     reference = runs[REFERENCE]
     started = time.time()
-    result = {"scene": config.name, "seed": config.survey.seed, "pulses": reference.n_pulses, "timed_passes": repeat,
+    result = {"scene": config.name, "seed": config.survey.seed, "pulses": reference.n_pulses,
+              "stretches": [list(stretch) for stretch in base.stretches], "timed_passes": repeat,
               "waveform_pulses": min(waveform_pulses, reference.n_pulses), "reference": REFERENCE,
               "match_tolerance_m": accuracy.MATCH_TOLERANCE_M,
               "levels": {n: level_metrics(runs[n], reference) for n in levels},
@@ -388,8 +399,12 @@ def _write_tradeoff(result: dict, out: Path, render: bool) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     if render:
         plot_tradeoff(out / "tradeoff.png", result)
+    stretches = result.get("stretches") or []
+    slots = ", ".join(f"{first:,}-{end - 1:,}" for first, end in stretches)
+    sample = (", the whole pass" if not stretches else f" about the middle of the pass (pulse slots {slots})"
+              if len(stretches) == 1 else f" in {len(stretches)} stretches spread over the pass (pulse slots {slots})")
     intro = (f"# Speed against accuracy: {result['scene']}\n\n{result['pulses']:,} pulses per run (seed "
-             f"{result['seed']}), waveforms over the first {result['waveform_pulses']:,}; against the truth mesh "
+             f"{result['seed']}){sample}, waveforms over the first {result['waveform_pulses']:,}; against the truth mesh "
              f"and against the `{result['reference']}` level on the same pulses. pulses/s: the fastest of "
              f"{result['timed_passes']} timed passes of each run (`median_pulses_per_s` in tradeoff.json: their median, "
              f"how far a pass the machine disturbed falls).\n\n")

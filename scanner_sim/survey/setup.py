@@ -35,6 +35,7 @@ from scanner_sim.survey.chunk import CastChunk, Chunk, Physics, cast_chunk, simu
 from scanner_sim.survey.gate import echo_span, rule_gate, warn_if_shut_out
 from scanner_sim.survey.gis_products import gis_files
 from scanner_sim.survey.handoff import Handoff
+from scanner_sim.survey.pass_sample import spread_stretches
 from scanner_sim.survey.ranging_precision import panel_ranges_m
 from scanner_sim.survey.setup_cache import cached_ranging_precision, cached_scene
 from scanner_sim.survey.sizing import check_pass_budget
@@ -245,6 +246,9 @@ class PassSetup:
     #: [s] spent measuring the TPU's ranging table at set-up: on a fresh machine this is where the physics kernels
     #: compile first, so a pass reports it in ``compile_s`` rather than ``setup_s``.
     ranging_s: float = 0.0
+    #: (first slot, end slot) of each stretch of the pass that is simulated instead of its whole slot range
+    #: (:meth:`spread_sample`), or empty: the slot range, at most ``max_pulses`` pulses.
+    stretches: tuple[tuple[int, int], ...] = ()
 
     @classmethod
     def build(cls, config: SceneConfig, options: PassOptions = PassOptions(), scene: Scene | None = None,
@@ -319,24 +323,50 @@ class PassSetup:
 
     def expected_pulses(self) -> int:
         """The pulses the pass fires: its slots that fire (exactly, as :meth:`slot_chunks` yields them), at most
-        ``max_pulses``; the progress bar's total."""
+        ``max_pulses``, or those of its ``stretches``; the progress bar's total."""
+        if self.stretches:
+            return sum(self.scanner.fired_count(first, end) for first, end in self.stretches)
         n = self.scanner.fired_count(self.first_slot, self.end_slot)
         return min(n, self.max_pulses) if self.max_pulses else n
 
     def slot_chunks(self):
         """Yield (n,) int64 slot numbers of the fired pulses, ``chunk_slots`` slots at a time (about
-        ``survey.chunk_pulses`` pulses)."""
+        ``survey.chunk_pulses`` pulses): of the slot range, at most ``max_pulses`` pulses, or of each stretch of
+        ``stretches`` in turn."""
+        if not self.stretches:
+            yield from self._fired_slots(self.first_slot, self.end_slot, self.max_pulses)
+        for first, end in self.stretches:
+            yield from self._fired_slots(first, end, None)
+
+    def _fired_slots(self, first: int, end: int, max_pulses: int | None):
         rate, fired = self.scanner.pulse_rate_hz, 0
-        for k0 in range(self.first_slot, self.end_slot, self.chunk_slots):
-            k1 = min(self.end_slot, k0 + self.chunk_slots)
+        for k0 in range(first, end, self.chunk_slots):
+            k1 = min(end, k0 + self.chunk_slots)
             slots = self.scanner.pulse_slots(k0 / rate, k1 / rate)
-            if self.max_pulses is not None:
-                slots = slots[: self.max_pulses - fired]
+            if max_pulses is not None:
+                slots = slots[: max_pulses - fired]
             if slots.size:
                 fired += slots.size
                 yield slots
-            if self.max_pulses is not None and fired >= self.max_pulses:
+            if max_pulses is not None and fired >= max_pulses:
                 return
+
+    def spread_sample(self, pulses: int, stretches: int) -> PassSetup:
+        """This pass cut to ``pulses`` of its pulses in ``stretches`` runs of consecutive pulses spread evenly over it
+        (:func:`~scanner_sim.survey.pass_sample.spread_stretches`); the whole pass when it fires no more."""
+        n = self.expected_pulses()
+        if pulses >= n:
+            return self
+        wanted = spread_stretches(n, pulses, stretches)
+        ends = {i: None for first, size in wanted for i in (first, first + size - 1)}  # pulse index -> its slot
+        seen = 0
+        for slots in self.slot_chunks():
+            for i in ends:
+                if seen <= i < seen + slots.size:
+                    ends[i] = int(slots[i - seen])
+            seen += slots.size
+        return dataclasses.replace(self, stretches=tuple((ends[first], ends[first + size - 1] + 1)
+                                                         for first, size in wanted))
 
     def cast_chunk(self, slots: np.ndarray) -> CastChunk:
         """The ray stage of one chunk of pulse slots (n,) (:func:`~scanner_sim.survey.chunk.cast_chunk`)."""

@@ -43,6 +43,16 @@ def test_every_level_has_its_speed_and_both_sets_of_metrics(step_edges):
     assert "| subrays=1 |" in (out / "tradeoff.md").read_text()
 
 
+def test_fewer_pulses_than_the_pass_are_taken_from_its_middle_and_the_table_says_so(step_edges):
+    """400 of the scene's 2,000 pulses (its survey.max_pulses, one chunk's worth): one stretch about the middle of the
+    pass, its slots in tradeoff.json and the table's first line."""
+    out, result = step_edges
+    assert result["pulses"] == 400
+    ((first, end),) = result["stretches"]
+    assert 600 <= first and end <= 1400
+    assert f"about the middle of the pass (pulse slots {first:,}-{end - 1:,})" in (out / "tradeoff.md").read_text()
+
+
 def test_where_auto_falls_back_the_table_says_why(step_edges):
     """The step edges are panels, not a height-field seabed: auto can prove no pulse, casts them as balanced does,
     and its decisions (in the JSON, and under the table) say so and why; it still collapses the footprints on one
