@@ -54,7 +54,8 @@ def plot_tradeoff(path_png, result: Mapping) -> None:
         ax.set_xlabel("pulses/s")
         ax.set_ylabel(label, fontsize=9)
         ax.grid(alpha=0.3, which="both")
-    fig.suptitle(f"speed against accuracy: {result['scene']}, {result['pulses']:,} pulses per run, "
+    spread = " spread over the pass" if result.get("stretches") else ""
+    fig.suptitle(f"speed against accuracy: {result['scene']}, {result['pulses']:,} pulses per run{spread}, "
                  f"reference = {result['reference']}", fontsize=11)
     fig.tight_layout()
     figure_to_png(fig, path_png)
