@@ -82,7 +82,8 @@ def window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_
     # The uncut column, on SIMD lanes (uncut_column_value's numbers): where a cut is still ahead, and for the
     # baseline wherever that is needed.
     uncut_until = 0
-    if settings.deciding_only or settings.read_samples_only:
+    with_baseline = settings.deciding_only or settings.read_samples_only
+    if with_baseline:
         uncut_until = n_samples
     elif n_cut > 0:
         while uncut_until < n_samples and times[uncut_until] < cut_t[n_cut - 1]:
@@ -112,7 +113,7 @@ def window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_
         power[k] = bg + b2 * s1 + b3 * sa + b4 * sb
         if next_cut < n_cut:
             power[k] += ahead[next_cut] * uncut[k]
-    if settings.deciding_only or settings.read_samples_only:
+    if with_baseline:
         background = cuts.background_w[p]
         for k in range(n_samples):  # the processor's calibrated baseline, as baseline_values gives it
             baseline[k] = background + uncut[k]
