@@ -196,6 +196,26 @@ def normal_upper_bound(bits32):
 
 
 @kernel(inline="always")
+def normal_bounds(bits32):
+    """(lower, upper) bounds of :func:`normal_of_bits` (bits32) from :func:`normal_upper_bound`'s table, without
+    drawing: the normals are antisymmetric (:func:`centred_unit` gives the complement 2^32 - 1 - bits32 the value
+    1 - p, whose normal is -x to the bit), so the lower bound is the complement's upper bound, negated."""
+    return -normal_upper_bound(np.uint64(0xFFFFFFFF) - bits32), normal_upper_bound(bits32)
+
+
+@kernel(inline="always")
+def dark_noise_stream(c):
+    """(stream, half) of signal channel ``c``'s dark noise: half c % 2 of its pair's stream (:data:`FIRST_SIGNAL_STREAM`)."""
+    return FIRST_SIGNAL_STREAM + c // 2, c % 2
+
+
+@kernel(inline="always")
+def shot_noise_stream(d, n_channels):
+    """(stream, half) of detector ``d``'s shot noise, after the dark-noise streams of ``n_channels`` signal channels."""
+    return FIRST_SIGNAL_STREAM + (n_channels + 1) // 2 + d // 2, d % 2
+
+
+@kernel(inline="always")
 def normal_at(base, index):
     """Standard normal at position ``index`` of a stream (its first half)."""
     return normal_half_at(base, index, 0)

@@ -7,6 +7,12 @@ are certain before the noise is drawn:
 
 - a channel with no open sample that both escapes the column's clipping (the processor's calibrated baseline below
   the top code) and carries echo over that baseline finds no echo in the window: not needed;
+- nor does a channel that the column blinds from the window's start, where the samples it then sees begin surely
+  clipped and stay surely over half the threshold until they lie surely under it, with no later run of two samples
+  (:func:`_lost_in_the_column`): its one run starts on a plateau that reaches back into the blind samples, which the
+  peak search takes for the column and drops, echo and all. Where the noise's reach leaves a sample open, the bounds
+  of the sample's own two normals, read from their hashes without drawing them, decide (the far-field channel of
+  cable_survey, blind through its echo in six windows in ten);
 - where the pulse's echoes lie within a sample of each other and their signal over the baseline is one hump, the
   channel (gate open and baseline unclipped throughout) that surely stays unclipped and surely clears the threshold
   at the hump, with the best least SNR, is kept; a channel surely clipped at the hump, or clipped from samples the
@@ -26,9 +32,18 @@ import math
 
 import numpy as np
 
-from ..infra.noise import NORMAL_BOUND
+from ..infra.noise import (
+    NORMAL_BOUND,
+    dark_noise_stream,
+    half_bits,
+    hash_at,
+    normal_bounds,
+    shot_noise_stream,
+    stream_base,
+)
 from ..infra.runtime import kernel
 from ..instrument.channels import gate_open_at, level_lsb, processor_sigma_lsb
+from .channel_codes import quantise
 
 #: The kept channel's worst SNR must exceed a lower-gain channel's best by this factor for that one to be dropped:
 #: room for the peak fit's amplitude ratio (the centre sample over the fitted peak, within a few per cent).
@@ -45,14 +60,16 @@ TIMED_SNR = 20.0
 
 
 @kernel(nogil=True)
-def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, echo_span_s, scratch):
+def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, echo_span_s, draws, scratch):
     """Fill ``out`` (n_channels,) bool with the channels of one window that can decide a return (module doc);
     ``scratch``: (3, n_channels) bool work space.
 
     power: (n,) noise-free optical power at the window's samples [W]; baseline: (n,) the processor's calibrated
     baseline there [W] (background plus the uncut column, as :mod:`muls.ranging.peaks` uses it); times: (n,) the sample
     times [s]; chans: the signal channels' :class:`muls.instrument.channels.ChannelArrays`; max_code: the top code [LSB];
-    k_sigma: the detection threshold [sigma]; echo_span_s: the spread of the pulse's echo delays [s].
+    k_sigma: the detection threshold [sigma]; echo_span_s: the spread of the pulse's echo delays [s]; draws: the
+    window's noise streams, (key, pulse id, index of its first sample, noise scale), whose bounds settle what the
+    noise's reach leaves open (:func:`_lost_in_the_column`).
     """
     n_chan, n = out.shape[0], power.shape[0]
     whole, plain, clipped = scratch[0], scratch[1], scratch[2]
@@ -79,6 +96,9 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
             n_blind += blind
             n_echo += is_open & (not blind) & (power[k] > baseline[k])
         whole[c], plain[c], out[c] = n_open == n, n_blind == 0, n_echo > 0
+        if out[c] and n_blind > 0 and n_open == n and _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma,
+                                                                          draws):
+            out[c] = False
         if out[c]:
             tolerance = min(tolerance, processor_sigma_lsb(chans, c, 0.0) / chans.lsb_per_w[c])
     if echo_span_s > ECHO_SPAN_S or not _one_hump(power, baseline, top, tolerance):
@@ -115,6 +135,72 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
             # its peak cannot win, and is timed too well to be ranged as a return of its own
             loses = whole[c] and plain[c] and SNR_MARGIN * most < best_snr and least > TIMED_SNR
             out[c] = not (clipped[c] or loses)
+
+
+@kernel(inline="always")
+def _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma, draws):
+    """Channel c, its gate open over the whole window, surely finds no peak in it. The baseline alone clips its first
+    samples and none after (a blind stretch, residual 0); its first run surely begins on a surely clipped sample next to
+    that stretch, so the plateau reaches back into it and the peak search takes the run for the column and drops it
+    (muls.ranging.peaks), echo and all. Any later run can only begin after a sample that may lie at or under the run
+    level (half the threshold), and is then one sample long and surely unclipped: it has no rising edge and is dropped
+    too. Each code is bounded by :func:`_noise_reach`, and where that leaves a test open, by the draws' own bounds
+    (:func:`_drawn_code_range`; ``draws``: the window's (key, pulse id, first sample index, noise scale))."""
+    n = power.shape[0]
+    dark_mean, lsb_per_w = chans.dark_mean_lsb[c], chans.lsb_per_w[c]
+    b = 0  # the first sample the channel sees
+    while b < n and dark_mean + lsb_per_w * baseline[b] >= max_code:
+        b += 1
+    if b + 2 > n:
+        return False
+    key, pulse_id, first_index, noise_scale = draws
+    dark_base = stream_base(key, pulse_id, dark_noise_stream(c)[0])
+    shot_base = stream_base(key, pulse_id, shot_noise_stream(chans.detector[c], chans.detector.shape[0])[0])
+    if not (_surely_clipped(c, power[b], chans, max_code)
+            or _drawn_code_range(c, b, power[b], chans, max_code, noise_scale, dark_base, shot_base, first_index)[0]
+            >= max_code):
+        return False
+    # the first run: at b (its residual, max_code less the baseline, over the run level), else at b + 1, surely clipped
+    if max_code - (dark_mean + lsb_per_w * baseline[b]) <= 0.5 * k_sigma * processor_sigma_lsb(chans, c, baseline[b]) \
+            and not (_surely_clipped(c, power[b + 1], chans, max_code)
+                     or _drawn_code_range(c, b + 1, power[b + 1], chans, max_code, noise_scale, dark_base, shot_base,
+                                          first_index)[0] >= max_code):
+        return False
+    low_before = False  # the sample before may lie at or under the run level (so a later run may begin after it)
+    may_begin = False  # this sample may begin a later run
+    for k in range(b + 1, n):
+        expected = dark_mean + lsb_per_w * baseline[k]
+        if expected >= max_code:
+            return False  # blind again after samples it sees
+        run_level = 0.5 * k_sigma * processor_sigma_lsb(chans, c, baseline[k])
+        level, reach = level_lsb(chans, c, power[k]), _noise_reach(chans, c, power[k])
+        lowest, highest = min(level - reach, max_code), min(level + reach, max_code)
+        if (lowest - expected <= run_level < highest - expected) or lowest < max_code <= highest:
+            lowest, highest = _drawn_code_range(c, k, power[k], chans, max_code, noise_scale, dark_base, shot_base,
+                                                first_index)
+        may_be_over = highest - expected > run_level
+        if may_begin and may_be_over:
+            return False  # a later run of two samples or more
+        may_begin = low_before and k > b + 1 and may_be_over
+        if may_begin and highest >= max_code:
+            return False  # a later run that may clip
+        low_before = lowest - expected <= run_level
+    return True
+
+
+@kernel(inline="always")
+def _drawn_code_range(c, k, power, chans, max_code, noise_scale, dark_base, shot_base, first_index):
+    """(lowest, highest) code [LSB] channel c (gate open) can give at sample k of its window, at optical power
+    ``power`` [W]: :func:`muls.receiver.channel_codes.channel_codes`'s expression with each of its two normals at the
+    bound of its bits (:func:`muls.infra.noise.normal_bounds`, read from the hash, not drawn). Rounding is monotone, so
+    the code lies between them."""
+    dark_lo, dark_hi = normal_bounds(half_bits(hash_at(dark_base, first_index + k), dark_noise_stream(c)[1]))
+    shot_half = shot_noise_stream(chans.detector[c], chans.detector.shape[0])[1]
+    shot_lo, shot_hi = normal_bounds(half_bits(hash_at(shot_base, first_index + k), shot_half))
+    level = level_lsb(chans, c, power)
+    dark_std, shot_std = chans.dark_std_lsb[c], math.sqrt(chans.shot_lsb2_per_w[c] * power)
+    return (float(quantise(level + noise_scale * (dark_std * dark_lo + shot_std * shot_lo), max_code)),
+            float(quantise(level + noise_scale * (dark_std * dark_hi + shot_std * shot_hi), max_code)))
 
 
 @kernel(inline="always")

@@ -16,13 +16,14 @@ import numpy as np
 
 from ..infra.blocks import in_blocks
 from ..infra.noise import (
-    FIRST_SIGNAL_STREAM,
     NORMAL_BOUND,
     PHASE_STREAM,
     REFERENCE_STREAM,
+    dark_noise_stream,
     fill_hashes,
     fill_normal_pairs,
     seed_key,
+    shot_noise_stream,
     stream_base,
     uniform_at,
 )
@@ -262,8 +263,8 @@ def _digitise(codes, clean, synthesised, baselines, window_pulse, window_start, 
                     chans, settings, shot_needed, scratch, steps)
         # Every sample: drawn a window at once for the pairs a synthesised channel needs.
         first_index = window_start[w]
-        _draw_pairs(dark_normal, synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index, no_low, tails)
-        _draw_pairs(shot_normal, shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index, no_low,
+        _draw_pairs(dark_normal, synthesised[w], sampling, p, dark_noise_stream(0)[0], first_index, no_low, tails)
+        _draw_pairs(shot_normal, shot_needed, sampling, p, shot_noise_stream(0, n_chan)[0], first_index, no_low,
                     tails)
         for c in range(n_chan):
             if synthesised[w, c]:
@@ -290,8 +291,8 @@ def _digitise_read_samples(codes, clean, synthesised, baselines, window_pulse, w
         p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
                     chans, settings, shot_needed, scratch, steps)
         first_index = window_start[w]
-        _hash_pairs(hashes[:n_pairs], synthesised[w], sampling, p, FIRST_SIGNAL_STREAM, first_index)
-        _hash_pairs(hashes[n_pairs:], shot_needed, sampling, p, FIRST_SIGNAL_STREAM + n_pairs, first_index)
+        _hash_pairs(hashes[:n_pairs], synthesised[w], sampling, p, dark_noise_stream(0)[0], first_index)
+        _hash_pairs(hashes[n_pairs:], shot_needed, sampling, p, shot_noise_stream(0, n_chan)[0], first_index)
         for c in range(n_chan):
             if synthesised[w, c]:
                 d = chans.detector[c]

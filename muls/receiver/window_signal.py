@@ -125,8 +125,9 @@ def window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_
         for j in range(offsets[p], offsets[p + 1]):
             if energy[j] > 0.0:
                 first_echo, last_echo = min(first_echo, delay[j]), max(last_echo, delay[j])
+        draws = (sampling.key, sampling.pulse_id[p], window_start[w], settings.noise_scale)
         deciding_channels(synthesised[w], power, baseline, times, chans, settings.max_code, settings.k_sigma,
-                          last_echo - first_echo, deciding_scratch)
+                          last_echo - first_echo, draws, deciding_scratch)
     else:
         synthesised[w, :] = True
     if clean.shape[0] > 0:

@@ -88,6 +88,25 @@ def test_the_table_bound_on_a_normal_lies_above_it_and_close():
     assert (bound - normal)[central].max() < 0.015
 
 
+def test_the_bounds_on_a_normal_read_from_its_bits_bracket_it_both_ways():
+    """``normal_bounds`` takes its lower bound from the complement's table cell, which is right only if the normals
+    are antisymmetric to the bit (the complement of a half gives -x): checked on both ends of every cell and at random
+    halves, with both bounds within 0.015 of the draw where |x| < 2.5. A lower bound above a draw would let the
+    deciding test leave out a channel whose code could have started a run."""
+    from muls.infra.noise import UPPER_BOUND_SHIFT, normal_bounds, normal_of_bits
+
+    cells = np.arange(1 << (32 - int(UPPER_BOUND_SHIFT)), dtype=np.uint64)
+    edges = np.concatenate([cells << UPPER_BOUND_SHIFT, ((cells + np.uint64(1)) << UPPER_BOUND_SHIFT) - np.uint64(1)])
+    bits = np.concatenate([edges, np.random.default_rng(4).integers(0, 2**32, 200_000, dtype=np.uint64)])
+    normal = np.array([normal_of_bits(b) for b in bits])
+    complement = np.array([normal_of_bits(np.uint64(2**32 - 1) - b) for b in bits])
+    np.testing.assert_array_equal(complement, -normal)
+    lower, upper = np.array([normal_bounds(b) for b in bits]).T
+    assert (lower <= normal).all() and (normal <= upper).all()
+    central = np.abs(normal) < 2.5
+    assert (normal - lower)[central].max() < 0.015 and (upper - normal)[central].max() < 0.015
+
+
 
 def test_seed_key_accepts_ints_and_generators_and_names_what_it_refuses():
     """A seed is an integer from 0, or a numpy Generator, which is advanced once: its key is that of the integer

@@ -166,6 +166,24 @@ def test_a_channel_the_backscatter_blinds_is_left_out_and_would_have_found_nothi
     assert not np.any(ranged_every.peaks.channel == 3)
 
 
+def test_a_channel_blind_through_the_echo_is_left_out_where_its_only_run_joins_the_column():
+    """cable_survey's water and far gate (coastal ocean, CH3 open from 35 ns), plates at 5.5 to 9 m: the column alone
+    clips CH3 from its gate's opening through the echo, and the echo's tail, where CH3 sees again, runs on from a
+    clipped plateau that reaches back into that blind stretch: the peak search takes it for the column. CH3 is then
+    left out in most of these windows (the noise's reach leaves a few open), and digitised with every channel it gives
+    no peak at all, and every return and dropout is the same. Before this rule every window kept CH3 beside the
+    channel that decides (its best SNR, behind the blind samples, could not be compared)."""
+    model = _model("coastal_ocean", (35e-9, 400e-9))
+    ranges = np.repeat(np.linspace(5.5, 9.0, 8), 12)
+    batch = PulseBatch.flat_target(model.instrument, ranges, reflectance=np.tile([0.05, 0.1, 0.2, 0.3, 0.5, 0.9], 16))
+    every, ranged_every = simulate(model, batch, seed=4)
+    kept, ranged_kept = simulate(model, batch, seed=4, deciding_only=True)
+    assert kept.synthesised[:, 2].mean() < 0.2
+    assert not np.any(ranged_every.peaks.channel == 3)
+    assert sorted(_returns(ranged_kept)) == sorted(_returns(ranged_every))
+    np.testing.assert_array_equal(ranged_kept.dropout_cause, ranged_every.dropout_cause)
+
+
 def test_a_pulse_without_a_window_draws_no_reference_and_keeps_its_dropout():
     """Under deciding_only the CH0 reference is synthesised only for the pulses with a record window: it times their
     returns, and a pulse without one (its beam lit nothing: here targets of zero reflectance) has no return to time.
