@@ -137,7 +137,7 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
             out[c] = not (clipped[c] or loses)
 
 
-@kernel(inline="always")
+@kernel(nogil=True)
 def _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma, draws):
     """Channel c, its gate open over the whole window, surely finds no peak in it. The baseline alone clips its first
     samples and none after (a blind stretch, residual 0); its first run surely begins on a surely clipped sample next to
@@ -188,7 +188,7 @@ def _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma, draws):
     return True
 
 
-@kernel(inline="always")
+@kernel(nogil=True)
 def _drawn_code_range(c, k, power, chans, max_code, noise_scale, dark_base, shot_base, first_index):
     """(lowest, highest) code [LSB] channel c (gate open) can give at sample k of its window, at optical power
     ``power`` [W]: :func:`muls.receiver.channel_codes.channel_codes`'s expression with each of its two normals at the

@@ -153,8 +153,9 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     digitise_windows = _digitise_read_samples if settings.read_samples_only else _digitise
 
     def windows(a, b):  # windows a:b; their pulses index the whole batch
+        deciding = np.empty((3, shape[1]), np.bool_) if deciding_only else None  # the deciding test's scratch
         digitise_windows(codes[a:b], clean[a:b], synthesised[a:b], baselines[a:b], window_pulse[a:b], window_start[a:b],
-                         sampling, model.column, cuts, echoes, signal, settings)
+                         sampling, model.column, cuts, echoes, signal, settings, deciding)
 
     needed = np.ones(batch.n_pulses, np.bool_)
     if deciding_only:
@@ -248,10 +249,11 @@ class DigitiserSettings(NamedTuple):
 
 @kernel(nogil=True)
 def _digitise(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes, chans,
-              settings):
+              settings, deciding):
     """The signal windows' codes (MULS Eqs. 1, 12, 13) into ``codes``, every sample drawn, with ``clean``,
     ``synthesised`` and, where ``baselines`` is not empty ((n_windows, n_samples)), each window's calibrated baseline
-    [W] (:func:`digitise`)."""
+    [W] (:func:`digitise`); ``deciding``: None, or the deciding test's scratch where only the channels that can decide
+    a return are synthesised (:func:`~muls.receiver.window_signal.window_signal`)."""
     n_windows, n_chan, n_samples = codes.shape
     n_pairs, n_shot_pairs, shot_needed, scratch, steps = window_scratch(codes, cuts, chans, col, sampling.dt_s)
     dark_normal = np.empty((2 * n_pairs, n_samples))
@@ -260,7 +262,7 @@ def _digitise(codes, clean, synthesised, baselines, window_pulse, window_start, 
     times, power = scratch[0], scratch[1]
     for w in range(n_windows):
         p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
-                    chans, settings, shot_needed, scratch, steps)
+                    chans, settings, shot_needed, scratch, steps, deciding)
         # Every sample: drawn a window at once for the pairs a synthesised channel needs.
         first_index = window_start[w]
         _draw_pairs(dark_normal, synthesised[w], sampling, p, dark_noise_stream(0)[0], first_index, no_low, tails)
@@ -276,7 +278,7 @@ def _digitise(codes, clean, synthesised, baselines, window_pulse, window_start, 
 
 @kernel(nogil=True)
 def _digitise_read_samples(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts,
-                           echoes, chans, settings):
+                           echoes, chans, settings, deciding):
     """:func:`_digitise` with only the samples the peak search may read coded, the others 0
     (:func:`muls.receiver.channel_codes.ranging_codes`; :func:`digitise`'s ``ranging_only`` of full records). A kernel
     of its own so that a run which never asks for it does not compile it and the draws by list it calls; the window up
@@ -289,7 +291,7 @@ def _digitise_read_samples(codes, clean, synthesised, baselines, window_pulse, w
     times, power, baseline = scratch[0], scratch[1], scratch[2]
     for w in range(n_windows):
         p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
-                    chans, settings, shot_needed, scratch, steps)
+                    chans, settings, shot_needed, scratch, steps, deciding)
         first_index = window_start[w]
         _hash_pairs(hashes[:n_pairs], synthesised[w], sampling, p, dark_noise_stream(0)[0], first_index)
         _hash_pairs(hashes[n_pairs:], shot_needed, sampling, p, shot_noise_stream(0, n_chan)[0], first_index)

@@ -28,7 +28,7 @@ def sample_times(out, first, end, t0_s, dt_s, first_index, phase_s):
 def window_scratch(codes, cuts, chans, col, dt_s):
     """For the windows of ``codes`` (n_windows, n_channels, n): (stream pairs of the channels' dark noise, stream
     pairs of the detectors' shot noise, (detectors,) bool scratch, (times, power, baseline, uncut (n,) each, then the
-    column cuts' times, shares and shares ahead, and the deciding test's (3, channels) bool), the pulse basis's two
+    column cuts' times, shares and shares ahead), the pulse basis's two
     exponentials' factors over a sample interval ``dt_s`` [s] (``col.basis``))."""
     n_chan, n_samples = codes.shape[1], codes.shape[2]
     n_detectors = 0
@@ -36,20 +36,23 @@ def window_scratch(codes, cuts, chans, col, dt_s):
         n_detectors = max(n_detectors, chans.detector[c] + 1)
     k = cuts.cut_tau_s.shape[1]
     scratch = (np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(k),
-               np.empty(k), np.empty(k + 1), np.empty((3, n_chan), np.bool_))
+               np.empty(k), np.empty(k + 1))
     steps = math.exp(-col.basis[0] * dt_s), math.exp(-col.basis[1] * dt_s)
     return (n_chan + 1) // 2, (n_detectors + 1) // 2, np.empty(n_detectors, np.bool_), scratch, steps
 
 
 @kernel(inline="always")
 def window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes, chans,
-            settings, shot_needed, scratch, steps):
+            settings, shot_needed, scratch, steps, deciding):
     """Window w up to its noise: its sample times and noise-free power (MULS Eq. 1: echoes, the column as its targets
     cut it, background), the calibrated baseline where the channels are decided or the samples the search reads are
     chosen (into ``baselines`` too where it is not empty), the channels synthesised, their noise-free levels into
     ``clean`` (when kept) and the detectors whose shot noise is needed. Into ``scratch`` (:func:`window_scratch`);
-    ``steps``: the pulse basis's two exponentials' factors over a sample interval. Returns the window's pulse."""
-    times, power, baseline, uncut, cut_t, cut_s, ahead, deciding_scratch = scratch
+    ``steps``: the pulse basis's two exponentials' factors over a sample interval; ``deciding``: None (every channel
+    synthesised) or the deciding test's (3, channels) bool scratch. A None there prunes the test from the kernel
+    numba compiles (its branch is dropped before typing): a run that decides no channels never compiles it (1.4 to
+    2.9 s of a first run's CPU). Returns the window's pulse."""
+    times, power, baseline, uncut, cut_t, cut_s, ahead = scratch
     n_chan, n_samples = codes.shape[1], codes.shape[2]
     basis, dt = col.basis, sampling.dt_s
     offsets, delay, energy = echoes.offsets, echoes.delay_s, echoes.energy_j
@@ -120,14 +123,14 @@ def window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_
         if baselines.shape[0] > 0:
             for k in range(n_samples):  # (a loop: an array assignment compiles numba's shape-error formatting)
                 baselines[w, k] = baseline[k]
-    if settings.deciding_only:
+    if deciding is not None:
         first_echo, last_echo = np.inf, -np.inf
         for j in range(offsets[p], offsets[p + 1]):
             if energy[j] > 0.0:
                 first_echo, last_echo = min(first_echo, delay[j]), max(last_echo, delay[j])
         draws = (sampling.key, sampling.pulse_id[p], window_start[w], settings.noise_scale)
         deciding_channels(synthesised[w], power, baseline, times, chans, settings.max_code, settings.k_sigma,
-                          last_echo - first_echo, draws, deciding_scratch)
+                          last_echo - first_echo, draws, deciding)
     else:
         synthesised[w, :] = True
     if clean.shape[0] > 0:
