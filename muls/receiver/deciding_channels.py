@@ -156,15 +156,12 @@ def _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma, draws):
     key, pulse_id, first_index, noise_scale = draws
     dark_base = stream_base(key, pulse_id, dark_noise_stream(c)[0])
     shot_base = stream_base(key, pulse_id, shot_noise_stream(chans.detector[c], chans.detector.shape[0])[0])
-    if not (_surely_clipped(c, power[b], chans, max_code)
-            or _drawn_code_range(c, b, power[b], chans, max_code, noise_scale, dark_base, shot_base, first_index)[0]
-            >= max_code):
+    bounds = (noise_scale, dark_base, shot_base, first_index)
+    if not _clipped_whatever_drawn(c, b, power[b], chans, max_code, bounds):
         return False
     # the first run: at b (its residual, max_code less the baseline, over the run level), else at b + 1, surely clipped
     if max_code - (dark_mean + lsb_per_w * baseline[b]) <= 0.5 * k_sigma * processor_sigma_lsb(chans, c, baseline[b]) \
-            and not (_surely_clipped(c, power[b + 1], chans, max_code)
-                     or _drawn_code_range(c, b + 1, power[b + 1], chans, max_code, noise_scale, dark_base, shot_base,
-                                          first_index)[0] >= max_code):
+            and not _clipped_whatever_drawn(c, b + 1, power[b + 1], chans, max_code, bounds):
         return False
     low_before = False  # the sample before may lie at or under the run level (so a later run may begin after it)
     may_begin = False  # this sample may begin a later run
@@ -176,8 +173,7 @@ def _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma, draws):
         level, reach = level_lsb(chans, c, power[k]), _noise_reach(chans, c, power[k])
         lowest, highest = min(level - reach, max_code), min(level + reach, max_code)
         if (lowest - expected <= run_level < highest - expected) or lowest < max_code <= highest:
-            lowest, highest = _drawn_code_range(c, k, power[k], chans, max_code, noise_scale, dark_base, shot_base,
-                                                first_index)
+            lowest, highest = _drawn_code_range(c, k, power[k], chans, max_code, bounds)
         may_be_over = highest - expected > run_level
         if may_begin and may_be_over:
             return False  # a later run of two samples or more
@@ -188,12 +184,22 @@ def _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma, draws):
     return True
 
 
+@kernel(inline="always")
+def _clipped_whatever_drawn(c, k, power, chans, max_code, bounds):
+    """Channel c's code at sample k, at optical power ``power`` [W], is the top code whatever the noise: within the
+    noise's reach, or else within its draws' bounds (:func:`_drawn_code_range`)."""
+    return _surely_clipped(c, power, chans, max_code) or _drawn_code_range(c, k, power, chans, max_code,
+                                                                           bounds)[0] >= max_code
+
+
 @kernel(nogil=True)
-def _drawn_code_range(c, k, power, chans, max_code, noise_scale, dark_base, shot_base, first_index):
+def _drawn_code_range(c, k, power, chans, max_code, bounds):
     """(lowest, highest) code [LSB] channel c (gate open) can give at sample k of its window, at optical power
     ``power`` [W]: :func:`muls.receiver.channel_codes.channel_codes`'s expression with each of its two normals at the
     bound of its bits (:func:`muls.infra.noise.normal_bounds`, read from the hash, not drawn). Rounding is monotone, so
-    the code lies between them."""
+    the code lies between them. ``bounds``: (noise scale, the channel's dark-noise stream base, its detector's
+    shot-noise stream base, the window's first sample index)."""
+    noise_scale, dark_base, shot_base, first_index = bounds
     dark_lo, dark_hi = normal_bounds(half_bits(hash_at(dark_base, first_index + k), dark_noise_stream(c)[1]))
     shot_half = shot_noise_stream(chans.detector[c], chans.detector.shape[0])[1]
     shot_lo, shot_hi = normal_bounds(half_bits(hash_at(shot_base, first_index + k), shot_half))
