@@ -40,15 +40,7 @@ def test_regression_the_physics_kernels_compile_no_string_formatting(tmp_path):
     (``base_w[:] = baselines[w]``) compiles numba's shape-mismatch error, which formats the shapes: its unicode,
     repr and str helpers, 18 kernels and 37 signatures, about 1.5 s more of the first run's compile, for a message
     no valid input can raise. Copy in a loop, or pass the row itself."""
-    names = cold_compiled_kernels(
-        "import numpy as np\n"
-        "from muls import mul2023, water_preset\n"
-        "from muls.optics.optical_model import OpticalModel, PulseBatch\n"
-        "from muls.simulate import simulate\n"
-        "model = OpticalModel.build(mul2023(60e-9, 400e-9), water_preset('coastal_ocean'))\n"
-        "batch = PulseBatch.flat_target(model.instrument, np.linspace(2.0, 20.0, 50))\n"
-        "def run():\n"
-        "    simulate(model, batch, 1, deciding_only=True, ranging_only=True)\n", tmp_path)
+    names = _cold_flat_targets("deciding_only=True, ranging_only=True", tmp_path)
     assert any(name.endswith("._digitise") for name in names) and any(name.endswith("._peaks") for name in names)
     assert any(name.endswith(".deciding_channels.deciding_channels") for name in names)
     assert not string_formatting(names)
@@ -61,7 +53,14 @@ def test_regression_a_simulation_that_decides_no_channels_compiles_no_deciding_t
     the test sat in the digitiser's window behind a runtime flag, so numba typed and compiled it in every first run,
     1.4 s of CPU, and 2.9 s once it bounded draws from their hashes, for a pass that never runs it. Its branch now
     hangs on an argument that is None where no channel is decided, a branch numba drops before typing."""
-    names = cold_compiled_kernels(
+    names = _cold_flat_targets("ranging_only=True", tmp_path)
+    assert any(name.endswith("._digitise") for name in names)
+    assert not any(".deciding_channels." in name for name in names)
+
+
+def _cold_flat_targets(options: str, tmp_path) -> list:
+    """The kernels a cold ``simulate`` of 50 flat targets in coastal water compiles, called with ``options``."""
+    return cold_compiled_kernels(
         "import numpy as np\n"
         "from muls import mul2023, water_preset\n"
         "from muls.optics.optical_model import OpticalModel, PulseBatch\n"
@@ -69,6 +68,4 @@ def test_regression_a_simulation_that_decides_no_channels_compiles_no_deciding_t
         "model = OpticalModel.build(mul2023(60e-9, 400e-9), water_preset('coastal_ocean'))\n"
         "batch = PulseBatch.flat_target(model.instrument, np.linspace(2.0, 20.0, 50))\n"
         "def run():\n"
-        "    simulate(model, batch, 1, ranging_only=True)\n", tmp_path)
-    assert any(name.endswith("._digitise") for name in names)
-    assert not any(".deciding_channels." in name for name in names)
+        f"    simulate(model, batch, 1, {options})\n", tmp_path)
