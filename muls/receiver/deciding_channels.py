@@ -154,9 +154,10 @@ def _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma, draws):
     if b + 2 > n:
         return False
     key, pulse_id, first_index, noise_scale = draws
-    dark_base = stream_base(key, pulse_id, dark_noise_stream(c)[0])
-    shot_base = stream_base(key, pulse_id, shot_noise_stream(chans.detector[c], chans.detector.shape[0])[0])
-    bounds = (noise_scale, dark_base, shot_base, first_index)
+    dark_stream, dark_half = dark_noise_stream(c)
+    shot_stream, shot_half = shot_noise_stream(chans.detector[c], chans.detector.shape[0])
+    bounds = (noise_scale, first_index, stream_base(key, pulse_id, dark_stream), dark_half,
+              stream_base(key, pulse_id, shot_stream), shot_half)
     if not _clipped_whatever_drawn(c, b, power[b], chans, max_code, bounds):
         return False
     # the first run: at b (its residual, max_code less the baseline, over the run level), else at b + 1, surely clipped
@@ -197,11 +198,10 @@ def _drawn_code_range(c, k, power, chans, max_code, bounds):
     """(lowest, highest) code [LSB] channel c (gate open) can give at sample k of its window, at optical power
     ``power`` [W]: :func:`muls.receiver.channel_codes.channel_codes`'s expression with each of its two normals at the
     bound of its bits (:func:`muls.infra.noise.normal_bounds`, read from the hash, not drawn). Rounding is monotone, so
-    the code lies between them. ``bounds``: (noise scale, the channel's dark-noise stream base, its detector's
-    shot-noise stream base, the window's first sample index)."""
-    noise_scale, dark_base, shot_base, first_index = bounds
-    dark_lo, dark_hi = normal_bounds(half_bits(hash_at(dark_base, first_index + k), dark_noise_stream(c)[1]))
-    shot_half = shot_noise_stream(chans.detector[c], chans.detector.shape[0])[1]
+    the code lies between them. ``bounds``: (noise scale, the window's first sample index, then the base and half of
+    the channel's dark-noise stream and of its detector's shot-noise stream)."""
+    noise_scale, first_index, dark_base, dark_half, shot_base, shot_half = bounds
+    dark_lo, dark_hi = normal_bounds(half_bits(hash_at(dark_base, first_index + k), dark_half))
     shot_lo, shot_hi = normal_bounds(half_bits(hash_at(shot_base, first_index + k), shot_half))
     level = level_lsb(chans, c, power)
     dark_std, shot_std = chans.dark_std_lsb[c], math.sqrt(chans.shot_lsb2_per_w[c] * power)

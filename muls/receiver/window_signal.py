@@ -28,8 +28,8 @@ def sample_times(out, first, end, t0_s, dt_s, first_index, phase_s):
 def window_scratch(codes, cuts, chans, col, dt_s):
     """For the windows of ``codes`` (n_windows, n_channels, n): (stream pairs of the channels' dark noise, stream
     pairs of the detectors' shot noise, (detectors,) bool scratch, (times, power, baseline, uncut (n,) each, then the
-    column cuts' times, shares and shares ahead), the pulse basis's two
-    exponentials' factors over a sample interval ``dt_s`` [s] (``col.basis``))."""
+    column cuts' times, shares and shares ahead), the pulse basis's two exponentials' factors over a sample interval
+    ``dt_s`` [s] (``col.basis``))."""
     n_chan, n_samples = codes.shape[1], codes.shape[2]
     n_detectors = 0
     for c in range(n_chan):
