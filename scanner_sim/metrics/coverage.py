@@ -290,11 +290,8 @@ class CoverageAccumulator:
     def _add_soundings(self, slots, footprint: Footprint, points) -> None:
         """Every point is a sounding where its pulse's nominal beam axis meets the truth (in each order's cell
         there); its true errors are its offset from that point (navigation, ranging and footprint errors together)."""
-        pulse = np.searchsorted(slots, points.pulse_index)
-        truth = footprint.xyz[pulse]
-        self.orders.add(truth[:, :2], -truth[:, 2],
-                        points.xyz[:, 2] - truth[:, 2], np.hypot(*(points.xyz[:, :2] - truth[:, :2]).T),
-                        getattr(points, "tvu_m", None), getattr(points, "thu_m", None))
+        truth = footprint.xyz[np.searchsorted(slots, points.pulse_index)]
+        self.orders.add(truth, points.xyz, getattr(points, "tvu_m", None), getattr(points, "thu_m", None))
 
     def order_compliance(self) -> np.ndarray:
         """(len(s44.ORDERS), cells) bool: the reached plan cells lying in a complying cell of each S-44 order's own

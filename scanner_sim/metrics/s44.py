@@ -196,21 +196,31 @@ class OrderTally:
 
     def __init__(self, grids, scales: tuple[OrderScale, ...]):
         self.grids, self.scales = tuple(grids), tuple(scales)
-        # int32 as coverage's BinTally: memory grows with the area reached
-        self.soundings = [np.zeros(g.size, np.int32) for g in self.grids]
-        self.meeting = [np.zeros(g.size, np.int32) for g in self.grids]
+        sizes = [g.size for g in self.grids]
+        self._offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        # int32 as coverage's BinTally: memory grows with the area reached. Each order's counts are a view of one
+        # flat array, which the tally's kernel fills for every order in one pass.
+        self._soundings, self._meeting = np.zeros(sum(sizes), np.int32), np.zeros(sum(sizes), np.int32)
+        self.soundings = [self._soundings[o:o + n] for o, n in zip(self._offsets, sizes)]
+        self.meeting = [self._meeting[o:o + n] for o, n in zip(self._offsets, sizes)]
+        self._limits = np.array([[s.order.tvu_a_m ** 2, s.order.tvu_b, s.order.thu_m, s.order.thu_depth_fraction]
+                                 for s in self.scales], np.float64)
+        self._origin_m = np.array(self.grids[0].origin_m, np.float64) if self.grids else np.zeros(2)
+        self._cell_m = np.array([g.cell_m for g in self.grids], np.float64)
+        self._shapes = np.array([g.shape for g in self.grids], np.int64).reshape(-1, 2)
 
-    def add(self, xy, depth_m, vertical_error_m, horizontal_error_m, tvu_m=None, thu_m=None) -> None:
-        """xy (n, 2) true plan position of each sounding [m] (NaN: none, counted nowhere); the rest as in
-        :func:`soundings_meeting`."""
-        meets = soundings_meeting(depth_m, vertical_error_m, horizontal_error_m, tvu_m, thu_m)
-        one = np.int32(1)  # the tally's own dtype: np.add.at of a Python int casts on a slow path
-        for k, grid in enumerate(self.grids):
-            # np.add.at where the soundings are: a bincount over every cell would cost the whole grid per chunk
-            cell = grid.index(xy)
-            inside = cell >= 0
-            np.add.at(self.soundings[k], cell[inside], one)
-            np.add.at(self.meeting[k], cell[inside & meets[k]], one)
+    def add(self, truth_xyz, measured_xyz, tvu_m=None, thu_m=None) -> None:
+        """Soundings (n,) of a chunk: ``truth_xyz`` (n, 3) the true point of each [m] (z up, the surface at 0; NaN:
+        none, counted nowhere), ``measured_xyz`` (n, 3) where the pass put it; its depth is the truth's, its true
+        errors the two's vertical and horizontal offsets; ``tvu_m``, ``thu_m`` as in :func:`soundings_meeting`."""
+        from scanner_sim.metrics.sounding_tally import tally_soundings  # numba: only where a pass tallies
+
+        none = np.zeros(0)
+        tally_soundings(np.ascontiguousarray(truth_xyz, np.float64), np.ascontiguousarray(measured_xyz, np.float64),
+                        none if tvu_m is None else np.ascontiguousarray(tvu_m, np.float64),
+                        none if thu_m is None else np.ascontiguousarray(thu_m, np.float64),
+                        self._limits, self._origin_m, self._cell_m, self._shapes, self._offsets, self._soundings,
+                        self._meeting)
 
     def complies(self, k: int) -> np.ndarray:
         """(grids[k].size,) bool: the cells of order k's own grid that comply with it."""
