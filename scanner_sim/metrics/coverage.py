@@ -199,14 +199,18 @@ def nominal_footprint(hits, direction: np.ndarray | None = None) -> Footprint:
     return Footprint(xyz, object_id, direction)
 
 
-def pulse_outcomes(slots: np.ndarray, points, dropouts, tolerance_m: float) -> tuple[np.ndarray, np.ndarray]:
+def pulse_outcomes(slots: np.ndarray, points, dropouts, tolerance_m: float,
+                   point_pulse: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per pulse (n,) int: VALID or a FAILURE_CAUSES code; per point (m,) bool: |range error| <= tolerance.
 
-    slots: the chunk's pulse slots, ascending; points / dropouts carry ``pulse_index`` in those slots.
+    slots: the chunk's pulse slots, ascending; points / dropouts carry ``pulse_index`` in those slots;
+    point_pulse (m,): each point's pulse (its index in ``slots``), when the caller has it already.
     """
+    if point_pulse is None:
+        point_pulse = np.searchsorted(slots, points.pulse_index)
     valid_point = np.abs(points.range_error_m) <= tolerance_m  # NaN (no truth along the line) is not valid
     outcome = np.full(slots.size, FAILURE_CAUSES.index("out_of_tolerance"), np.int64)
-    outcome[np.searchsorted(slots, points.pulse_index[valid_point])] = VALID
+    outcome[point_pulse[valid_point]] = VALID
     outcome[np.searchsorted(slots, dropouts.pulse_index)] = dropouts.cause
     return outcome, valid_point
 
@@ -248,13 +252,14 @@ class CoverageAccumulator:
 
     def add(self, slots: np.ndarray, footprint: Footprint, points, dropouts) -> None:
         """One chunk: its slots (n,) ascending, the nominal footprint of those pulses, their points and dropouts."""
-        outcome, valid = pulse_outcomes(slots, points, dropouts, self.settings.tolerance_m)
+        point_pulse = np.searchsorted(slots, points.pulse_index)  # each point's pulse in the chunk
+        outcome, valid = pulse_outcomes(slots, points, dropouts, self.settings.tolerance_m, point_pulse)
         xyz, obj = points.xyz[valid], points.object_id[valid]
         pulse_cell = self.grid.index(footprint.xyz)
-        self.cells.add(pulse_cell, outcome, pulse_cell[np.searchsorted(slots, points.pulse_index[valid])])
+        self.cells.add(pulse_cell, outcome, pulse_cell[point_pulse[valid]])
         self.objects.add(footprint.object_id, outcome, obj)
         self._add_shadowing(footprint)
-        self._add_soundings(slots, footprint, points)
+        self._add_soundings(footprint, points, point_pulse)
         if slots.size:
             lo, hi = self.slot_span
             self.slot_span = [int(slots[0]) if lo is None else min(lo, int(slots[0])), max(hi or 0, int(slots[-1]))]
@@ -287,10 +292,11 @@ class CoverageAccumulator:
         through = (leave >= np.maximum(enter, 0.0)) & (self._targets[None, :] != by[:, None])
         np.add.at(self.shadowing, self._targets[np.nonzero(through)[1]], COUNT_DTYPE(1))
 
-    def _add_soundings(self, slots, footprint: Footprint, points) -> None:
+    def _add_soundings(self, footprint: Footprint, points, point_pulse: np.ndarray) -> None:
         """Every point is a sounding where its pulse's nominal beam axis meets the truth (in each order's cell
-        there); its true errors are its offset from that point (navigation, ranging and footprint errors together)."""
-        truth = footprint.xyz[np.searchsorted(slots, points.pulse_index)]
+        there); its true errors are its offset from that point (navigation, ranging and footprint errors together).
+        point_pulse (m,): each point's pulse (row of ``footprint``)."""
+        truth = footprint.xyz[point_pulse]
         self.orders.add(truth, points.xyz, getattr(points, "tvu_m", None), getattr(points, "thu_m", None))
 
     def order_compliance(self) -> np.ndarray:
