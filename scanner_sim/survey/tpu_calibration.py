@@ -97,6 +97,13 @@ HISTOGRAM_BIN_M = 0.001
 HISTOGRAM_MAX_M = 20.0
 
 
+def _at_or_under(levels: np.ndarray) -> np.ndarray:
+    """(CHART_LEVELS.size,) int64: how many of ``levels`` (n,) are at or under each chart level (NaN: none), without
+    sorting them: each level's first chart level at or over it, counted and summed up."""
+    first = np.searchsorted(CHART_LEVELS, levels, side="left")
+    return np.cumsum(np.bincount(first, minlength=CHART_LEVELS.size + 1)[:CHART_LEVELS.size])
+
+
 class UncertaintySink:
     """A pass's uncertainty figures, chunk by chunk (the summary's ``uncertainty``): THU and TVU quantiles over every
     point, and the calibration of the judged points (:func:`checked_errors`): the shares within THU and TVU over all,
@@ -137,8 +144,8 @@ class UncertaintySink:
             tally = np.array([mask.sum(), (inside_z & mask).sum(), (inside_h & mask).sum(),
                               0 if on is None else on.sum(), 0 if on is None else (inside_s & on).sum()], np.int64)
             self.groups[name] = self.groups.get(name, np.zeros(5, np.int64)) + tally
-        self.chart[0] += np.searchsorted(np.sort(errors.level_vertical), CHART_LEVELS, side="right")
-        self.chart[1] += np.searchsorted(np.sort(errors.level_horizontal), CHART_LEVELS, side="right")
+        self.chart[0] += _at_or_under(errors.level_vertical)
+        self.chart[1] += _at_or_under(errors.level_horizontal)
 
     def _count(self, name: str, values: np.ndarray) -> None:
         v = values[np.isfinite(values)]

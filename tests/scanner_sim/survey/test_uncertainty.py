@@ -257,3 +257,20 @@ def test_uncertainty_command_pools_passes_of_derived_seeds(capsys):
     assert out["calibration"]["vertical_within_tvu"] == pytest.approx(weighted, abs=1e-4)
     assert main(["uncertainty", "mine_field", "--seeds", "0"]) == 2
     assert "--seeds: must be an integer >= 1, not '0'" in capsys.readouterr().err
+
+
+def test_the_calibration_charts_counts_are_those_of_the_sorted_levels():
+    """The chart counts, per nominal coverage, the levels at or under it; counted without sorting the chunk's levels
+    (0.55 of a 10,000-pulse chunk's 1.0 ms in the sink), they must equal the sorted levels' right-hand
+    ``searchsorted``: levels on a chart level, at 0 and 1, NaN (no level: counted nowhere)."""
+    from scanner_sim.survey.tpu_calibration import CHART_LEVELS, _at_or_under
+
+    rng = np.random.default_rng(2)
+    for n in (0, 1, 60, 10000):
+        levels = rng.random(n)
+        if n > 2:
+            levels[::7] = np.nan
+            levels[::11] = CHART_LEVELS[rng.integers(0, CHART_LEVELS.size, levels[::11].size)]
+            levels[:2] = 0.0, 1.0
+        expected = np.searchsorted(np.sort(levels), CHART_LEVELS, side="right")
+        np.testing.assert_array_equal(_at_or_under(levels), expected)
