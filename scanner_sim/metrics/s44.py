@@ -204,7 +204,7 @@ class OrderTally:
         self.soundings = [self._soundings[o:o + n] for o, n in zip(self._offsets, sizes)]
         self.meeting = [self._meeting[o:o + n] for o, n in zip(self._offsets, sizes)]
         self._limits = np.array([[s.order.tvu_a_m ** 2, s.order.tvu_b, s.order.thu_m, s.order.thu_depth_fraction]
-                                 for s in self.scales], np.float64)
+                                 for s in self.scales], np.float64).reshape(-1, 4)
         self._origin_m = np.array(self.grids[0].origin_m, np.float64) if self.grids else np.zeros(2)
         self._cell_m = np.array([g.cell_m for g in self.grids], np.float64)
         self._shapes = np.array([g.shape for g in self.grids], np.int64).reshape(-1, 2)
