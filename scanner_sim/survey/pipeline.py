@@ -29,6 +29,7 @@ from scanner_sim.config.crs import crs_label
 from scanner_sim.io.rosbag import ROSBAG_NAME
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.metrics.planned_swath import planned_swath
+from scanner_sim.metrics.sounding_tally import load_tally_kernel
 from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.render import point_cloud
 from scanner_sim.render.worker import PictureWorker
@@ -127,7 +128,8 @@ WARM_UP_SLOTS = 64
 def warm_up(setup: PassSetup, options: PassOptions) -> float:
     """Compile every kernel of the pass's flow (numba compiles a kernel on its first call, about a minute for all of
     them on a fresh machine), or load it from the cache, before the pass's clock starts: simulate the pass's first
-    :data:`WARM_UP_SLOTS` slots, and the whole records of one when the pass keeps some, and discard them. Returns
+    :data:`WARM_UP_SLOTS` slots, and the whole records of one when the pass keeps some, and discard them, and load
+    the coverage's S-44 tally, whose kernel runs in the sinks. Returns
     the seconds it took, the summary's ``compile_s``. A chunk is a pure function of its slots, so the pass's bits
     do not change."""
     started = time.perf_counter()
@@ -136,6 +138,8 @@ def warm_up(setup: PassSetup, options: PassOptions) -> float:
         setup.simulate_chunk(first[:WARM_UP_SLOTS])
         if options.waveforms or setup.config.output.waveform_every_n_pulses:
             setup.simulate_chunk(first[:1], record_mode="full", every_channel=True)
+    if setup.plan.measures_coverage:  # the S-44 tally's kernel runs in the sinks, not in a chunk
+        load_tally_kernel()
     return time.perf_counter() - started
 
 
