@@ -27,7 +27,7 @@ from scanner_sim.records.point_records import PointRecords
 from scanner_sim.studies import accuracy
 from scanner_sim.survey import sinks
 from scanner_sim.survey.georeference import NO_OBJECT
-from scanner_sim.survey.pipeline import pass_chunks, stream_pass
+from scanner_sim.survey.pipeline import load_sink_kernels, pass_chunks, stream_pass
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.world.scene import build_scene
 
@@ -142,6 +142,7 @@ def run_level(base: PassSetup, level: FidelityLevel, waveform_pulses: int) -> Le
     setup = base.at_level(level)
     slots = list(setup.slot_chunks())
     setup.simulate_chunk(slots[0][:WARM_UP_PULSES])  # compiled kernels and caches warm
+    load_sink_kernels(setup)
     points, covered, wall_s = _timed_pass(setup)
     n = int(sum(s.size for s in slots))
     if covered is None:

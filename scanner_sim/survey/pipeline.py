@@ -138,9 +138,15 @@ def warm_up(setup: PassSetup, options: PassOptions) -> float:
         setup.simulate_chunk(first[:WARM_UP_SLOTS])
         if options.waveforms or setup.config.output.waveform_every_n_pulses:
             setup.simulate_chunk(first[:1], record_mode="full", every_channel=True)
-    if setup.plan.measures_coverage:  # the S-44 tally's kernel runs in the sinks, not in a chunk
-        load_tally_kernel()
+    load_sink_kernels(setup)
     return time.perf_counter() - started
+
+
+def load_sink_kernels(setup: PassSetup) -> None:
+    """Load (or compile) the kernels the pass runs in its sinks rather than in a chunk, which a warm-up chunk does
+    not reach: the coverage's S-44 tally, when the pass measures coverage."""
+    if setup.plan.measures_coverage:
+        load_tally_kernel()
 
 
 def pass_facts(setup: PassSetup, options: PassOptions) -> sinks.PassFacts:
