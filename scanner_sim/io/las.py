@@ -398,10 +398,12 @@ class LasWriter(StreamingWriter):
         for name, (dtype, _) in EXTRA_DIMENSIONS.items():
             values = getattr(r, name).astype(dtype, copy=False)
             pts[name] = values
-            known = values[~np.isnan(values)] if values.dtype.kind == "f" else values  # nan: no surface
-            if known.size == 0:
+            if values.size == 0:
                 continue
-            lo, hi = known.min().item(), known.max().item()
+            # fmin/fmax pass over NaN (no surface): NaN only where every value is
+            lo, hi = np.fmin.reduce(values).item(), np.fmax.reduce(values).item()
+            if lo != lo:
+                continue
             if name in self._extra_range:
                 old_lo, old_hi = self._extra_range[name]
                 lo, hi = min(lo, old_lo), max(hi, old_hi)
