@@ -147,9 +147,8 @@ def _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma, draws):
     too. Each code is bounded by :func:`_noise_reach`, and where that leaves a test open, by the draws' own bounds
     (:func:`_drawn_code_range`; ``draws``: the window's (key, pulse id, first sample index, noise scale))."""
     n = power.shape[0]
-    dark_mean, lsb_per_w = chans.dark_mean_lsb[c], chans.lsb_per_w[c]
     b = 0  # the first sample the channel sees
-    while b < n and dark_mean + lsb_per_w * baseline[b] >= max_code:
+    while b < n and level_lsb(chans, c, baseline[b]) >= max_code:
         b += 1
     if b + 2 > n:
         return False
@@ -161,13 +160,13 @@ def _lost_in_the_column(c, power, baseline, chans, max_code, k_sigma, draws):
     if not _clipped_whatever_drawn(c, b, power[b], chans, max_code, bounds):
         return False
     # the first run: at b (its residual, max_code less the baseline, over the run level), else at b + 1, surely clipped
-    if max_code - (dark_mean + lsb_per_w * baseline[b]) <= 0.5 * k_sigma * processor_sigma_lsb(chans, c, baseline[b]) \
+    if max_code - level_lsb(chans, c, baseline[b]) <= 0.5 * k_sigma * processor_sigma_lsb(chans, c, baseline[b]) \
             and not _clipped_whatever_drawn(c, b + 1, power[b + 1], chans, max_code, bounds):
         return False
     low_before = False  # the sample before may lie at or under the run level (so a later run may begin after it)
     may_begin = False  # this sample may begin a later run
     for k in range(b + 1, n):
-        expected = dark_mean + lsb_per_w * baseline[k]
+        expected = level_lsb(chans, c, baseline[k])  # the baseline's code
         if expected >= max_code:
             return False  # blind again after samples it sees
         run_level = 0.5 * k_sigma * processor_sigma_lsb(chans, c, baseline[k])
