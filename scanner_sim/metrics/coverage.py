@@ -200,14 +200,12 @@ def nominal_footprint(hits, direction: np.ndarray | None = None) -> Footprint:
 
 
 def pulse_outcomes(slots: np.ndarray, points, dropouts, tolerance_m: float,
-                   point_pulse: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   point_pulse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per pulse (n,) int: VALID or a FAILURE_CAUSES code; per point (m,) bool: |range error| <= tolerance.
 
     slots: the chunk's pulse slots, ascending; points / dropouts carry ``pulse_index`` in those slots;
-    point_pulse (m,): each point's pulse (its index in ``slots``), when the caller has it already.
+    point_pulse (m,): each point's pulse (its index in ``slots``).
     """
-    if point_pulse is None:
-        point_pulse = np.searchsorted(slots, points.pulse_index)
     valid_point = np.abs(points.range_error_m) <= tolerance_m  # NaN (no truth along the line) is not valid
     outcome = np.full(slots.size, FAILURE_CAUSES.index("out_of_tolerance"), np.int64)
     outcome[point_pulse[valid_point]] = VALID
