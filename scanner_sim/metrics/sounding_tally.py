@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from muls.infra.runtime import kernel
 
 
@@ -51,11 +49,3 @@ def tally_soundings(truth, measured, tvu_m, thu_m, limits, origin_m, cell_m, sha
             if ok:
                 meeting[cell] += 1
 
-
-def load_tally_kernel() -> None:
-    """Compile :func:`tally_soundings` (or load it from the cache) on no soundings, with the argument types
-    :class:`~scanner_sim.metrics.s44.OrderTally` passes: a pass does so before its clock starts, since the tally
-    first runs inside the timed pass, on its own thread (0.3 s of compiling on a fresh machine)."""
-    none, counts = np.zeros(0), np.zeros(0, np.int32)
-    tally_soundings(np.zeros((0, 3)), np.zeros((0, 3)), none, none, np.zeros((0, 4)), np.zeros(2), none,
-                    np.zeros((0, 2), np.int64), np.zeros(0, np.int64), counts, counts)

@@ -29,7 +29,7 @@ from scanner_sim.config.crs import crs_label
 from scanner_sim.io.rosbag import ROSBAG_NAME
 from scanner_sim.io.run_dir import RunDirectory, abort_on_error
 from scanner_sim.metrics.planned_swath import planned_swath
-from scanner_sim.metrics.sounding_tally import load_tally_kernel
+from scanner_sim.metrics.s44 import OrderTally
 from scanner_sim.records.point_records import DropoutRecords, PointRecords
 from scanner_sim.render import point_cloud
 from scanner_sim.render.worker import PictureWorker
@@ -146,7 +146,7 @@ def load_sink_kernels(setup: PassSetup) -> None:
     """Load (or compile) the kernels the pass runs in its sinks rather than in a chunk, which a warm-up chunk does
     not reach: the coverage's S-44 tally, when the pass measures coverage."""
     if setup.plan.measures_coverage:
-        load_tally_kernel()
+        OrderTally.load_kernel()
 
 
 def pass_facts(setup: PassSetup, options: PassOptions) -> sinks.PassFacts:
