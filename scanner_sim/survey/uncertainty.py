@@ -37,17 +37,15 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr, ndtri
+from scipy.special import ndtr
 
 from muls.infra.runtime import kernel
+from scanner_sim.survey.folded_normal import rounded_folded_normal_quantile
 from scanner_sim.survey.georeference import GRAZING_COS
 from scanner_sim.survey.ranging_precision import RangingPrecision
 
 #: The confidence of THU and TVU.
 CONFIDENCE = 0.95
-#: Newton steps of :func:`folded_normal_quantile`: from within 0.43 sigma of the root, four steps reach it to
-#: about 1e-6 sigma, far under the millimetre THU and TVU are reported to.
-NEWTON_STEPS = 4
 #: THU and TVU are reported to the millimetre [decimals of a metre], the resolution of the points' LAS coordinates
 #: (which keeps points.laz compact: noise in the low bits would not compress).
 REPORTED_DECIMALS = 3
@@ -237,8 +235,7 @@ def with_uncertainty(points, mean, var):
     """``points`` (:class:`PointRecords`) with ``thu_m``, ``tvu_m`` and ``tvu_surface_m`` (95 %, to the millimetre)
     of their predicted error of ``mean`` (n, 4) and variances ``var`` (n, 4) (:meth:`TpuModel.error_model`)."""
     return dataclasses.replace(points, thu_m=np.round(thu_of(mean, var), REPORTED_DECIMALS),
-                               tvu_m=np.round(tvu_of(mean, var), REPORTED_DECIMALS),
-                               tvu_surface_m=np.round(tvu_of(mean, var, SURFACE), REPORTED_DECIMALS))
+                               tvu_m=tvu_of(mean, var), tvu_surface_m=tvu_of(mean, var, SURFACE))
 
 
 def horizontal_sigma(mean, var) -> np.ndarray:
@@ -253,14 +250,10 @@ def thu_of(mean, var) -> np.ndarray:
 
 
 def tvu_of(mean, var, axis: int = 2) -> np.ndarray:
-    """(n,) TVU [m]: the 95 % quantile of |vertical error| of errors of ``mean`` (n, m) and variances ``var`` (n, m),
-    along the true beam (``axis`` 2, z) or against the surface under the point (:data:`SURFACE`); NaN where the
-    figure is unknown."""
-    sigma = np.sqrt(var[:, axis])
-    known = np.isfinite(sigma)
-    out = np.full(len(sigma), np.nan)
-    out[known] = folded_normal_quantile(mean[known, axis], sigma[known], CONFIDENCE)
-    return out
+    """(n,) TVU [m] to the millimetre (:data:`REPORTED_DECIMALS`): the 95 % quantile of |vertical error| of errors of
+    ``mean`` (n, m) and variances ``var`` (n, m), along the true beam (``axis`` 2, z) or against the surface under the
+    point (:data:`SURFACE`) (:mod:`scanner_sim.survey.folded_normal`); NaN where the figure is unknown."""
+    return rounded_folded_normal_quantile(mean[:, axis], np.sqrt(var[:, axis]), CONFIDENCE, REPORTED_DECIMALS)
 
 
 def coverage_levels(mean, var, vertical_m, horizontal_m) -> tuple[np.ndarray, np.ndarray]:
@@ -273,22 +266,3 @@ def coverage_levels(mean, var, vertical_m, horizontal_m) -> tuple[np.ndarray, np
     level_z = ndtr((e - mu) / sigma) - ndtr((-e - mu) / sigma)
     level_h = -np.expm1(-0.5 * (horizontal_m / np.maximum(horizontal_sigma(mean, var), 1e-6)) ** 2)
     return level_z, level_h
-
-
-def folded_normal_quantile(mean, sigma, p: float) -> np.ndarray:
-    """(n,) the T with P(|Z| <= T) = ``p`` for Z normal of ``mean`` (n,) and ``sigma`` (n,) [m], for p >= 0.9:
-    Newton's method on F(T) = Phi((T - mean) / sigma) - Phi((-T - mean) / sigma) = p from T0 = |mean| + z sigma,
-    z = Phi^-1((1 + p) / 2) (1.96 for 0.95), which lies at or above the root. F rises and is concave beyond |mean|,
-    and its first step is at most (1 - p) / (2 phi(z)) sigma < z sigma long for p >= 0.9 (0.43 sigma at 0.95), so
-    every iterate stays beyond |mean| and the steps converge quadratically onto the root (:data:`NEWTON_STEPS`).
-    A sigma under 1 micrometre is taken as 1 micrometre."""
-    if not 0.9 <= p < 1.0:
-        raise ValueError(f"folded_normal_quantile: p = {p!r}; this solver holds for 0.9 <= p < 1")
-    mean, sigma = np.abs(np.asarray(mean, np.float64)), np.maximum(np.asarray(sigma, np.float64), 1e-6)
-    t = mean + ndtri(0.5 + 0.5 * p) * sigma
-    for _ in range(NEWTON_STEPS):
-        a, b = (t - mean) / sigma, (t + mean) / sigma
-        f = ndtr(a) - ndtr(-b) - p
-        slope = (np.exp(-0.5 * a * a) + np.exp(-0.5 * b * b)) / (sigma * math.sqrt(2.0 * math.pi))
-        t = t - f / slope
-    return t

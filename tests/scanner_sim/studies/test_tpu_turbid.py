@@ -12,11 +12,11 @@ from scanner_sim.config import load_scene
 from scanner_sim.metrics.feature_cubes import with_cubes
 from scanner_sim.studies.coverage_study import combination_config
 from scanner_sim.survey.feature_placement import cube_positions
+from scanner_sim.survey.folded_normal import folded_normal_quantile
 from scanner_sim.survey.gate import echo_span
 from scanner_sim.survey.pipeline import simulate_pass
 from scanner_sim.survey.ranging_precision import REFLECTANCES, tabulate
 from scanner_sim.survey.setup import PassOptions, PassSetup
-from scanner_sim.survey.uncertainty import folded_normal_quantile
 
 WATER = "turbid_harbor"
 #: [m] 8 m over the seabed: the gate follows the seabed's echo, so the 2 m cubes' tops (6 m away) lie at its opening.

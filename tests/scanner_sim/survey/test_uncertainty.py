@@ -10,7 +10,6 @@ import math
 import laspy
 import numpy as np
 import pytest
-from scipy.stats import foldnorm
 
 from muls import mul2023
 from scanner_sim.cli import main
@@ -21,7 +20,7 @@ from scanner_sim.survey.pipeline import pass_chunks, run_pass, simulate_pass, wa
 from scanner_sim.survey.ranging_precision import tabulate
 from scanner_sim.survey.setup import PassOptions, PassSetup
 from scanner_sim.survey.tpu_calibration import UncertaintySink
-from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel, folded_normal_quantile
+from scanner_sim.survey.uncertainty import NavigationSigmas, TpuModel
 
 WATERS = ("clean_ocean", "coastal_ocean", "turbid_harbor")
 SEABED_SCENES = sorted(name for name in shipped_scenes() if load_scene(name).seabed is not None)
@@ -40,16 +39,6 @@ def _model(**navigation) -> TpuModel:
     table = tabulate(np.zeros(20), np.full(20, 1), np.full(20, 50.0), np.zeros(20, bool), np.zeros(20, bool),
                      np.zeros(20, np.int64), 3, (5.0,))
     return TpuModel(table, NavigationSigmas(**navigation), 0.01, 0.004, 0.65)
-
-
-def test_tvu_is_the_folded_normal_quantile():
-    """TVU's quantile (bisection on the normal CDF) against scipy's folded normal distribution."""
-    mean = np.array([0.0, 0.01, 0.05, -0.3, 2.0])
-    sigma = np.array([0.01, 0.01, 0.01, 0.2, 0.05])
-    for p in (0.9, 0.95, 0.99):
-        expected = foldnorm(np.abs(mean) / sigma).ppf(p) * sigma
-        np.testing.assert_allclose(folded_normal_quantile(mean, sigma, p), expected, rtol=1e-7)
-    assert folded_normal_quantile(np.zeros(1), np.ones(1), 0.95)[0] == pytest.approx(1.959964, abs=1e-6)
 
 
 def test_attitude_and_heading_jacobians_match_a_turned_rotation():
