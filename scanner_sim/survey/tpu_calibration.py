@@ -15,13 +15,16 @@ height under a point).
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
+from muls.infra.normal_cdf import normal_cdf
+from muls.infra.runtime import kernel
 from scanner_sim.config.materials import NOISE_CLASS
 from scanner_sim.records.point_records import PointRecords
-from scanner_sim.survey.uncertainty import CONFIDENCE, coverage_levels
+from scanner_sim.survey.uncertainty import CONFIDENCE
 
 #: [m] A true beam whose first hit lies further than this along it from the truth of the point's own line of sight
 #: met another surface than the one ranged (an edge between them): the point is not judged.
@@ -61,24 +64,59 @@ def checked_errors(points: PointRecords, sight, mean: np.ndarray, var: np.ndarra
     and the points' predicted error, ``mean`` (n, m) and variances ``var`` (n, m)
     (:meth:`~scanner_sim.survey.uncertainty.TpuModel.predict`); ``scene`` (:class:`~scanner_sim.world.scene.Scene`)
     gives the seabed of the surface reading (None, or a scene without a height field: none)."""
-    row = np.searchsorted(sight.slot, points.pulse_index)
-    true_range = sight.axis_range_m[row]
-    noise = points.classification == NOISE_CLASS
-    met = np.isfinite(true_range)
-    same = met & (np.abs(true_range - points.true_range_m) <= SAME_SURFACE_M)
-    judged = np.nonzero(~noise & same)[0]
-    row = row[judged]
-    error = points.xyz[judged] - (sight.true_origin_m[row] + true_range[judged, None] * sight.true_direction[row])
-    horizontal = np.hypot(error[:, 0], error[:, 1])
-    level_z, level_h = coverage_levels(mean[judged], var[judged], error[:, 2], horizontal)
-    skipped = {"noise": int(noise.sum()), "true_beam_meets_nothing": int((~noise & ~met).sum()),
-               "other_surface": int((~noise & met & ~same).sum())}
+    n = len(points)
+    judged, error = np.empty(n, np.int64), np.empty((n, 2))
+    level_z, horizontal_sigma = np.empty(n), np.empty(n)
+    counts = np.zeros(4, np.int64)
+    _judge(np.searchsorted(sight.slot, points.pulse_index), sight.axis_range_m, sight.true_origin_m,
+           sight.true_direction, points.classification, points.true_range_m, points.xyz, mean, var, NOISE_CLASS,
+           SAME_SURFACE_M, judged, error, level_z, horizontal_sigma, counts)
+    k = counts[3]
+    judged, vertical, horizontal = judged[:k], error[:k, 0], error[:k, 1]
+    level_h = -np.expm1(-0.5 * (horizontal / horizontal_sigma[:k]) ** 2)  # as coverage_levels (numpy's expm1)
+    skipped = {"noise": int(counts[0]), "true_beam_meets_nothing": int(counts[1]), "other_surface": int(counts[2])}
     on = judged[_over_seabed(points, judged, scene)]
     surface = (points.xyz[on, 2] - scene.surface_height(points.xyz[on, 0], points.xyz[on, 1]) if on.size
                else np.zeros(0))
-    return CheckedErrors(error[:, 2], horizontal, points.tvu_m[judged], points.thu_m[judged], points.channel[judged],
-                         points.incidence_deg[judged], level_z, level_h, skipped, surface, points.tvu_surface_m[on],
+    return CheckedErrors(vertical, horizontal, points.tvu_m[judged], points.thu_m[judged], points.channel[judged],
+                         points.incidence_deg[judged], level_z[:k], level_h, skipped, surface, points.tvu_surface_m[on],
                          points.incidence_deg[on])
+
+
+@kernel(nogil=True)
+def _judge(row, axis_range, true_origin, true_direction, classification, true_range, xyz, mean, var, noise_class,
+           same_surface_m, judged, error, level_z, horizontal_sigma, counts):
+    """:func:`checked_errors`' judging, point by point: the judged points' indices into ``judged`` (k,), their
+    true vertical and horizontal errors into ``error`` (k, 2) [m], the vertical coverage level and the horizontal
+    sigma (at least 1 micrometre) of :func:`~scanner_sim.survey.uncertainty.coverage_levels` into ``level_z`` and
+    ``horizontal_sigma`` (k,); ``counts`` (4,): noise, true beam meeting nothing, another surface, and k. Each figure
+    in the operations numpy takes over the arrays (the normal CDF Cephes', :func:`~muls.infra.normal_cdf.normal_cdf`),
+    the same bits. ``row`` (n,): each point's line of sight."""
+    k = 0
+    for i in range(row.shape[0]):
+        r = row[i]
+        tr = axis_range[r]
+        if classification[i] == noise_class:
+            counts[0] += 1
+            continue
+        if not np.isfinite(tr):
+            counts[1] += 1
+            continue
+        if not abs(tr - np.float64(true_range[i])) <= same_surface_m:
+            counts[2] += 1
+            continue
+        ex = xyz[i, 0] - (true_origin[r, 0] + tr * true_direction[r, 0])
+        ey = xyz[i, 1] - (true_origin[r, 1] + tr * true_direction[r, 1])
+        ez = xyz[i, 2] - (true_origin[r, 2] + tr * true_direction[r, 2])
+        judged[k], error[k, 0], error[k, 1] = i, ez, math.hypot(ex, ey)
+        mu, sigma = mean[i, 2], math.sqrt(var[i, 2])
+        sigma = 1e-6 if sigma < 1e-6 else sigma  # np.maximum's: NaN stays NaN
+        e = abs(ez)
+        level_z[k] = normal_cdf((e - mu) / sigma) - normal_cdf((-e - mu) / sigma)
+        h = math.sqrt(0.5 * (var[i, 0] + var[i, 1] + mean[i, 0] * mean[i, 0] + mean[i, 1] * mean[i, 1]))
+        horizontal_sigma[k] = 1e-6 if h < 1e-6 else h
+        k += 1
+    counts[3] = k
 
 
 def _over_seabed(points: PointRecords, judged: np.ndarray, scene) -> np.ndarray:
