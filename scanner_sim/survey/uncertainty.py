@@ -260,7 +260,10 @@ def coverage_levels(mean, var, vertical_m, horizontal_m) -> tuple[np.ndarray, np
     """The coverage level at which each of n true errors lies on its predicted distribution, each (n,) in [0, 1]:
     P(|Z| <= |vertical|) for Z normal of the predicted vertical mean and variance, and P(R <= horizontal) for R the
     radius of the circular bivariate normal of :func:`horizontal_sigma`, 1 - exp(-h^2 / (2 sigma_h^2)). A model
-    that is right gives levels spread uniformly: the share of levels <= q is q (the calibration curve)."""
+    that is right gives levels spread uniformly: the share of levels <= q is q (the calibration curve). The
+    definition over arrays: a pass takes the same figures point by point in
+    :func:`~scanner_sim.survey.tpu_calibration.checked_errors`' kernel, which tests/scanner_sim/survey/test_tpu_calibration.py
+    holds to this, bit for bit."""
     mu, sigma = mean[:, 2], np.maximum(np.sqrt(var[:, 2]), 1e-6)
     e = np.abs(vertical_m)
     level_z = ndtr((e - mu) / sigma) - ndtr((-e - mu) / sigma)
