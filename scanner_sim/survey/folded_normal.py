@@ -41,7 +41,8 @@ def folded_normal_quantile(mean, sigma, p: float) -> np.ndarray:
     and its first step is at most (1 - p) / (2 phi(z)) sigma < z sigma long for p >= 0.9 (0.43 sigma at 0.95), so
     every iterate stays beyond |mean| and the steps converge quadratically onto the root (:data:`NEWTON_STEPS`).
     A sigma under 1 micrometre is taken as 1 micrometre."""
-    _check_p(p)
+    if not 0.9 <= p < 1.0:
+        raise ValueError(f"folded_normal_quantile: p = {p!r}; this solver holds for 0.9 <= p < 1")
     mean, sigma = np.abs(np.asarray(mean, np.float64)), np.maximum(np.asarray(sigma, np.float64), 1e-6)
     t = mean + ndtri(0.5 + 0.5 * p) * sigma
     for _ in range(NEWTON_STEPS):
@@ -69,11 +70,6 @@ def quantile_table(p: float) -> np.ndarray:
     past :data:`TABLE_MAX_R` (g is even in r: the first entry is g(-step) = g(step))."""
     r = np.abs(np.arange(-1, round(TABLE_MAX_R / TABLE_STEP) + 3) * TABLE_STEP)
     return folded_normal_quantile(r, np.ones_like(r), p)
-
-
-def _check_p(p: float) -> None:
-    if not 0.9 <= p < 1.0:
-        raise ValueError(f"folded_normal_quantile: p = {p!r}; this solver holds for 0.9 <= p < 1")
 
 
 @kernel(nogil=True)
