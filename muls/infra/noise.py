@@ -144,18 +144,32 @@ def fill_hashes(base, first_index, out):
         out[k] = hash_at(base, first_index + k)
 
 
+@kernel(inline="always")
+def _list_flagged(flags, listed):
+    """The indices k of the nonzero ``flags[k]`` into ``listed``, in order, without a branch; returns how many. A
+    loop that branched on each flag instead mispredicts at random (one draw in twenty lies in a tail), which cost the
+    tails' patch more than their logarithms."""
+    m = 0
+    for k in range(flags.shape[0]):
+        listed[m] = k
+        m += flags[k] != 0
+    return m
+
+
 @kernel(nogil=True, error_model="numpy")
 def fill_normals_of(hashes, half, at, out, tails):
     """out[i] = :func:`normal_of_bits` (:func:`half_bits` (hashes[at[i]], half)) for i < at.shape[0], bit for bit;
-    ``tails`` (m,) bool scratch. As :func:`fill_normal_pairs`: a loop without a branch for the central formula, then
-    the draws in the tails patched."""
-    for i in range(at.shape[0]):
+    ``tails`` (2 m,) int64 scratch. As :func:`fill_normal_pairs`: a loop without a branch for the central formula,
+    then the draws in the tails listed and patched."""
+    m = at.shape[0]
+    in_tail, listed = tails[m:2 * m], tails[:m]
+    for i in range(m):
         p = centred_unit(half_bits(hashes[at[i]], half))
         out[i] = _central_normal(p)
-        tails[i] = _in_tail(p)
-    for i in range(at.shape[0]):
-        if tails[i]:
-            out[i] = _tail_normal(centred_unit(half_bits(hashes[at[i]], half)))
+        in_tail[i] = np.int64(_in_tail(p))
+    for i in range(_list_flagged(in_tail, listed)):
+        j = listed[i]
+        out[j] = _tail_normal(centred_unit(half_bits(hashes[at[j]], half)))
 
 
 #: :func:`normal_upper_bound` reads a table of the top 12 bits of a half: 4,096 cells of 2^20 values each.
@@ -225,35 +239,37 @@ def normal_at(base, index):
 def fill_normal_pairs(base, first_index, high, low, tails):
     """The normals of both halves of positions ``first_index + k`` of a stream, ``k < high.shape[0]``: ``high[k]``,
     ``low[k]`` equal :func:`normal_half_at` (..., 0) and (..., 1) bit for bit; an empty ``low`` (shape (0,)) skips the
-    second half. ``tails``: (n,) uint64 scratch.
+    second half. ``tails``: (2 n,) int64 scratch.
 
     A block at once costs about two thirds of draw by draw: the first loop has no branch (the central formula
-    everywhere; numpy's error model drops the division's zero check), so it runs on SIMD lanes; the second patches
-    the draws in the tails (one position in ten), hashing them again. The first loop comes in two copies, with and
-    without the low half: one loop that tests for it inside kept a high half alone 30 % slower.
+    everywhere; numpy's error model drops the division's zero check), so it runs on SIMD lanes; then the positions
+    with a draw in a tail (one in ten) are listed (:func:`_list_flagged`) and patched, hashing them again. The first
+    loop comes in two copies, with and without the low half: one loop that tests for it inside kept a high half alone
+    30 % slower. A listed position's two halves are both taken through the tail formula and the one in no tail left
+    as it was (a select, not a branch: which half it is falls at random).
     """
     n, base = high.shape[0], np.uint64(base)  # a Python int would make numba mix int64 and uint64 into float64
     both = low.shape[0] > 0
+    in_tail, listed = tails[n:2 * n], tails[:n]  # bit 0: the high half's draw in a tail, bit 1: the low half's
     if both:
         for k in range(n):
             h = hash_at(base, first_index + k)
             p_high, p_low = centred_unit(half_bits(h, 0)), centred_unit(half_bits(h, 1))
             high[k], low[k] = _central_normal(p_high), _central_normal(p_low)
-            tails[k] = np.uint64(_in_tail(p_high) | _in_tail(p_low))
+            in_tail[k] = np.int64(_in_tail(p_high)) | (np.int64(_in_tail(p_low)) << 1)
     else:
         for k in range(n):
             p_high = centred_unit(half_bits(hash_at(base, first_index + k), 0))
             high[k] = _central_normal(p_high)
-            tails[k] = np.uint64(_in_tail(p_high))
-    for k in range(n):
-        if tails[k] != 0:
-            h = hash_at(base, first_index + k)
-            p = centred_unit(half_bits(h, 0))
-            if _in_tail(p):
-                high[k] = _tail_normal(p)
-            p = centred_unit(half_bits(h, 1))
-            if both and _in_tail(p):
-                low[k] = _tail_normal(p)
+            in_tail[k] = np.int64(_in_tail(p_high))
+    for i in range(_list_flagged(in_tail, listed)):
+        k = listed[i]
+        h = hash_at(base, first_index + k)
+        x = _tail_normal(centred_unit(half_bits(h, 0)))
+        high[k] = x if in_tail[k] & 1 else high[k]
+        if both:
+            x = _tail_normal(centred_unit(half_bits(h, 1)))
+            low[k] = x if in_tail[k] & 2 else low[k]
 
 
 @kernel

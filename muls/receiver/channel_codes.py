@@ -54,8 +54,8 @@ def ranging_codes(out, power, baseline, times, dark_hashes, dark_half, shot_hash
     echo model the search takes off a residual is never negative, and a code of 0 lies under every run's level and the
     top code, so the search finds the same runs. ``dark_hashes``, ``shot_hashes`` (n,): the
     positions of the channel's dark stream and its detector's shot stream, whose halves ``dark_half`` and
-    ``shot_half`` are this channel's; ``read``, ``tails`` (n,) bool, ``at`` (n,) int64, ``dark_normal``, ``shot_normal``
-    (n,) scratch."""
+    ``shot_half`` are this channel's; ``read`` (n,) bool, ``tails`` (2 n,) int64, ``at`` (n,) int64, ``dark_normal``,
+    ``shot_normal`` (n,) scratch."""
     # The channel's constants in locals (numba tells LLVM nothing of aliasing: read from ``chans`` in the loop, they
     # are read again after every store); the expressions are gate_open_at, level_lsb and processor_sigma_lsb.
     gate_open, gate_close = chans.gate_open_s[c], chans.gate_close_s[c]

@@ -185,7 +185,7 @@ def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
     bound = noise_scale * dark_std * NORMAL_BOUND + 0.5
-    normal, no_low, tails, levels = np.empty(n_ref), np.empty(0), np.empty(n_ref, np.uint64), np.empty(n_ref)
+    normal, no_low, tails, levels = np.empty(n_ref), np.empty(0), np.empty(2 * n_ref, np.int64), np.empty(n_ref)
     times = np.empty(n_ref)
     for p in range(n_pulses):
         if not (needed[p] or keep):
@@ -258,7 +258,7 @@ def _digitise(codes, clean, synthesised, baselines, window_pulse, window_start, 
     n_pairs, n_shot_pairs, shot_needed, scratch, steps = window_scratch(codes, cuts, chans, col, sampling.dt_s)
     dark_normal = np.empty((2 * n_pairs, n_samples))
     shot_normal = np.empty((2 * n_shot_pairs, n_samples))
-    tails, no_low = np.empty(n_samples, np.uint64), np.empty(0)
+    tails, no_low = np.empty(2 * n_samples, np.int64), np.empty(0)
     times, power = scratch[0], scratch[1]
     for w in range(n_windows):
         p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
@@ -286,7 +286,7 @@ def _digitise_read_samples(codes, clean, synthesised, baselines, window_pulse, w
     n_windows, n_chan, n_samples = codes.shape
     n_pairs, n_shot_pairs, shot_needed, scratch, steps = window_scratch(codes, cuts, chans, col, sampling.dt_s)
     hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
-    read, in_tail, listed = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples, np.int64)
+    read, tails, listed = np.empty(n_samples, np.bool_), np.empty(2 * n_samples, np.int64), np.empty(n_samples, np.int64)
     dark_normal, shot_normal = np.empty(n_samples), np.empty(n_samples)
     times, power, baseline = scratch[0], scratch[1], scratch[2]
     for w in range(n_windows):
@@ -300,7 +300,7 @@ def _digitise_read_samples(codes, clean, synthesised, baselines, window_pulse, w
                 d = chans.detector[c]
                 ranging_codes(codes[w, c], power, baseline, times, hashes[c // 2], c % 2, hashes[n_pairs + d // 2],
                               d % 2, chans, c, settings.max_code, settings.noise_scale, settings.k_sigma, read, listed,
-                              dark_normal, shot_normal, in_tail)
+                              dark_normal, shot_normal, tails)
             else:
                 codes[w, c, :] = 0
 

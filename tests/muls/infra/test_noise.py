@@ -55,7 +55,7 @@ def test_block_draws_equal_the_draws_one_by_one_tails_included():
         base = np.uint64(stream_base(seed_key(11), pulse, stream))
         expected = np.array([[normal_half_at(base, first + k, half) for k in range(n)] for half in (0, 1)])
         assert (np.abs(expected) > 1.97).sum() > 0.04 * expected.size  # the tail formula is exercised
-        high, low, tails = np.empty(n), np.empty(n), np.empty(n, np.uint64)
+        high, low, tails = np.empty(n), np.empty(n), np.empty(2 * n, np.int64)
         fill_normal_pairs(base, first, high, low, tails)
         assert np.array_equal(high, expected[0]) and np.array_equal(low, expected[1])
         only_high = np.empty(n)
@@ -66,7 +66,7 @@ def test_block_draws_equal_the_draws_one_by_one_tails_included():
         fill_hashes(base, first, hashes)
         listed = np.sort(np.random.default_rng(pulse).choice(n, n // 3, replace=False))
         for half in (0, 1):
-            some, flags = np.empty(listed.size), np.empty(listed.size, np.bool_)
+            some, flags = np.empty(listed.size), np.empty(2 * listed.size, np.int64)
             fill_normals_of(hashes, half, listed, some, flags)
             assert np.array_equal(some, expected[half][listed])
 
@@ -131,5 +131,5 @@ def test_the_bound_table_built_in_numpy_is_the_kernels_normals_to_the_bit():
     cells = 1 << (32 - int(UPPER_BOUND_SHIFT))
     last = ((np.arange(1, cells + 1, dtype=np.uint64) << UPPER_BOUND_SHIFT) - np.uint64(1))
     normals = np.empty(cells)
-    fill_normals_of(last, 1, np.arange(cells, dtype=np.int64), normals, np.empty(cells, np.bool_))
+    fill_normals_of(last, 1, np.arange(cells, dtype=np.int64), normals, np.empty(2 * cells, np.int64))
     assert np.array_equal(_NORMAL_UPPER, normals + 1e-6)
