@@ -97,30 +97,37 @@ class RangingPrecision:
 
 @kernel(nogil=True)
 def _look_up(bias_m, std_m, channels, bins, ranges_m, edges, channel, snr, saturated, later, range_m, bias, std):
-    """:meth:`RangingPrecision.of` point by point into ``bias`` and ``std`` (n,), from the flattened (C-ordered)
-    tables ``bias_m`` and ``std_m`` of ``channels`` channels, ``ranges_m`` (panels,) and ``bins`` SNR bins of
-    ``edges``. Each return's cell at panel 0 is an index into the flat tables (panel i lies i * bins on)."""
-    panels = ranges_m.shape[0]
-    measured = np.empty(panels)
+    """:meth:`RangingPrecision.of` point by point into ``bias`` and ``std`` (n,) (:func:`look_up_one` of each), from
+    the flattened (C-ordered) tables ``bias_m`` and ``std_m`` of ``channels`` channels, ``ranges_m`` (panels,) and
+    ``bins`` SNR bins of ``edges``."""
+    measured = np.empty(ranges_m.shape[0])
     for i in range(range_m.shape[0]):
-        first = ((min(max(channel[i], 0), channels - 1) * 2 + saturated[i]) * 2 + later[i]) * (panels * bins) \
-            + _snr_bin(edges, snr[i])
-        if panels == 1:
-            bias[i], std[i] = bias_m[first], std_m[first]
-            continue
-        rho, below = range_m[i], 0
-        for k in range(panels):  # ascending: a farther panel's echo comes later
-            measured[k] = ranges_m[k] + bias_m[first + k * bins]
-            below += measured[k] <= rho
-        lo = min(max(below - 1, 0), panels - 2)
-        gap = measured[lo + 1] - measured[lo]
-        w = (rho - measured[lo]) / (gap if gap > 0 else np.inf)
-        if w == w:  # clipped to [0, 1] as numpy clips: a NaN stays NaN, -0 becomes 0
-            w = w if w > 0.0 else 0.0
-            w = w if w < 1.0 else 1.0
-        a, b = first + lo * bins, first + (lo + 1) * bins
-        bias[i] = (1 - w) * bias_m[a] + w * bias_m[b]
-        std[i] = (1 - w) * std_m[a] + w * std_m[b]
+        bias[i], std[i] = look_up_one(bias_m, std_m, channels, bins, ranges_m, edges, channel[i], snr[i], saturated[i],
+                                      later[i], range_m[i], measured)
+
+
+@kernel(inline="always")
+def look_up_one(bias_m, std_m, channels, bins, ranges_m, edges, channel, snr, saturated, later, rho, measured):
+    """(bias, standard deviation) [m] of one return (:meth:`RangingPrecision.of`'s arguments, one value each: ``channel``
+    and the flags as integers, ``snr`` and the measured range ``rho`` [m] as float64) from the flattened tables (as
+    :func:`_look_up`); ``measured`` (panels,) scratch. The return's cell at panel 0 is an index into the flat tables
+    (panel i lies i * bins on)."""
+    panels = ranges_m.shape[0]
+    first = ((min(max(channel, 0), channels - 1) * 2 + saturated) * 2 + later) * (panels * bins) + _snr_bin(edges, snr)
+    if panels == 1:
+        return bias_m[first], std_m[first]
+    below = 0
+    for k in range(panels):  # ascending: a farther panel's echo comes later
+        measured[k] = ranges_m[k] + bias_m[first + k * bins]
+        below += measured[k] <= rho
+    lo = min(max(below - 1, 0), panels - 2)
+    gap = measured[lo + 1] - measured[lo]
+    w = (rho - measured[lo]) / (gap if gap > 0 else np.inf)
+    if w == w:  # clipped to [0, 1] as numpy clips: a NaN stays NaN, -0 becomes 0
+        w = w if w > 0.0 else 0.0
+        w = w if w < 1.0 else 1.0
+    a, b = first + lo * bins, first + (lo + 1) * bins
+    return (1 - w) * bias_m[a] + w * bias_m[b], (1 - w) * std_m[a] + w * std_m[b]
 
 
 @kernel(inline="always")

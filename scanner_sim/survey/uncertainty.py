@@ -42,7 +42,7 @@ from scipy.special import ndtr
 from muls.infra.runtime import kernel
 from scanner_sim.survey.folded_normal import rounded_folded_normal_quantile
 from scanner_sim.survey.georeference import GRAZING_COS
-from scanner_sim.survey.ranging_precision import RangingPrecision
+from scanner_sim.survey.ranging_precision import RangingPrecision, look_up_one
 
 #: The confidence of THU and TVU.
 CONFIDENCE = 0.95
@@ -147,50 +147,129 @@ class TpuModel:
         """The predicted error (:meth:`error_model`) of a chunk's ``points`` (:class:`PointRecords`) from its lines of
         sight ``sight`` (:class:`~scanner_sim.survey.georeference.LinesOfSight`: each pulse's estimated beam and
         pose) and the unit normals (n, 3) of the facets they ranged (NaN rows for noise); the measured range is the
-        point's distance from its beam's origin."""
-        row = np.searchsorted(sight.slot, points.pulse_index)
-        origin, direction = sight.origin_m[row], sight.direction[row]
-        range_m = np.einsum("ij,ij->i", points.xyz - origin, direction)
-        return self.error_model(points.xyz - sight.platform_m[row], direction, sight.attitude_rad[row], points.channel,
-                                points.snr, points.saturated, points.return_number > 1, range_m, points.incidence_deg,
-                                normal)
+        point's distance from its beam's origin. Point by point in one kernel (:func:`_predict`), the same bits as
+        :meth:`error_model` on the gathered arrays; the turns' sines and cosines and the incidence's tangent (in float32,
+        as the points hold it) are numpy's, taken per pulse and per point before it."""
+        nav, ranging = self.navigation, self.ranging
+        if nav.attitude_rad:
+            yaw, pitch = sight.attitude_rad[:, 2], sight.attitude_rad[:, 1]
+            turns = np.stack([np.sin(yaw), np.cos(yaw), np.sin(pitch), np.cos(pitch)], axis=1)
+        else:
+            turns = np.zeros((0, 4))
+        tan_incidence = np.tan(np.radians(np.nan_to_num(points.incidence_deg, nan=0.0)))
+        n = len(points.xyz)
+        mean, var = np.empty((n, 4)), np.empty((n, 4))
+        _predict(points.xyz, points.pulse_index, points.channel, points.snr, points.saturated, points.return_number,
+                 tan_incidence, np.empty((0, 3)) if normal is None else np.ascontiguousarray(normal, np.float64),
+                 sight.slot, sight.origin_m, sight.direction, sight.platform_m, turns,
+                 ranging.bias_m.reshape(-1), ranging.std_m.reshape(-1), ranging.bias_m.shape[0], ranging.bias_m.shape[-1],
+                 np.asarray(ranging.ranges_m, float), ranging.snr_edges,
+                 (self.beam_diameter_m, math.tan(0.5 * self.divergence_full_rad), self.pulse_sigma_m, GRAZING_COS),
+                 (nav.position_m**2, nav.depth_m**2, nav.heading_rad, nav.attitude_rad), mean, var)
+        return mean, var
+
+
+@kernel(nogil=True, error_model="numpy")
+def _predict(xyz, pulse_index, channel, snr, saturated, return_number, tan_incidence, normal, slot, origin, direction,
+             platform, turns, bias_m, std_m, channels, bins, ranges_m, edges, beam, nav, mean, var):
+    """:meth:`TpuModel.predict` point by point into ``mean`` and ``var`` (n, 4): each point's pulse found in the sorted
+    ``slot`` (as ``np.searchsorted``), its lever, beam and measured range (as the einsum of :meth:`TpuModel.predict`'s
+    numpy form), its ranging's bias and spread (:func:`~scanner_sim.survey.ranging_precision.look_up_one` of the flat
+    tables), the footprint's widening, its axes (x, y, z and :func:`surface_axis`'s of ``normal``, (n, 3) or (0, 3):
+    none) and the propagation (:func:`_propagate_point`). ``beam``: (exit diameter [m], tan of half the divergence,
+    the pulse's rms length [m], :data:`GRAZING_COS`); ``nav``: (position and depth variances [m^2], heading and
+    attitude sigmas [rad]); ``turns`` (pulses, 4) as :func:`_propagate`'s, per pulse, or (0, 4) without attitude."""
+    beam_diameter, tan_half_divergence, pulse_sigma, grazing_cos = beam
+    position_var, depth_var, heading, attitude = nav
+    measured, axes = np.empty(ranges_m.shape[0]), np.zeros((4, 3))
+    axes[0, 0] = axes[1, 1] = axes[2, 2] = 1.0
+    known = normal.shape[0] > 0
+    row = 0
+    for i in range(xyz.shape[0]):
+        row = _first_not_below(slot, pulse_index[i], row)
+        u = (direction[row, 0], direction[row, 1], direction[row, 2])
+        range_m = _dot((xyz[i, 0] - origin[row, 0], xyz[i, 1] - origin[row, 1], xyz[i, 2] - origin[row, 2]), u)
+        bias, std = look_up_one(bias_m, std_m, channels, bins, ranges_m, edges, np.int64(channel[i]),
+                                np.float64(snr[i]), np.int64(saturated[i]), np.int64(return_number[i] > 1), range_m,
+                                measured)
+        footprint = 0.25 * (beam_diameter + 2.0 * range_m * tan_half_divergence) * np.float64(tan_incidence[i])
+        sigma = std * math.hypot(1.0, footprint / pulse_sigma)
+        if known:
+            axes[3, 0], axes[3, 1], axes[3, 2] = _surface_axis_of(normal[i, 0], normal[i, 1], normal[i, 2], grazing_cos)
+        else:
+            axes[3, 0], axes[3, 1], axes[3, 2] = _surface_axis_of(np.nan, np.nan, np.nan, grazing_cos)
+        turn = (turns[row, 0], turns[row, 1], turns[row, 2], turns[row, 3]) if attitude else (0.0, 1.0, 0.0, 1.0)
+        lever = (xyz[i, 0] - platform[row, 0], xyz[i, 1] - platform[row, 1], xyz[i, 2] - platform[row, 2])
+        _propagate_point(i, lever, u, axes, sigma, bias, True, position_var, depth_var, heading, attitude, turn, mean,
+                         var)
 
 
 @kernel(nogil=True)
 def _propagate(lever, u, axes, range_sigma, bias, position_var, depth_var, heading, attitude, turns, mean, var):
     """Fill ``mean`` (n, m) with bias . (a . u) (unless ``bias`` is empty) and ``var`` (n, m) with the variances of
-    :meth:`TpuModel.variances`, point by point: the ranging along the beam, the navigation's position
-    (``position_var``, ``depth_var`` [m^2]) along the unit axes, and each turn (``heading``, ``attitude`` [rad], 0:
-    none) through a x v, v the ``lever``. ``turns`` (n, 4): sin and cos of yaw, sin and cos of pitch (when
-    ``attitude``). Each sum is taken in the order numpy takes it over arrays, each a . J as numpy's einsum adds its
-    three terms, (a_0 J_0 + a_2 J_2) + a_1 J_1 onto 0: the figures equal numpy's evaluation of the same formulas, bit
-    for bit."""
-    n, m = axes.shape[0], axes.shape[1]
-    for i in range(n):
-        l0, l1, l2 = lever[i, 0], lever[i, 1], lever[i, 2]
-        heading_v = (0.0 * l2 - 1.0 * l1, 1.0 * l0 - 0.0 * l2, 0.0 * l1 - 0.0 * l0)  # z x v
-        pitch_v, roll_v = heading_v, heading_v
+    :meth:`TpuModel.variances`, point by point (:func:`_propagate_point`): the ranging along the beam, the
+    navigation's position (``position_var``, ``depth_var`` [m^2]) along the unit axes, and each turn (``heading``,
+    ``attitude`` [rad], 0: none) through a x v, v the ``lever``. ``turns`` (n, 4): sin and cos of yaw, sin and cos of
+    pitch (when ``attitude``). The figures equal numpy's evaluation of the same formulas, bit for bit."""
+    with_bias = bias.shape[0] > 0
+    for i in range(axes.shape[0]):
+        turn = (turns[i, 0], turns[i, 1], turns[i, 2], turns[i, 3]) if attitude else (0.0, 1.0, 0.0, 1.0)
+        _propagate_point(i, (lever[i, 0], lever[i, 1], lever[i, 2]), (u[i, 0], u[i, 1], u[i, 2]), axes[i],
+                         range_sigma[i], bias[i] if with_bias else 0.0, with_bias, position_var, depth_var, heading,
+                         attitude, turn, mean, var)
+
+
+@kernel(inline="always")
+def _propagate_point(i, lever, u, axes, range_sigma, bias, with_bias, position_var, depth_var, heading, attitude, turn,
+                     mean, var):
+    """Row i of ``mean`` (bias . (a . u), when ``with_bias``) and ``var`` (n, m) along each of the m ``axes`` (m, 3) of
+    one point: its ``lever`` and beam direction ``u`` as 3-tuples, its ``range_sigma`` and ``bias`` [m], and ``turn``,
+    the sin and cos of its yaw and of its pitch. Each sum is taken in the order numpy takes it over arrays, each a . J
+    as numpy's einsum adds its three terms, (a_0 J_0 + a_2 J_2) + a_1 J_1 onto 0: the figures equal numpy's evaluation
+    of :meth:`TpuModel.variances`, bit for bit."""
+    l0, l1, l2 = lever
+    heading_v = (0.0 * l2 - 1.0 * l1, 1.0 * l0 - 0.0 * l2, 0.0 * l1 - 0.0 * l0)  # z x v
+    pitch_v, roll_v = heading_v, heading_v
+    if attitude:
+        sin_yaw, cos_yaw, sin_pitch, cos_pitch = turn
+        pitch_v = _cross(sin_yaw, -cos_yaw, 0.0, l0, l1, l2)  # pitch: about -Rz(yaw) y
+        roll_v = _cross(cos_yaw * cos_pitch, sin_yaw * cos_pitch, sin_pitch, l0, l1, l2)  # roll: about R x
+    for j in range(axes.shape[0]):
+        a = (axes[j, 0], axes[j, 1], axes[j, 2])
+        along = _dot(a, u)
+        if with_bias:
+            mean[i, j] = bias * along
+        s = range_sigma * along
+        v = s * s
+        v += position_var * (a[0] * a[0] + a[1] * a[1]) + depth_var * (a[2] * a[2])
+        if heading:
+            s = heading * _dot(a, heading_v)
+            v += s * s
         if attitude:
-            sin_yaw, cos_yaw, sin_pitch, cos_pitch = turns[i, 0], turns[i, 1], turns[i, 2], turns[i, 3]
-            pitch_v = _cross(sin_yaw, -cos_yaw, 0.0, l0, l1, l2)  # pitch: about -Rz(yaw) y
-            roll_v = _cross(cos_yaw * cos_pitch, sin_yaw * cos_pitch, sin_pitch, l0, l1, l2)  # roll: about R x
-        for j in range(m):
-            a = (axes[i, j, 0], axes[i, j, 1], axes[i, j, 2])
-            along = _dot(a, (u[i, 0], u[i, 1], u[i, 2]))
-            if bias.shape[0]:
-                mean[i, j] = bias[i] * along
-            s = range_sigma[i] * along
-            v = s * s
-            v += position_var * (a[0] * a[0] + a[1] * a[1]) + depth_var * (a[2] * a[2])
-            if heading:
-                s = heading * _dot(a, heading_v)
-                v += s * s
-            if attitude:
-                s = attitude * _dot(a, pitch_v)
-                v += s * s
-                s = attitude * _dot(a, roll_v)
-                v += s * s
-            var[i, j] = v
+            s = attitude * _dot(a, pitch_v)
+            v += s * s
+            s = attitude * _dot(a, roll_v)
+            v += s * s
+        var[i, j] = v
+
+
+@kernel(inline="always")
+def _first_not_below(slot, value, guess):
+    """The first index of the sorted ``slot`` (n,) whose value is not below ``value`` (``np.searchsorted``'s left
+    side): ``guess`` or the one after it where either is (a chunk's points come in pulse order, so the previous
+    point's row nearly always is), else a binary search."""
+    n = slot.shape[0]
+    for row in (guess, guess + 1):
+        if row <= n and (row == n or slot[row] >= value) and (row == 0 or slot[row - 1] < value):
+            return row
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if slot[mid] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @kernel(inline="always")
@@ -222,13 +301,19 @@ def surface_axis(normal) -> np.ndarray:
 def _surface_axis(normal, grazing_cos, axis):
     """:func:`surface_axis` of each row of ``normal`` (n, 3) into ``axis`` (n, 3)."""
     for i in range(normal.shape[0]):
-        n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
-        known = np.isfinite(n0) and np.isfinite(n1) and np.isfinite(n2)
-        nz = n2 if known else 1.0
-        g0, g1 = (-n0 / nz, -n1 / nz) if known else (0.0, 0.0)
-        axis[i, 0], axis[i, 1], axis[i, 2] = -g0, -g1, 1.0
-        if abs(nz) < grazing_cos:
-            axis[i, :] = np.nan
+        axis[i, 0], axis[i, 1], axis[i, 2] = _surface_axis_of(normal[i, 0], normal[i, 1], normal[i, 2], grazing_cos)
+
+
+@kernel(inline="always")
+def _surface_axis_of(n0, n1, n2, grazing_cos):
+    """:func:`surface_axis` of one unit normal (n0, n1, n2), as a 3-tuple (with numpy's error model: a facet's
+    n_z of 0 divides to infinities, then the grazing test gives NaN)."""
+    known = np.isfinite(n0) and np.isfinite(n1) and np.isfinite(n2)
+    nz = n2 if known else 1.0
+    g0, g1 = (-n0 / nz, -n1 / nz) if known else (0.0, 0.0)
+    if abs(nz) < grazing_cos:
+        return np.nan, np.nan, np.nan
+    return -g0, -g1, 1.0
 
 
 def with_uncertainty(points, mean, var):

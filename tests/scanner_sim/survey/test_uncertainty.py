@@ -105,6 +105,44 @@ def test_footprint_widens_the_ranging_spread_as_it_widens_the_echo():
         assert expected >= widening
 
 
+def test_predict_is_the_error_model_on_the_gathered_arrays_to_the_bit():
+    """``TpuModel.predict`` runs point by point in one kernel; its mean and variances must be ``error_model``'s (the
+    numpy form the propagation is written in) on the arrays gathered per point, bit for bit: with the navigation's
+    attitude and without it, normals known, unknown (NaN), near vertical (no surface reading) or not given, and
+    points out of pulse order (the kernel's row search then falls back from its guess)."""
+    from scanner_sim.survey.chunk import cast_chunk, finish_chunk
+
+    setup = PassSetup.build(load_scene("cable_survey"), PassOptions(fidelity="fast", max_pulses=2000))
+    cast = cast_chunk(setup, next(setup.slot_chunks()))
+    points, sight = finish_chunk(setup, cast).points, cast.sight
+    n = len(points.xyz)
+    normal = np.tile([0.1, -0.2, 0.97], (n, 1))
+    normal[::7] = np.nan
+    normal[::11] = [1.0, 0.0, 0.0]  # a vertical facet
+    order = np.r_[np.arange(n)[::2], np.arange(n)[1::2][::-1]]
+    shuffled = dataclasses.replace(points, **{f.name: getattr(points, f.name)[order]
+                                              for f in dataclasses.fields(points)
+                                              if isinstance(getattr(points, f.name), np.ndarray)})
+
+    def numpy_form(model, points, normal):
+        row = np.searchsorted(sight.slot, points.pulse_index)
+        direction = sight.direction[row]
+        range_m = np.einsum("ij,ij->i", points.xyz - sight.origin_m[row], direction)
+        return model.error_model(points.xyz - sight.platform_m[row], direction, sight.attitude_rad[row],
+                                 points.channel, points.snr, points.saturated, points.return_number > 1, range_m,
+                                 points.incidence_deg, normal)
+
+    still = dataclasses.replace(setup.tpu, navigation=NavigationSigmas())
+    assert setup.tpu.navigation.attitude_rad > 0
+    for model in (setup.tpu, still):
+        for pts, nrm in ((points, normal), (points, None), (shuffled, normal[order])):
+            got, expected = model.predict(pts, sight, nrm), numpy_form(model, pts, nrm)
+            for a, b in zip(got, expected):
+                assert a.tobytes() == b.tobytes()
+    var = setup.tpu.predict(points, sight, normal)[1]  # the surface reading lost only where the facet stands vertical
+    assert np.isnan(var[::11, 3]).all() and np.isfinite(np.delete(var[:, 3], np.s_[::11])).all()
+
+
 def test_ranging_table_holds_mean_and_spread_per_bin_and_fills_empty_bins_from_the_nearest():
     """Two SNR bins with known errors: each keeps its mean and standard deviation; a bin without returns takes the
     nearest filled bin's; a far panel range without returns the nearest range's."""
