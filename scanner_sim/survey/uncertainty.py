@@ -134,7 +134,8 @@ class TpuModel:
         """The predicted error of n points: its mean (n, 4) [m] (the ranging's bias along the beam) and variances
         (n, 4) [m^2], along x, y, z and the surface reading's axis (:func:`surface_axis` of the ranged facet's
         ``normal`` (n, 3); None or NaN rows: z). Arguments as :meth:`variances` and :meth:`RangingPrecision.of`;
-        ``range_m`` (n,) the measured range [m], ``incidence_deg`` (n,)."""
+        ``range_m`` (n,) the measured range [m], ``incidence_deg`` (n,). The numpy form of the model: a pass runs
+        :meth:`predict`'s kernel, which a test holds to this bit for bit."""
         bias, std = self.ranging.of(channel, snr, saturated, later, range_m)
         sigma_range = std * np.hypot(1.0, self.footprint_sigma_m(range_m, incidence_deg) / self.pulse_sigma_m)
         n = len(bias)
