@@ -159,6 +159,8 @@ class TpuModel:
             turns = np.zeros((0, 4))
         tan_incidence = np.tan(np.radians(np.nan_to_num(points.incidence_deg, nan=0.0)))
         n = len(points.xyz)
+        if n and (not sight.slot.size or points.pulse_index.max() > sight.slot[-1]):
+            raise IndexError("a point's pulse lies past the last line of sight of its chunk")
         mean, var = np.empty((n, 4)), np.empty((n, 4))
         _predict(points.xyz, points.pulse_index, points.channel, points.snr, points.saturated, points.return_number,
                  tan_incidence, np.empty((0, 3)) if normal is None else np.ascontiguousarray(normal, np.float64),

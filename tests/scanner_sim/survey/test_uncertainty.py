@@ -141,6 +141,8 @@ def test_predict_is_the_error_model_on_the_gathered_arrays_to_the_bit():
                 assert a.tobytes() == b.tobytes()
     var = setup.tpu.predict(points, sight, normal)[1]  # the surface reading lost only where the facet stands vertical
     assert np.isnan(var[::11, 3]).all() and np.isfinite(np.delete(var[:, 3], np.s_[::11])).all()
+    with pytest.raises(IndexError):  # as numpy's gathers refused it: no row to read past the chunk's last pulse
+        setup.tpu.predict(points, sight._replace(slot=sight.slot - 1), normal)
 
 
 def test_ranging_table_holds_mean_and_spread_per_bin_and_fills_empty_bins_from_the_nearest():
