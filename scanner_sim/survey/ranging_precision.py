@@ -73,11 +73,15 @@ class RangingPrecision:
         decimetre of range, more than a nearest panel's step allows."""
         n = len(range_m)
         bias, std = np.empty(n), np.empty(n)
-        _look_up(self.bias_m.reshape(-1), self.std_m.reshape(-1), self.bias_m.shape[0], self.bias_m.shape[-1],
-                 np.asarray(self.ranges_m, float), self.snr_edges, np.asarray(channel, np.int64),
-                 np.asarray(snr, float), np.asarray(saturated, np.int64), np.asarray(later, np.int64),
-                 np.asarray(range_m, float), bias, std)
+        _look_up(*self.flat_tables(), np.asarray(channel, np.int64), np.asarray(snr, float),
+                 np.asarray(saturated, np.int64), np.asarray(later, np.int64), np.asarray(range_m, float), bias, std)
         return bias, std
+
+    def flat_tables(self) -> tuple:
+        """The table as the look-up kernels take it (:func:`look_up_one`): the flattened (C-ordered) ``bias_m`` and
+        ``std_m``, the channels, the SNR bins, the panel ranges [m] (panels,) and the SNR edges."""
+        return (self.bias_m.reshape(-1), self.std_m.reshape(-1), self.bias_m.shape[0], self.bias_m.shape[-1],
+                np.asarray(self.ranges_m, float), self.snr_edges)
 
     def as_dict(self) -> dict:
         """The table as JSON-ready lists (the summary's ``uncertainty.ranging``): per channel, state and panel range,

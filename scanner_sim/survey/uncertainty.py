@@ -97,8 +97,7 @@ class TpuModel:
         (the pass's ``top_hat`` beam; a Gaussian beam cut at its 1/e^2 radius has 0.21 w, less); 0 where the
         incidence is unknown (NaN)."""
         width = self.beam_diameter_m + 2.0 * range_m * math.tan(0.5 * self.divergence_full_rad)
-        tan = np.tan(np.radians(np.nan_to_num(incidence_deg, nan=0.0)))
-        return 0.25 * width * tan
+        return 0.25 * width * _incidence_tan(incidence_deg)
 
     def variances(self, lever_m, direction, attitude_rad, range_sigma_m, axes=None) -> np.ndarray:
         """(n, m) variances [m^2] of the point's error along each of m ``axes`` (n, m, 3) (sum over the sources of
@@ -118,16 +117,20 @@ class TpuModel:
         u = np.ascontiguousarray(direction, np.float64)
         n = len(u)
         a = np.ascontiguousarray(np.broadcast_to(np.eye(3), (n, 3, 3)) if axes is None else axes, np.float64)
-        if nav.attitude_rad:
-            yaw, pitch = attitude_rad[:, 2], attitude_rad[:, 1]
-            turns = np.stack([np.sin(yaw), np.cos(yaw), np.sin(pitch), np.cos(pitch)], axis=1)
-        else:
-            turns = np.zeros((0, 4))
+        turns = self._turns(attitude_rad)
         mean, var = np.empty((n if bias.size else 0, a.shape[1])), np.empty((n, a.shape[1]))
         _propagate(np.ascontiguousarray(lever_m, np.float64), u, a, np.ascontiguousarray(range_sigma_m, np.float64),
                    np.ascontiguousarray(bias, np.float64), nav.position_m**2, nav.depth_m**2, nav.heading_rad,
                    nav.attitude_rad, turns, mean, var)
         return mean, var
+
+    def _turns(self, attitude_rad) -> np.ndarray:
+        """(n, 4) sin and cos of the yaw and of the pitch of ``attitude_rad`` (n, 3) roll, pitch, yaw, as
+        :func:`_propagate_point` takes them; (0, 4) where the navigation has no attitude error (none are read)."""
+        if not self.navigation.attitude_rad:
+            return np.zeros((0, 4))
+        yaw, pitch = attitude_rad[:, 2], attitude_rad[:, 1]
+        return np.stack([np.sin(yaw), np.cos(yaw), np.sin(pitch), np.cos(pitch)], axis=1)
 
     def error_model(self, lever_m, direction, attitude_rad, channel, snr, saturated, later, range_m, incidence_deg,
                     normal=None) -> tuple[np.ndarray, np.ndarray]:
@@ -151,22 +154,16 @@ class TpuModel:
         point's distance from its beam's origin. Point by point in one kernel (:func:`_predict`), the same bits as
         :meth:`error_model` on the gathered arrays; the turns' sines and cosines and the incidence's tangent (in float32,
         as the points hold it) are numpy's, taken per pulse and per point before it."""
-        nav, ranging = self.navigation, self.ranging
-        if nav.attitude_rad:
-            yaw, pitch = sight.attitude_rad[:, 2], sight.attitude_rad[:, 1]
-            turns = np.stack([np.sin(yaw), np.cos(yaw), np.sin(pitch), np.cos(pitch)], axis=1)
-        else:
-            turns = np.zeros((0, 4))
-        tan_incidence = np.tan(np.radians(np.nan_to_num(points.incidence_deg, nan=0.0)))
+        nav = self.navigation
         n = len(points.xyz)
         if n and (not sight.slot.size or points.pulse_index.max() > sight.slot[-1]):
             raise IndexError("a point's pulse lies past the last line of sight of its chunk")
         mean, var = np.empty((n, 4)), np.empty((n, 4))
         _predict(points.xyz, points.pulse_index, points.channel, points.snr, points.saturated, points.return_number,
-                 tan_incidence, np.empty((0, 3)) if normal is None else np.ascontiguousarray(normal, np.float64),
-                 sight.slot, sight.origin_m, sight.direction, sight.platform_m, turns,
-                 ranging.bias_m.reshape(-1), ranging.std_m.reshape(-1), ranging.bias_m.shape[0], ranging.bias_m.shape[-1],
-                 np.asarray(ranging.ranges_m, float), ranging.snr_edges,
+                 _incidence_tan(points.incidence_deg),
+                 np.empty((0, 3)) if normal is None else np.ascontiguousarray(normal, np.float64),
+                 sight.slot, sight.origin_m, sight.direction, sight.platform_m, self._turns(sight.attitude_rad),
+                 *self.ranging.flat_tables(),
                  (self.beam_diameter_m, math.tan(0.5 * self.divergence_full_rad), self.pulse_sigma_m, GRAZING_COS),
                  (nav.position_m**2, nav.depth_m**2, nav.heading_rad, nav.attitude_rad), mean, var)
         return mean, var
@@ -187,6 +184,8 @@ def _predict(xyz, pulse_index, channel, snr, saturated, return_number, tan_incid
     measured, axes = np.empty(ranges_m.shape[0]), np.zeros((4, 3))
     axes[0, 0] = axes[1, 1] = axes[2, 2] = 1.0
     known = normal.shape[0] > 0
+    if not known:  # every point's surface axis that of an unknown normal
+        axes[3, 0], axes[3, 1], axes[3, 2] = _surface_axis_of(np.nan, np.nan, np.nan, grazing_cos)
     row = 0
     for i in range(xyz.shape[0]):
         row = _first_not_below(slot, pulse_index[i], row)
@@ -199,8 +198,6 @@ def _predict(xyz, pulse_index, channel, snr, saturated, return_number, tan_incid
         sigma = std * math.hypot(1.0, footprint / pulse_sigma)
         if known:
             axes[3, 0], axes[3, 1], axes[3, 2] = _surface_axis_of(normal[i, 0], normal[i, 1], normal[i, 2], grazing_cos)
-        else:
-            axes[3, 0], axes[3, 1], axes[3, 2] = _surface_axis_of(np.nan, np.nan, np.nan, grazing_cos)
         turn = (turns[row, 0], turns[row, 1], turns[row, 2], turns[row, 3]) if attitude else (0.0, 1.0, 0.0, 1.0)
         lever = (xyz[i, 0] - platform[row, 0], xyz[i, 1] - platform[row, 1], xyz[i, 2] - platform[row, 2])
         _propagate_point(i, lever, u, axes, sigma, bias, True, position_var, depth_var, heading, attitude, turn, mean,
@@ -285,6 +282,12 @@ def _dot(a, b):
 def _cross(a0, a1, a2, b0, b1, b2):
     """a x b of two vectors given by their components, term for term."""
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+def _incidence_tan(incidence_deg) -> np.ndarray:
+    """(n,) tan of ``incidence_deg`` (n,), numpy's in the angles' own precision (the points hold float32), 0 where the
+    incidence is unknown (NaN)."""
+    return np.tan(np.radians(np.nan_to_num(incidence_deg, nan=0.0)))
 
 
 def surface_axis(normal) -> np.ndarray:
