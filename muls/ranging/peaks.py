@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..infra.blocks import in_blocks
+from ..infra.borrowed import borrowed
 from ..infra.lookup import bracket, interp_at, on_geometric_grid, on_log_grid, steps_per_log
 from ..infra.runtime import kernel
 from ..instrument.channels import processor_sigma_lsb
@@ -203,17 +204,32 @@ def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, b
     records coded where the search reads, :func:`muls.receiver.channel_codes.ranging_codes`): a channel's residuals are
     computed, and its runs looked for, only within a sample of its nonzero codes (:func:`_code_segments`).
     ``baselines``: each window's calibrated baseline [W] ((n_windows, n_samples), the digitiser's, the numbers
-    ``baseline_values`` gives), or empty: computed here."""
+    ``baseline_values`` gives), or empty: computed here. Allocates the scratch that :func:`_peak_windows` borrows
+    (:mod:`muls.infra.borrowed`)."""
+    n_samples = codes.shape[2]
+    scratch = (np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples),
+               np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples // 2 + 1, np.int64),
+               np.empty(n_samples // 2 + 1, np.int64))
+    _peak_windows(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings,
+                  fit_table, clip_table, out, sparse, baselines, scratch)
+
+
+@kernel(nogil=True)
+def _peak_windows(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings,
+                  fit_table, clip_table, out, sparse, baselines, scratch):
+    """:func:`_peaks`'s search, its arguments borrowed; ``scratch``: the sample times, baseline, residuals, sigmas and
+    echo model (n,) float each, the open and blind samples (n,) bool each, and the stretches' first and end samples
+    (n // 2 + 1,) int64 each."""
+    (codes, synthesised, window_pulse, window_start, phase, col, background, chans, fit_table, clip_table, out,
+     baselines, scratch) = borrowed((codes, synthesised, window_pulse, window_start, phase, col, background, chans,
+                                     fit_table, clip_table, out, baselines, scratch))
     n_windows, n_chan, n_samples = codes.shape
     cap = out.index.shape[0] // max(1, n_windows * n_chan)
     basis = col.basis
     k_sigma, tail_tolerance, max_code = settings.k_sigma, settings.tail_tolerance, settings.max_code
     out_c, out_idx, out_amp, out_snr, out_sat, counts = out
-    times, base_w = np.empty(n_samples), np.empty(n_samples)
-    resid, sigma = np.empty(n_samples), np.empty(n_samples)
-    echoes = np.empty(n_samples)  # model of the echoes found so far (known pulse shape)
-    open_, blind = np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_)
-    seg_first, seg_end = np.empty(n_samples // 2 + 1, np.int64), np.empty(n_samples // 2 + 1, np.int64)
+    # echoes: the model of the echoes found so far (known pulse shape)
+    times, base_w, resid, sigma, echoes, open_, blind, seg_first, seg_end = scratch
     for w in range(n_windows):
         p = window_pulse[w]
         first = 0  # the first channel where a run may start; none: noise only (a dropout), no baseline needed

@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..infra.blocks import in_blocks
+from ..infra.borrowed import borrowed
 from ..infra.noise import (
     NORMAL_BOUND,
     PHASE_STREAM,
@@ -165,7 +166,8 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     def references(a, b):  # the CH0 records of pulses a:b
         _reference(reference[a:b], ref_clean[a:b], sampling._replace(phase_s=phase[a:b], pulse_id=sampling.pulse_id[a:b]),
                    model.basis, pulse.duration_s, lsb_per_density, chans.dark_mean_lsb[0], chans.dark_std_lsb[0],
-                   settings.max_code, settings.noise_scale, ranging_only, needed[a:b])
+                   settings.max_code, settings.noise_scale, ranging_only, needed[a:b],
+                   (np.empty(n_ref), np.empty(0), np.empty(2 * n_ref, np.int64), np.empty(n_ref), np.empty(n_ref)))
 
     in_blocks(windows, shape[0])
     in_blocks(references, batch.n_pulses)
@@ -176,17 +178,19 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
 
 @kernel(nogil=True)
 def _reference(reference, clean, sampling, basis, extent, lsb_per_density, dark_mean, dark_std, max_code,
-               noise_scale, peak_only, needed):
+               noise_scale, peak_only, needed, scratch):
     """The CH0 records (n_pulses, n_ref) from sample 0 (MULS Eqs. 2, 13 through the photodiode). ``peak_only``:
     only the samples that can hold the record's highest code or flank it (what :func:`muls.ranging.peaks._reference_peaks`
     reads) get their noise and code, the others code 0: a sample whose noise-free level lies more than two noise
     bounds (:data:`muls.infra.noise.NORMAL_BOUND` sigma and a rounding each) under the highest level is below the highest
-    code whatever the draws, and so is 0. ``needed`` (n_pulses,) bool: the pulses whose codes are drawn, the others' all 0."""
+    code whatever the draws, and so is 0. ``needed`` (n_pulses,) bool: the pulses whose codes are drawn, the others' all 0.
+    ``scratch``: the normals' (n_ref,), an empty low half, the tails' (2 n_ref,) int64, the levels' and the sample
+    times' (n_ref,). Its arguments borrowed (:mod:`muls.infra.borrowed`)."""
+    reference, clean, sampling, basis, needed, scratch = borrowed((reference, clean, sampling, basis, needed, scratch))
     n_pulses, n_ref = reference.shape
     keep = clean.shape[0] > 0
     bound = noise_scale * dark_std * NORMAL_BOUND + 0.5
-    normal, no_low, tails, levels = np.empty(n_ref), np.empty(0), np.empty(2 * n_ref, np.int64), np.empty(n_ref)
-    times = np.empty(n_ref)
+    normal, no_low, tails, levels, times = scratch
     for p in range(n_pulses):
         if not (needed[p] or keep):
             reference[p, :] = 0
@@ -253,12 +257,26 @@ def _digitise(codes, clean, synthesised, baselines, window_pulse, window_start, 
     """The signal windows' codes (MULS Eqs. 1, 12, 13) into ``codes``, every sample drawn, with ``clean``,
     ``synthesised`` and, where ``baselines`` is not empty ((n_windows, n_samples)), each window's calibrated baseline
     [W] (:func:`digitise`); ``deciding``: None, or the deciding test's scratch where only the channels that can decide
-    a return are synthesised (:func:`~muls.receiver.window_signal.window_signal`)."""
-    n_windows, n_chan, n_samples = codes.shape
+    a return are synthesised (:func:`~muls.receiver.window_signal.window_signal`). Allocates the windows' scratch,
+    which :func:`_digitise_windows` borrows (:mod:`muls.infra.borrowed`)."""
+    n_samples = codes.shape[2]
     n_pairs, n_shot_pairs, shot_needed, scratch, steps = window_scratch(codes, cuts, chans, col, sampling.dt_s)
-    dark_normal = np.empty((2 * n_pairs, n_samples))
-    shot_normal = np.empty((2 * n_shot_pairs, n_samples))
-    tails, no_low = np.empty(2 * n_samples, np.int64), np.empty(0)
+    normals = (np.empty((2 * n_pairs, n_samples)), np.empty((2 * n_shot_pairs, n_samples)),
+               np.empty(2 * n_samples, np.int64), np.empty(0))
+    _digitise_windows(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
+                      chans, settings, borrowed(deciding), shot_needed, scratch, steps, normals)
+
+
+@kernel(nogil=True)
+def _digitise_windows(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
+                      chans, settings, deciding, shot_needed, scratch, steps, normals):
+    """:func:`_digitise`'s loop over the windows, its arguments borrowed; ``normals``: the dark and shot normals'
+    (2 pairs, n) scratch, the tails' (2 n,) int64 scratch and an empty low half."""
+    (codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes, chans, shot_needed,
+     scratch, normals) = borrowed((codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts,
+                                  echoes, chans, shot_needed, scratch, normals))
+    dark_normal, shot_normal, tails, no_low = normals
+    n_windows, n_chan = codes.shape[0], codes.shape[1]
     times, power = scratch[0], scratch[1]
     for w in range(n_windows):
         p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
@@ -282,12 +300,27 @@ def _digitise_read_samples(codes, clean, synthesised, baselines, window_pulse, w
     """:func:`_digitise` with only the samples the peak search may read coded, the others 0
     (:func:`muls.receiver.channel_codes.ranging_codes`; :func:`digitise`'s ``ranging_only`` of full records). A kernel
     of its own so that a run which never asks for it does not compile it and the draws by list it calls; the window up
-    to its noise is :mod:`.window_signal`'s, as :func:`_digitise`'s."""
-    n_windows, n_chan, n_samples = codes.shape
+    to its noise is :mod:`.window_signal`'s, as :func:`_digitise`'s. Allocates the scratch that
+    :func:`_read_samples_windows` borrows."""
+    n_samples = codes.shape[2]
     n_pairs, n_shot_pairs, shot_needed, scratch, steps = window_scratch(codes, cuts, chans, col, sampling.dt_s)
-    hashes = np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64)
-    read, tails, listed = np.empty(n_samples, np.bool_), np.empty(2 * n_samples, np.int64), np.empty(n_samples, np.int64)
-    dark_normal, shot_normal = np.empty(n_samples), np.empty(n_samples)
+    work = (np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64), np.empty(n_samples, np.bool_),
+            np.empty(2 * n_samples, np.int64), np.empty(n_samples, np.int64), np.empty(n_samples), np.empty(n_samples))
+    _read_samples_windows(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
+                          chans, settings, borrowed(deciding), n_pairs, shot_needed, scratch, steps, work)
+
+
+@kernel(nogil=True)
+def _read_samples_windows(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts,
+                          echoes, chans, settings, deciding, n_pairs, shot_needed, scratch, steps, work):
+    """:func:`_digitise_read_samples`'s loop over the windows, its arguments borrowed; ``work``: the hashes'
+    (pairs, n) uint64, the samples read (n,) bool, the tails' (2 n,) int64 and the listed samples' (n,) int64
+    scratch, and the two normals' (n,) each."""
+    (codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes, chans, shot_needed,
+     scratch, work) = borrowed((codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts,
+                                echoes, chans, shot_needed, scratch, work))
+    hashes, read, tails, listed, dark_normal, shot_normal = work
+    n_windows, n_chan = codes.shape[0], codes.shape[1]
     times, power, baseline = scratch[0], scratch[1], scratch[2]
     for w in range(n_windows):
         p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,

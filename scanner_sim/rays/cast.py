@@ -113,7 +113,10 @@ def cast_beams(target: CastScene, beam_origin: np.ndarray, beam_dir: np.ndarray,
             kernels.clear_blocked(occluded, shadows.length[:c], rows.receiver_weight, base)
         elif shadow_rays and c:
             need = caster.workspace("shadows_to_cast", (c,), np.int64)
-            need = need[:shadows_to_cast(grid, rows, scene.local_origin, rays.rx, shadows.length[:c], base, c, m, need)]
+            segments = caster.workspace("shadow_segments", (7, m), np.float64)
+            rows_of = caster.workspace("shadow_rows", (m,), np.int64)
+            need = need[:shadows_to_cast(grid, rows, scene.local_origin, rays.rx, shadows.length[:c], base, c, need,
+                                         segments, rows_of)]
             if need.size:
                 occluded = caster.occluded_raw(shadows.origin[need], shadows.direction[need], shadows.length[need])
                 rows.receiver_weight[base + need[occluded >= 0]] = 0.0

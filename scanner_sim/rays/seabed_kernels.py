@@ -11,6 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from muls.infra.borrowed import borrowed
 from muls.infra.runtime import kernel
 
 
@@ -369,19 +370,21 @@ def unproven_shadows(pulse, p0, analytic, length):
 
 
 @kernel(nogil=True, error_model="numpy")
-def shadows_to_cast(grid, rows, local_origin, rx_local, sh_len, first, count, m, need):
+def shadows_to_cast(grid, rows, local_origin, rx_local, sh_len, first, count, need, segments, rows_of):
     """Which of a block's shadow rays Embree must cast: writes their indices (0 .. ``count`` - 1, for hit rows
     ``first`` ..) into ``need`` and returns how many.
 
     rows: :class:`scanner_sim.rays.hits.HitColumns` in scan order, ``m`` sub-rays per pulse at most; sh_len (count,):
     each row's shadow-ray length (<= 0: empty, never cast); rx_local (n_pulses, 3): the receiver apertures in the
-    local frame (``local_origin`` [m] off the world frame). A pulse's non-empty shadow rays are all left out when
-    every one of them starts on the seabed (``grid.object_id``) and :func:`_bundle_clear` proves that
-    nothing can meet the straight segments from those hits up to the aperture: then Embree would find none
+    local frame (``local_origin`` [m] off the world frame); ``segments`` (7, m) float and ``rows_of`` (m,) int64: the
+    caller's scratch (every argument is borrowed, :mod:`muls.infra.borrowed`). A pulse's non-empty shadow rays are
+    all left out when every one of them starts on the seabed (``grid.object_id``) and :func:`_bundle_clear` proves
+    that nothing can meet the straight segments from those hits up to the aperture: then Embree would find none
     blocked. A hit on anything else, or a test that fails, casts them all."""
-    hx, hy, hz = np.empty(m), np.empty(m), np.empty(m)
-    z_end, wx, wy, rise = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-    rows_of = np.empty(m, np.int64)
+    grid, rows, local_origin, rx_local, sh_len, need, segments, rows_of = borrowed(
+        (grid, rows, local_origin, rx_local, sh_len, need, segments, rows_of))
+    hx, hy, hz, z_end, wx, wy, rise = segments[0], segments[1], segments[2], segments[3], segments[4], segments[5], \
+        segments[6]
     pulse, point = rows.pulse_index, rows.point
     k, c = 0, 0
     while c < count:

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
+from muls.infra.borrowed import borrowed
 from muls.infra.runtime import kernel
 from scanner_sim.survey.folded_normal import rounded_folded_normal_quantile
 from scanner_sim.survey.georeference import GRAZING_COS
@@ -165,23 +166,30 @@ class TpuModel:
                  sight.slot, sight.origin_m, sight.direction, sight.platform_m, self._turns(sight.attitude_rad),
                  *self.ranging.flat_tables(),
                  (self.beam_diameter_m, math.tan(0.5 * self.divergence_full_rad), self.pulse_sigma_m, GRAZING_COS),
-                 (nav.position_m**2, nav.depth_m**2, nav.heading_rad, nav.attitude_rad), mean, var)
+                 (nav.position_m**2, nav.depth_m**2, nav.heading_rad, nav.attitude_rad), mean, var,
+                 (np.empty(len(self.ranging.ranges_m)), np.empty((4, 3))))
         return mean, var
 
 
 @kernel(nogil=True, error_model="numpy")
 def _predict(xyz, pulse_index, channel, snr, saturated, return_number, tan_incidence, normal, slot, origin, direction,
-             platform, turns, bias_m, std_m, channels, bins, ranges_m, edges, beam, nav, mean, var):
+             platform, turns, bias_m, std_m, channels, bins, ranges_m, edges, beam, nav, mean, var, scratch):
     """:meth:`TpuModel.predict` point by point into ``mean`` and ``var`` (n, 4): each point's pulse found in the sorted
     ``slot`` (as ``np.searchsorted``), its lever, beam and measured range (as the einsum of :meth:`TpuModel.predict`'s
     numpy form), its ranging's bias and spread (:func:`~scanner_sim.survey.ranging_precision.look_up_one` of the flat
     tables), the footprint's widening, its axes (x, y, z and :func:`surface_axis`'s of ``normal``, (n, 3) or (0, 3):
     none) and the propagation (:func:`_propagate_point`). ``beam``: (exit diameter [m], tan of half the divergence,
     the pulse's rms length [m], :data:`GRAZING_COS`); ``nav``: (position and depth variances [m^2], heading and
-    attitude sigmas [rad]); ``turns`` (pulses, 4) as :func:`_propagate`'s, per pulse, or (0, 4) without attitude."""
+    attitude sigmas [rad]); ``turns`` (pulses, 4) as :func:`_propagate`'s, per pulse, or (0, 4) without attitude;
+    ``scratch``: the look-up's (panels,) and the axes' (4, 3). Its arguments borrowed (:mod:`muls.infra.borrowed`)."""
+    (xyz, pulse_index, channel, snr, saturated, return_number, tan_incidence, normal, slot, origin, direction, platform,
+     turns, bias_m, std_m, ranges_m, edges, mean, var, scratch) = borrowed(
+        (xyz, pulse_index, channel, snr, saturated, return_number, tan_incidence, normal, slot, origin, direction,
+         platform, turns, bias_m, std_m, ranges_m, edges, mean, var, scratch))
     beam_diameter, tan_half_divergence, pulse_sigma, grazing_cos = beam
     position_var, depth_var, heading, attitude = nav
-    measured, axes = np.empty(ranges_m.shape[0]), np.zeros((4, 3))
+    measured, axes = scratch
+    axes[:] = 0.0
     axes[0, 0] = axes[1, 1] = axes[2, 2] = 1.0
     known = normal.shape[0] > 0
     if not known:  # every point's surface axis that of an unknown normal
