@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from muls.infra.borrowed import borrowed
 from muls.infra.runtime import kernel
 from scanner_sim.rays.cast import BeamCast, CastScene, cast_beams, kernel_inputs
 from scanner_sim.rays.collapse import cast_pulse_figures, collapse_simple, emit_rows, pulse_figures, simple_pulses
@@ -55,13 +56,16 @@ def _embree_answers(prim, tfar, analytic, m, cast_prim, cast_tfar):
 
 
 @kernel(nogil=True)
-def _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept):
+def _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept, pulse_scratch):
     """For each pulse of the block that ``analytic`` proves, its collapse figures (:func:`cast_pulse_figures`:
     ``figures[q]`` = (beam, rho_mean, cosine, mean_range), ``nodes[q]``, ``share[q]``), summed from its cast without
     making its rows. ``kept`` ((n m,) int32): ``prim`` where a hit row is still to be made (every sub-ray of a pulse
-    left to Embree or not simple, the axis alone of a simple one), -1 elsewhere."""
+    left to Embree or not simple, the axis alone of a simple one), -1 elsewhere. ``pulse_scratch``: a pulse's
+    energies and delays (m,) each, nodes and shares (2,) each. Its arguments borrowed (:mod:`muls.infra.borrowed`)."""
+    prim, tfar, analytic, rays, layout, faces, view, figures, nodes, share, kept, pulse_scratch = borrowed(
+        (prim, tfar, analytic, rays, layout, faces, view, figures, nodes, share, kept, pulse_scratch))
     m = layout.xy.shape[0]
-    energy, tau = np.empty(m), np.empty(m)
+    energy, tau = pulse_scratch[0], pulse_scratch[1]
     for q in range(analytic.shape[0]):
         first = q * m
         for k in range(first, first + m):  # (a loop: an array assignment compiles numba's shape-error formatting)
@@ -76,12 +80,15 @@ def _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures
 
 
 @kernel(nogil=True)
-def _collapsed_rows(rows, analytic, p0, m, figures, nodes, share, out):
+def _collapsed_rows(rows, analytic, p0, m, figures, nodes, share, out, pulse_scratch):
     """The block's hit ``rows`` (scan order, incidence as cosines) as :func:`collapse_simple` keeps them, into
     ``out``: a proven pulse's with the figures :func:`_proven_figures` found, another's with its own
-    (:func:`pulse_figures`). Returns the rows written."""
+    (:func:`pulse_figures`, in ``pulse_scratch`` as :func:`_proven_figures`'s). Returns the rows written. Its
+    arguments borrowed."""
+    rows, analytic, figures, nodes, share, out, pulse_scratch = borrowed(
+        (rows, analytic, figures, nodes, share, out, pulse_scratch))
     pulse = rows.pulse_index
-    energy, tau, own_nodes, own_share = np.empty(m), np.empty(m), np.empty(2), np.empty(2)
+    energy, tau, own_nodes, own_share = pulse_scratch
     start, o = 0, 0
     while start < pulse.shape[0]:
         stop = start + 1
@@ -123,12 +130,12 @@ def _collapse_block(caster, prim, tfar, analytic, p0, rays, layout, faces, view,
     clear). Returns the rows written."""
     n, m = analytic.shape[0], layout.xy.shape[0]
     figures, nodes, share = (a[:n] for a in scratch[:3])
-    kept = scratch[3][:n * m]
-    _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept)
+    kept, pulse_scratch = scratch[3][:n * m], scratch[4]
+    _proven_figures(prim, tfar, analytic, p0, rays, layout, faces, view, figures, nodes, share, kept, pulse_scratch)
     c = hit_block(kept, tfar, p0 * m, 0, rays, layout, faces, view, rows, shadows)
     if shadow_rays:
         _cast_unproven_shadows(caster, rows, shadows, c, p0, analytic)
-    return _collapsed_rows(head(rows, c), analytic, p0, m, figures, nodes, share, out)
+    return _collapsed_rows(head(rows, c), analytic, p0, m, figures, nodes, share, out, pulse_scratch)
 
 
 def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx_origin, rx_dir, pattern, geometry,
@@ -164,7 +171,11 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
     figure_scratch = (caster.workspace("auto_figures", (size // m, 4), np.float64),
                       caster.workspace("auto_nodes", (size // m, 2), np.float64),
                       caster.workspace("auto_share", (size // m, 2), np.float64),
-                      caster.workspace("auto_kept", (size,), np.int32))
+                      caster.workspace("auto_kept", (size,), np.int32),
+                      (caster.workspace("auto_energy", (m,), np.float64), caster.workspace("auto_tau", (m,), np.float64),
+                       caster.workspace("auto_own_nodes", (2,), np.float64),
+                       caster.workspace("auto_own_share", (2,), np.float64)))
+    segments = caster.workspace("auto_segments", (7, 2 * m), np.float64)
     left_o = caster.workspace("auto_left_origins32", (size, 3), np.float32)
     left_d = caster.workspace("auto_left_dirs32", (size, 3), np.float32)
     parts = []
@@ -175,7 +186,7 @@ def cast_seabed_analytic(target: CastScene, beam_origin, beam_dir, shaft_dir, rx
         subrays_local32(rays, p0, p1, layout, o32, d32)
         axis_prim, axis_tfar = caster.first_hits_raw(np.ascontiguousarray(o32[::m]), np.ascontiguousarray(d32[::m]))
         analytic = np.empty(p1 - p0, bool)
-        analytic_block(o32, d32, axis_prim, axis_tfar, p0, rays.rx, grid, shadow_rays, prim, tfar, analytic)
+        analytic_block(o32, d32, axis_prim, axis_tfar, p0, rays.rx, grid, shadow_rays, prim, tfar, analytic, segments)
         if census is not None:
             on_seabed = (axis_prim >= grid.face0) & (axis_prim < grid.face0 + grid.plane.shape[0])
             missed = analytic & (axis_prim < 0)

@@ -257,8 +257,15 @@ def _bundle_misses(grid, origins, dirs, first, m):
     return True
 
 
+@kernel(inline="always")
+def _segment_rows(segments):
+    """The rows of a (7, k) scratch of segments for :func:`_bundle_clear`: their seabed points' x, y and z, their end
+    heights, their horizontal directions' x and y and their rises."""
+    return segments[0], segments[1], segments[2], segments[3], segments[4], segments[5], segments[6]
+
+
 @kernel(nogil=True, error_model="numpy")
-def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shadow, prim, tfar, analytic):
+def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shadow, prim, tfar, analytic, segments):
     """The ``auto`` level's analytic sub-ray hits on the seabed, for one block of pulses.
 
     origins, dirs ((n m, 3) float32, pulse-major): the block's sub-rays, sub-ray 0 the beam axis; axis_prim,
@@ -273,15 +280,17 @@ def analytic_block(origins, dirs, axis_prim, axis_tfar, p0, rx_local, grid, shad
     scene, no other object reaches up to it, and the seabed either stays below it or slopes less than the
     steepest sub-ray descends, so that a sub-ray crosses the seabed once only (:func:`_bundle_clear`). With
     ``shadow`` the segments from the hits to the receiver aperture (``rx_local[p0 + q]``) must pass the same test
-    rising: then no shadow ray of the pulse can be blocked, and none is cast."""
+    rising: then no shadow ray of the pulse can be blocked, and none is cast. ``segments`` (7, 2 m): the caller's
+    scratch; every argument is borrowed (:mod:`muls.infra.borrowed`)."""
+    origins, dirs, axis_prim, axis_tfar, rx_local, grid, prim, tfar, analytic, segments = borrowed(
+        (origins, dirs, axis_prim, axis_tfar, rx_local, grid, prim, tfar, analytic, segments))
     n = axis_prim.shape[0]
     m = origins.shape[0] // n
     plane, face0, cell_face = grid.plane, grid.face0, grid.cell_face
     gaps = cell_face.shape[0] > 0
     x0, y0, spacing, nx, ny = grid.x0, grid.y0, grid.spacing, grid.nx, grid.ny
     # Segments to test: the m sub-rays back up from their hits, then (shadow) the m hits up to the receiver.
-    hx, hy, hz = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
-    z_end, wx, wy, rise = np.empty(2 * m), np.empty(2 * m), np.empty(2 * m), np.empty(2 * m)
+    hx, hy, hz, z_end, wx, wy, rise = _segment_rows(segments)
     for q in range(n):
         f0 = axis_prim[q]
         prim[q * m] = f0
@@ -383,8 +392,7 @@ def shadows_to_cast(grid, rows, local_origin, rx_local, sh_len, first, count, ne
     blocked. A hit on anything else, or a test that fails, casts them all."""
     grid, rows, local_origin, rx_local, sh_len, need, segments, rows_of = borrowed(
         (grid, rows, local_origin, rx_local, sh_len, need, segments, rows_of))
-    hx, hy, hz, z_end, wx, wy, rise = segments[0], segments[1], segments[2], segments[3], segments[4], segments[5], \
-        segments[6]
+    hx, hy, hz, z_end, wx, wy, rise = _segment_rows(segments)
     pulse, point = rows.pulse_index, rows.point
     k, c = 0, 0
     while c < count:
