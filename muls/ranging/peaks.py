@@ -131,7 +131,7 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoe
         _peaks(records.codes[a:b], synthesised[a:b], records.window_pulse[a:b], records.window_start[a:b],
                records.phase_s, -dig.pretrigger_s, dig.sample_interval_s, model.column, batch.background_w, signal,
                settings, model.fit_table, model.clip_table, out.blocks(a, b, n_chan), records.mode == "full",
-               baselines[a:b] if handed else baselines)
+               baselines[a:b] if handed else baselines, _search_scratch(records.codes.shape[2]))
 
     in_blocks(windows, n_windows)
     ref_index = np.concatenate(in_blocks(
@@ -197,29 +197,23 @@ def _reference_peaks(reference, dark_mean, fit, table):
     return out
 
 
+def _search_scratch(n_samples: int) -> tuple:
+    """The peak search's scratch for windows of ``n_samples``: the sample times, baseline, residuals, sigmas and echo
+    model (n,) float each, the open and blind samples (n,) bool each, and the stretches' first and end samples
+    (n // 2 + 1,) int64 each (allocated by the caller, whose arrays the kernel may borrow)."""
+    return (*(np.empty(n_samples) for _ in range(5)), np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_),
+            np.empty(n_samples // 2 + 1, np.int64), np.empty(n_samples // 2 + 1, np.int64))
+
+
 @kernel(nogil=True)
 def _peaks(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings, fit_table,
-           clip_table, out, sparse, baselines):
+           clip_table, out, sparse, baselines, scratch):
     """The peak search over every window and channel (module doc), into ``out``. ``sparse``: records mostly 0 (full
     records coded where the search reads, :func:`muls.receiver.channel_codes.ranging_codes`): a channel's residuals are
     computed, and its runs looked for, only within a sample of its nonzero codes (:func:`_code_segments`).
     ``baselines``: each window's calibrated baseline [W] ((n_windows, n_samples), the digitiser's, the numbers
-    ``baseline_values`` gives), or empty: computed here. Allocates the scratch that :func:`_peak_windows` borrows
-    (:mod:`muls.infra.borrowed`)."""
-    n_samples = codes.shape[2]
-    scratch = (np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples),
-               np.empty(n_samples, np.bool_), np.empty(n_samples, np.bool_), np.empty(n_samples // 2 + 1, np.int64),
-               np.empty(n_samples // 2 + 1, np.int64))
-    _peak_windows(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings,
-                  fit_table, clip_table, out, sparse, baselines, scratch)
-
-
-@kernel(nogil=True)
-def _peak_windows(codes, synthesised, window_pulse, window_start, phase, t0, dt, col, background, chans, settings,
-                  fit_table, clip_table, out, sparse, baselines, scratch):
-    """:func:`_peaks`'s search, its arguments borrowed; ``scratch``: the sample times, baseline, residuals, sigmas and
-    echo model (n,) float each, the open and blind samples (n,) bool each, and the stretches' first and end samples
-    (n // 2 + 1,) int64 each."""
+    ``baseline_values`` gives), or empty: computed here. ``scratch``: :func:`_search_scratch`'s. Its arguments
+    borrowed (:mod:`muls.infra.borrowed`)."""
     (codes, synthesised, window_pulse, window_start, phase, col, background, chans, fit_table, clip_table, out,
      baselines, scratch) = borrowed((codes, synthesised, window_pulse, window_start, phase, col, background, chans,
                                      fit_table, clip_table, out, baselines, scratch))

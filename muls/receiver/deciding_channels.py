@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 
+from ..infra.borrowed import borrowed
 from ..infra.noise import (
     NORMAL_BOUND,
     dark_noise_stream,
@@ -69,8 +70,9 @@ def deciding_channels(out, power, baseline, times, chans, max_code, k_sigma, ech
     times [s]; chans: the signal channels' :class:`muls.instrument.channels.ChannelArrays`; max_code: the top code [LSB];
     k_sigma: the detection threshold [sigma]; echo_span_s: the spread of the pulse's echo delays [s]; draws: the
     window's noise streams, (key, pulse id, index of its first sample, noise scale), whose bounds settle what the
-    noise's reach leaves open (:func:`_lost_in_the_column`).
+    noise's reach leaves open (:func:`_lost_in_the_column`). Its arguments borrowed (:mod:`muls.infra.borrowed`).
     """
+    out, power, baseline, times, chans, scratch = borrowed((out, power, baseline, times, chans, scratch))
     n_chan, n = out.shape[0], power.shape[0]
     whole, plain, clipped = scratch[0], scratch[1], scratch[2]
     tolerance = np.inf  # [W] one dark sigma of the most sensitive channel that sees the echo

@@ -33,7 +33,7 @@ from ..optics.optical_model import Echoes, OpticalModel, PulseBatch
 from ..optics.sample_kernels import add_pulse_steps
 from .channel_codes import channel_codes, quantise, ranging_codes
 from .record_windows import plan_windows
-from .window_signal import sample_times, window_scratch, window_signal
+from .window_signal import pulse_steps, sample_times, window_scratch, window_signal
 
 #: Windowed mode: samples of the CH0 reference record (the emitted pulse peaks ~21 samples in).
 REFERENCE_SAMPLES = 40
@@ -151,12 +151,15 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     cuts, signal = model.cuts(batch), chans.signal()
     lsb_per_density = ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s))
 
-    digitise_windows = _digitise_read_samples if settings.read_samples_only else _digitise
+    digitise_windows, noise_scratch = ((_digitise_read_samples, _read_samples_scratch) if settings.read_samples_only
+                                       else (_digitise, _noise_scratch))
 
     def windows(a, b):  # windows a:b; their pulses index the whole batch
         deciding = np.empty((3, shape[1]), np.bool_) if deciding_only else None  # the deciding test's scratch
+        shot_needed, scratch = window_scratch(shape, cuts, signal)
         digitise_windows(codes[a:b], clean[a:b], synthesised[a:b], baselines[a:b], window_pulse[a:b], window_start[a:b],
-                         sampling, model.column, cuts, echoes, signal, settings, deciding)
+                         sampling, model.column, cuts, echoes, signal, settings, deciding, shot_needed, scratch,
+                         noise_scratch(shape, shot_needed))
 
     needed = np.ones(batch.n_pulses, np.bool_)
     if deciding_only:
@@ -251,32 +254,39 @@ class DigitiserSettings(NamedTuple):
     read_samples_only: bool = False
 
 
+def _noise_scratch(shape: tuple, shot_needed: np.ndarray) -> tuple:
+    """The dark and shot normals' (2 pairs, n) scratch of windows of ``shape`` (n_windows, n_channels, n) whose
+    detectors ``shot_needed`` lists, the tails' (2 n,) int64 scratch and an empty low half."""
+    n = shape[2]
+    return (np.empty((2 * ((shape[1] + 1) // 2), n)), np.empty((2 * ((shot_needed.shape[0] + 1) // 2), n)),
+            np.empty(2 * n, np.int64), np.empty(0))
+
+
+def _read_samples_scratch(shape: tuple, shot_needed: np.ndarray) -> tuple:
+    """:func:`_digitise_read_samples`'s scratch of windows of ``shape``: the hashes' (dark pairs + shot pairs, n)
+    uint64, the samples read (n,) bool, the tails' (2 n,) int64 and the listed samples' (n,) int64 scratch, and the
+    two normals' (n,) each."""
+    n = shape[2]
+    pairs = (shape[1] + 1) // 2 + (shot_needed.shape[0] + 1) // 2
+    return (np.empty((pairs, n), np.uint64), np.empty(n, np.bool_), np.empty(2 * n, np.int64), np.empty(n, np.int64),
+            np.empty(n), np.empty(n))
+
+
 @kernel(nogil=True)
 def _digitise(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes, chans,
-              settings, deciding):
+              settings, deciding, shot_needed, scratch, noise):
     """The signal windows' codes (MULS Eqs. 1, 12, 13) into ``codes``, every sample drawn, with ``clean``,
     ``synthesised`` and, where ``baselines`` is not empty ((n_windows, n_samples)), each window's calibrated baseline
     [W] (:func:`digitise`); ``deciding``: None, or the deciding test's scratch where only the channels that can decide
-    a return are synthesised (:func:`~muls.receiver.window_signal.window_signal`). Allocates the windows' scratch,
-    which :func:`_digitise_windows` borrows (:mod:`muls.infra.borrowed`)."""
-    n_samples = codes.shape[2]
-    n_pairs, n_shot_pairs, shot_needed, scratch, steps = window_scratch(codes, cuts, chans, col, sampling.dt_s)
-    normals = (np.empty((2 * n_pairs, n_samples)), np.empty((2 * n_shot_pairs, n_samples)),
-               np.empty(2 * n_samples, np.int64), np.empty(0))
-    _digitise_windows(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
-                      chans, settings, borrowed(deciding), shot_needed, scratch, steps, normals)
-
-
-@kernel(nogil=True)
-def _digitise_windows(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
-                      chans, settings, deciding, shot_needed, scratch, steps, normals):
-    """:func:`_digitise`'s loop over the windows, its arguments borrowed; ``normals``: the dark and shot normals'
-    (2 pairs, n) scratch, the tails' (2 n,) int64 scratch and an empty low half."""
+    a return are synthesised (:func:`~muls.receiver.window_signal.window_signal`); ``shot_needed``, ``scratch``:
+    :func:`~muls.receiver.window_signal.window_scratch`'s, ``noise``: :func:`_noise_scratch`'s. Its arguments but
+    ``deciding`` borrowed (:mod:`muls.infra.borrowed`; ``deciding`` is the switch that leaves the test out)."""
     (codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes, chans, shot_needed,
-     scratch, normals) = borrowed((codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts,
-                                  echoes, chans, shot_needed, scratch, normals))
-    dark_normal, shot_normal, tails, no_low = normals
+     scratch, noise) = borrowed((codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts,
+                                 echoes, chans, shot_needed, scratch, noise))
+    dark_normal, shot_normal, tails, no_low = noise
     n_windows, n_chan = codes.shape[0], codes.shape[1]
+    steps = pulse_steps(col, sampling.dt_s)
     times, power = scratch[0], scratch[1]
     for w in range(n_windows):
         p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
@@ -296,31 +306,18 @@ def _digitise_windows(codes, clean, synthesised, baselines, window_pulse, window
 
 @kernel(nogil=True)
 def _digitise_read_samples(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts,
-                           echoes, chans, settings, deciding):
+                           echoes, chans, settings, deciding, shot_needed, scratch, work):
     """:func:`_digitise` with only the samples the peak search may read coded, the others 0
-    (:func:`muls.receiver.channel_codes.ranging_codes`; :func:`digitise`'s ``ranging_only`` of full records). A kernel
-    of its own so that a run which never asks for it does not compile it and the draws by list it calls; the window up
-    to its noise is :mod:`.window_signal`'s, as :func:`_digitise`'s. Allocates the scratch that
-    :func:`_read_samples_windows` borrows."""
-    n_samples = codes.shape[2]
-    n_pairs, n_shot_pairs, shot_needed, scratch, steps = window_scratch(codes, cuts, chans, col, sampling.dt_s)
-    work = (np.empty((n_pairs + n_shot_pairs, n_samples), np.uint64), np.empty(n_samples, np.bool_),
-            np.empty(2 * n_samples, np.int64), np.empty(n_samples, np.int64), np.empty(n_samples), np.empty(n_samples))
-    _read_samples_windows(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,
-                          chans, settings, borrowed(deciding), n_pairs, shot_needed, scratch, steps, work)
-
-
-@kernel(nogil=True)
-def _read_samples_windows(codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts,
-                          echoes, chans, settings, deciding, n_pairs, shot_needed, scratch, steps, work):
-    """:func:`_digitise_read_samples`'s loop over the windows, its arguments borrowed; ``work``: the hashes'
-    (pairs, n) uint64, the samples read (n,) bool, the tails' (2 n,) int64 and the listed samples' (n,) int64
-    scratch, and the two normals' (n,) each."""
+    (:func:`muls.receiver.channel_codes.ranging_codes`; :func:`digitise`'s ``ranging_only`` of full records); ``work``:
+    :func:`_read_samples_scratch`'s. A kernel of its own so that a run which never asks for it does not compile it
+    and the draws by list it calls; the window up to its noise is :mod:`.window_signal`'s, as :func:`_digitise`'s."""
     (codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes, chans, shot_needed,
      scratch, work) = borrowed((codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts,
                                 echoes, chans, shot_needed, scratch, work))
     hashes, read, tails, listed, dark_normal, shot_normal = work
     n_windows, n_chan = codes.shape[0], codes.shape[1]
+    n_pairs = (n_chan + 1) // 2
+    steps = pulse_steps(col, sampling.dt_s)
     times, power, baseline = scratch[0], scratch[1], scratch[2]
     for w in range(n_windows):
         p = window_signal(w, codes, clean, synthesised, baselines, window_pulse, window_start, sampling, col, cuts, echoes,

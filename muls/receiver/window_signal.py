@@ -24,21 +24,20 @@ def sample_times(out, first, end, t0_s, dt_s, first_index, phase_s):
         out[k] = t0_s + (first_index + k) * dt_s + phase_s
 
 
+def window_scratch(shape: tuple, cuts, chans) -> tuple:
+    """For windows of ``shape`` (n_windows, n_channels, n): the (detectors,) bool of the detectors whose shot noise a
+    window needs, and (times, power, baseline, uncut (n,) each, then the column cuts' times, shares and shares ahead),
+    allocated by the digitiser's caller so that its kernels may borrow them (:mod:`muls.infra.borrowed`)."""
+    n, k = shape[2], cuts.cut_tau_s.shape[1]
+    n_detectors = int(chans.detector[:shape[1]].max()) + 1
+    return np.empty(n_detectors, np.bool_), (np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(k),
+                                             np.empty(k), np.empty(k + 1))
+
+
 @kernel(inline="always")
-def window_scratch(codes, cuts, chans, col, dt_s):
-    """For the windows of ``codes`` (n_windows, n_channels, n): (stream pairs of the channels' dark noise, stream
-    pairs of the detectors' shot noise, (detectors,) bool scratch, (times, power, baseline, uncut (n,) each, then the
-    column cuts' times, shares and shares ahead), the pulse basis's two exponentials' factors over a sample interval
-    ``dt_s`` [s] (``col.basis``))."""
-    n_chan, n_samples = codes.shape[1], codes.shape[2]
-    n_detectors = 0
-    for c in range(n_chan):
-        n_detectors = max(n_detectors, chans.detector[c] + 1)
-    k = cuts.cut_tau_s.shape[1]
-    scratch = (np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(n_samples), np.empty(k),
-               np.empty(k), np.empty(k + 1))
-    steps = math.exp(-col.basis[0] * dt_s), math.exp(-col.basis[1] * dt_s)
-    return (n_chan + 1) // 2, (n_detectors + 1) // 2, np.empty(n_detectors, np.bool_), scratch, steps
+def pulse_steps(col, dt_s):
+    """The pulse basis's two exponentials' factors over a sample interval ``dt_s`` [s] (``col.basis``)."""
+    return math.exp(-col.basis[0] * dt_s), math.exp(-col.basis[1] * dt_s)
 
 
 @kernel(inline="always")
