@@ -34,6 +34,7 @@ def _borrow(context, builder, ty, value):
 
 
 def _is_borrowable(ty) -> bool:
+    """Whether numba type ``ty`` is an array, a scalar, None, or a tuple of such (nested): what :func:`borrowed` takes."""
     return isinstance(ty, (types.Array, types.Number, types.Boolean, types.NoneType, types.Omitted)) or (
         isinstance(ty, types.BaseTuple) and all(_is_borrowable(member) for member in ty))
 
