@@ -21,14 +21,12 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
                overrides: dict | None = None) -> dict:
     """Ray throughput of the scene ``scene_name`` (a shipped name or YAML path; ``overrides``: dotted scene keys
     to change first, e.g. a finer seabed)."""
-    from embreex import rtcore_scene
-    from embreex.mesh_construction import TriangleMesh
-
     from scanner_sim.config import load_scene
     from scanner_sim.motion.scanner import Scanner
     from scanner_sim.rays import kernels as _raykernels
     from scanner_sim.rays.beams import beam_pattern
     from scanner_sim.rays.cast import CastScene, cast_beams, kernel_inputs
+    from scanner_sim.rays.embree_upload import embree_scene
     from scanner_sim.rays.hits import empty_columns
     from scanner_sim.survey.setup import checked_trajectory
     from scanner_sim.world.scene import build_scene
@@ -63,8 +61,7 @@ def bench_rays(scene_name: str = "cable_survey", pulses: int = 20000, subrays: i
     n_shadow = int(np.count_nonzero(sh_len > 0))
     n_rays = o32.shape[0] + n_shadow
 
-    raw_scene = rtcore_scene.EmbreeScene()
-    TriangleMesh(scene=raw_scene, vertices=caster.vertices, indices=caster.faces)
+    raw_scene = embree_scene(caster.vertices, caster.faces)
 
     def raw():
         raw_scene.run(o32, d32, output=1)

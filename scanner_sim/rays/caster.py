@@ -116,13 +116,13 @@ class EmbreeCaster(RayCaster):
     def __init__(self, vertices_local: np.ndarray, faces: np.ndarray):
         super().__init__(vertices_local, faces)
         try:
-            from embreex import rtcore_scene
-            from embreex.mesh_construction import TriangleMesh
+            import embreex.rtcore_scene  # noqa: F401
         except Exception as exc:
             raise ImportError("raycast backend 'embree' was asked for but embreex does not import "
                               f"({exc}); install it with `pip install embreex` or use backend 'auto'") from exc
-        self._scene = rtcore_scene.EmbreeScene()
-        TriangleMesh(scene=self._scene, vertices=self.vertices, indices=self.faces)
+        from .embree_upload import embree_scene
+
+        self._scene = embree_scene(self.vertices, self.faces)
         # embreex builds the BVH (commits the scene) on the first query, unguarded: build it now, in one
         # thread, before chunks running side by side can each start a build of the same scene.
         self._scene.run(np.zeros((1, 3), np.float32), np.array([[0.0, 0.0, 1.0]], np.float32))
