@@ -55,15 +55,6 @@ def embree_scene(vertices: np.ndarray, faces: np.ndarray):
     return scene
 
 
-def fast_upload_available() -> bool:
-    """Whether :func:`embree_scene` copies buffers whole here (the library found and embreex's layout confirmed)."""
-    from embreex import rtcore, rtcore_scene
-
-    api = _embree_api()
-    device = rtcore.EmbreeDevice()
-    return api is not None and _handles(rtcore_scene.EmbreeScene(device=device), device, api) is not None
-
-
 def _attach(api, scene_handle: int, device_handle: int, vertices: np.ndarray, faces: np.ndarray) -> None:
     """Give the scene a triangle geometry with Embree-allocated buffers filled from ``vertices`` and ``faces``."""
     geometry = api.rtcNewGeometry(device_handle, _GEOMETRY_TYPE_TRIANGLE)

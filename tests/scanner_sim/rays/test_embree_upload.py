@@ -11,7 +11,7 @@ from embreex import rtcore_scene  # noqa: E402
 from embreex.mesh_construction import TriangleMesh  # noqa: E402
 
 from scanner_sim.rays import embree_upload  # noqa: E402
-from scanner_sim.rays.embree_upload import embree_scene, fast_upload_available  # noqa: E402
+from scanner_sim.rays.embree_upload import embree_scene  # noqa: E402
 
 
 def _mesh(seed=3):
@@ -63,7 +63,6 @@ def test_whole_buffers_give_triangle_meshs_hits_bit_for_bit():
 def test_the_whole_buffer_path_is_the_one_taken_here(monkeypatch):
     """On Linux with the pinned embreex the layout is confirmed, and no mesh goes through ``TriangleMesh``: were
     a new embreex to move its fields, this fails while the runs still work through the fallback."""
-    assert fast_upload_available()
     vertices, faces = _mesh()
     rays = _rays(2000)
     expected = _answers(_triangle_mesh_scene(vertices, faces), *rays)
@@ -80,10 +79,17 @@ def test_an_unknown_layout_falls_back_to_triangle_mesh(monkeypatch):
     """A scene object of another size than the layout this module knows is never read: the mesh goes in through
     ``TriangleMesh`` and answers the same."""
     monkeypatch.setattr(embree_upload, "_SCENE_SIZE", embree_upload._SCENE_SIZE + 8)
-    assert not fast_upload_available()
     vertices, faces = _mesh()
     rays = _rays(2000)
     expected = _answers(_triangle_mesh_scene(vertices, faces), *rays)
+    uploads = []
+
+    def recorded(**kwargs):
+        uploads.append(kwargs["indices"].shape[0])
+        return TriangleMesh(**kwargs)
+
+    monkeypatch.setattr("embreex.mesh_construction.TriangleMesh", recorded)
     got = _answers(embree_scene(vertices, faces), *rays)
+    assert uploads == [faces.shape[0]]
     for key, value in expected.items():
         np.testing.assert_array_equal(got[key], value, err_msg=key)
