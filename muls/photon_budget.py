@@ -58,7 +58,7 @@ def channel_budget(model: OpticalModel, range_m: float, reflectance: float) -> t
     energy = echo_energy_j(model, range_m, reflectance)
     photons = energy / (ins.receiver.efficiency * hv)
     t_peak = 2.0 * range_m / model.water.speed_m_s + ins.pulse.peak_delay_s
-    echo_w = energy * float(ins.pulse(ins.pulse.peak_delay_s))
+    echo_w = energy * ins.pulse.peak_per_s
     column_w = float(model.column_power_w(t_peak, range_m)[0])
     uncut_w = float(model.column_power_w(t_peak)[0])  # the calibrated baseline the processing subtracts
     out = {}

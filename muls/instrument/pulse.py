@@ -86,10 +86,15 @@ class PulseShape:
         return 0.5 * (lo + hi)
 
     @cached_property
+    def peak_per_s(self) -> float:
+        """The pulse's maximum [1/s], at :attr:`peak_delay_s` (the pulse rises to it and falls after it)."""
+        return float(self(self.peak_delay_s))
+
+    @cached_property
     def fall_to_half_s(self) -> float:
         """[s] Time from the maximum to half of it on the falling side (6.9 ns for the mul2023 pulse)."""
         peak = self.peak_delay_s
-        top = float(self(peak))
+        top = self.peak_per_s
         lo, hi = peak, self.duration_s
         for _ in range(60):
             mid = 0.5 * (lo + hi)

@@ -29,7 +29,7 @@ class FitTable(NamedTuple):
         offset = np.linspace(-0.5, 0.5, 1001)
 
         def shape(u):
-            return pulse(u + pulse.peak_delay_s) / pulse(pulse.peak_delay_s)
+            return pulse(u + pulse.peak_delay_s) / pulse.peak_per_s
 
         before, centre, after = shape((-1.0 - offset) * dt), shape(-offset * dt), shape((1.0 - offset) * dt)
         feature = (after - before) / (2.0 * (2.0 * centre - before - after))
@@ -49,7 +49,7 @@ class ClipTable(NamedTuple):
     def build(cls, pulse: PulseShape, sample_interval_s: float) -> ClipTable:
         dt = sample_interval_s
         u = np.linspace(0.0, 2.0 * pulse.duration_s, 80001)
-        f = pulse(u) / pulse(pulse.peak_delay_s)
+        f = pulse(u) / pulse.peak_per_s
         i_peak = int(np.argmax(f))
         ratio = np.geomspace(1e-9, 1.0, 600)
         rising = np.interp(ratio, f[: i_peak + 1], u[: i_peak + 1])

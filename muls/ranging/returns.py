@@ -102,7 +102,7 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
 
     One rule per cause, the first that holds (docs/outputs.md tables them): ``no_hit`` no echo begins within the
     record; ``blind_zone`` none that does carries light; ``saturated`` a clipped return was dropped; then, over the
-    samples of the strongest echo (from its start to the end of its pulse, :func:`echo_span_samples`) and at the
+    samples of the strongest echo (from its start to the end of its pulse, :func:`echo_span`) and at the
     sample where the echoes alone are highest (the echo's peak): ``masked_by_backscatter`` if in a channel open at
     the peak the echo alone clears the threshold over dark noise (k sigma) and the column hides it there: the
     residual over the processor's baseline (the open-water column and background) is at most k times the noise
@@ -129,24 +129,22 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     sat[np.asarray(saturated_dropped, np.int64)] = True
     cause[missing & lit & sat] = DROPOUT_CAUSES.index("saturated")
     todo = np.nonzero(missing & lit & ~sat)[0]
-    if todo.size == 0:
-        return cause
-    # The strongest echo within the record, the earliest of equals.
-    strongest = np.full(batch.n_pulses, -1, np.int64)
-    ranked = np.lexsort((-np.arange(delay.size), np.where(delay < record_end, energy, -1.0), pulse_of))
-    strongest[pulse_of[ranked]] = ranked  # the last of each pulse's run wins
-    first, count = echo_span_samples(delay[strongest[todo]], ins.pulse.duration_s, dig, phase_s[todo])
     chans = model.channels
     signal = slice(1, len(ins.channels) + 1)
+    k = ins.processing.threshold_sigma
+    faint = _too_faint_to_see(model, pulse_of, energy, todo, k)
+    cause[todo[faint]] = DROPOUT_CAUSES.index("below_threshold")
+    todo = todo[~faint]
+    if todo.size == 0:
+        return cause
     top_w = (dig.max_code - chans.dark_mean_lsb[signal]) / chans.lsb_per_w[signal]  # the power that clips each channel
     sampling = (-dig.pretrigger_s, dig.sample_interval_s)
     t_peak, echo_peak, column_peak, base_peak, clipped = _span_terms(
-        first, count, phase_s[todo], sampling, todo, model.column, model.cuts(batch), echoes, ins.pulse.duration_s,
+        todo, phase_s[todo], sampling, record_end, model.column, model.cuts(batch), echoes, ins.pulse.duration_s,
         chans.gate_open_s[signal], chans.gate_close_s[signal], top_w)
     # The residual the peak search measures: the record (column cut by the targets, echo, background) over the
     # processor's baseline (the open-water column and background).
     resid_peak = echo_peak + column_peak - base_peak
-    k = ins.processing.threshold_sigma
     masked = np.zeros(todo.size, bool)
     seen_open = np.zeros(todo.size, bool)
     ranged_if_open = np.zeros(todo.size, bool)
@@ -172,23 +170,43 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     return cause
 
 
-def echo_span_samples(start_s, duration_s: float, digitizer, phase_s) -> tuple[np.ndarray, np.ndarray]:
-    """(first, count), each (n,) int64: the samples of each pulse's record from ``start_s`` (n,) [s] to
-    ``start_s + duration_s``, both included (sample k at ``-pretrigger_s + k dt + phase_s`` (n,) [s])."""
-    dt = digitizer.sample_interval_s
-    first = np.ceil((start_s + digitizer.pretrigger_s - phase_s) / dt).astype(np.int64)
-    last = np.floor((start_s + duration_s + digitizer.pretrigger_s - phase_s) / dt).astype(np.int64)
-    return first, np.maximum(last - first + 1, 0)
+#: Relative margin over the echoes' bound in :func:`_too_faint_to_see`: far above the rounding of the echoes' sum
+#: (about 1e-14 of it), so that a pulse set aside could not have had a channel see its echo.
+FAINT_MARGIN = 0.01
+
+
+def _too_faint_to_see(model: OpticalModel, pulse_of, energy_j, todo, k: float) -> np.ndarray:
+    """(len(todo),) bool: the pulses ``todo`` whose echoes (``energy_j`` [J] of batch pulse ``pulse_of``, each (m,))
+    could not clear k sigma of any signal channel's dark noise and rounding even all at their pulse's peak. No echo
+    sum exceeds its energies' total times the unit-area pulse's maximum, so no channel sees their echo alone (MULS
+    Eqs. 12-13 in LSB): they are ``below_threshold`` whatever the column does, without their span."""
+    chans = model.channels
+    signal = slice(1, len(model.instrument.channels) + 1)
+    total_j = np.bincount(pulse_of, weights=np.maximum(energy_j, 0.0))[todo]  # a lit pulse has echoes
+    most_w = total_j * model.instrument.pulse.peak_per_s * (1.0 + FAINT_MARGIN)
+    dark = np.sqrt(chans.dark_std_lsb[signal] ** 2 + 1.0 / 12.0)
+    return ~np.any(chans.lsb_per_w[signal] * most_w[:, None] > k * dark, axis=1)
+
+
+@kernel(inline="always")
+def echo_span(start_s, duration_s, pretrigger_s, dt_s, phase_s):
+    """(first, count): the samples of a record from ``start_s`` to ``start_s + duration_s`` [s], both included
+    (sample k at ``-pretrigger_s + k dt_s + phase_s`` [s])."""
+    first = math.ceil((start_s + pretrigger_s - phase_s) / dt_s)
+    last = math.floor((start_s + duration_s + pretrigger_s - phase_s) / dt_s)
+    return first, max(last - first + 1, 0)
 
 
 @kernel(nogil=True)
-def _span_terms(first, count, phase, sampling, pulses, col, cuts, echoes, extent, gate_open, gate_close, top_w):
-    """The terms of pulse ``pulses[i]`` over its span, samples ``first[i]`` to ``first[i] + count[i] - 1`` of its
-    record (sample k at ``sampling[0] + k sampling[1] + phase[i]`` [s]): the peak's time [s] (the first sample
-    where the echoes alone are highest), there the echoes alone, the column as the targets cut it plus background,
-    and the processor's baseline (the uncut column plus background) [W], each (n,); and whether each signal
-    channel (n, channels), at a sample where its gate (``gate_open``, ``gate_close`` [s]) is open, is clipped
-    (power at or over ``top_w`` [W]) by the baseline alone or by the record (column and echo).
+def _span_terms(pulses, phase, sampling, record_end, col, cuts, echoes, extent, gate_open, gate_close, top_w):
+    """The terms of pulse ``pulses[i]`` (sampling phase ``phase[i]`` [s]) over its span: the samples of its record
+    (sample k at ``sampling[0] + k sampling[1] + phase[i]`` [s]) from the start of its strongest echo within the record
+    (``delay_s < record_end``; the earliest of equals; energies finite) to that start plus ``extent`` [s]
+    (:func:`echo_span`). Returns the peak's time [s] (the first sample where the echoes alone are highest), there the
+    echoes alone, the column as the targets cut it plus background, and the processor's baseline (the uncut column
+    plus background) [W], each (n,); and whether each signal channel (n, channels), at a sample where its gate
+    (``gate_open``, ``gate_close`` [s]) is open, is clipped (power at or over ``top_w`` [W]) by the baseline alone or
+    by the record (column and echo).
 
     Each echo's pulse is stepped from sample to sample by constant factors; the cut column is evaluated only where
     it decides a clip (the baseline under a channel's top and the baseline with the echo at or over it: the cut
@@ -200,6 +218,15 @@ def _span_terms(first, count, phase, sampling, pulses, col, cuts, echoes, extent
     column_peak, base_peak = np.zeros(n), np.zeros(n)
     clipped = np.zeros((n, n_chan), np.bool_)
     basis = col.basis
+    first, count = np.empty(n, np.int64), np.empty(n, np.int64)
+    for i in range(n):
+        p = pulses[i]
+        strongest, strongest_j = -1, 0.0
+        for e in range(echoes.offsets[p], echoes.offsets[p + 1]):
+            energy = echoes.energy_j[e] if echoes.delay_s[e] < record_end else -1.0
+            if strongest < 0 or energy > strongest_j:
+                strongest, strongest_j = e, energy
+        first[i], count[i] = echo_span(echoes.delay_s[strongest], extent, -t0, dt, phase[i])
     most = 0  # a loop, not count.max(): numpy's max costs a second of compiling
     for i in range(n):
         most = max(most, count[i])

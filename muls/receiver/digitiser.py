@@ -149,7 +149,7 @@ def digitise(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     handed = ranging_only and deciding_only and mode == "windowed"
     baselines = np.empty((shape[0], shape[2]) if handed else (0, 0))
     cuts, signal = model.cuts(batch), chans.signal()
-    lsb_per_density = ins.reference.peak_lsb / float(pulse(pulse.peak_delay_s))
+    lsb_per_density = ins.reference.peak_lsb / pulse.peak_per_s
 
     digitise_windows, noise_scratch = ((_digitise_read_samples, _read_samples_scratch) if settings.read_samples_only
                                        else (_digitise, _noise_scratch))

@@ -36,7 +36,7 @@ def coaxial_study(water: str | Water = "turbid_harbor", t_max_ns: float = 200.0,
     co = co_model.column_power_w(t)
     non = non_model.column_power_w(t)
     energy = co_model.echoes(PulseBatch.flat_target(co_model.instrument, [np.inf])).energy_j
-    window_peak = float(energy.max() * co_model.instrument.pulse(co_model.instrument.pulse.peak_delay_s)) \
+    window_peak = float(energy.max() * co_model.instrument.pulse.peak_per_s) \
         if energy.size else 0.0
     geometry = non_model.instrument.geometry
     return {

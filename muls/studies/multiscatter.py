@@ -195,7 +195,7 @@ def multiscatter_waters_study(waters=STUDY_WATERS, ranges_m=STUDY_RANGES_M, pack
         ranges = sorted({round(float(r), 3) for r in table + extra})
         result = run_monte_carlo(instrument, w, TargetPlanes(tuple(ranges), 0.1), phase=ph, packets=packets, seed=seed)
         e_scale = instrument.transmitter.pulse_energy_j * two_way_transmission(instrument)
-        pulse_peak = float(instrument.pulse(instrument.pulse.peak_delay_s))
+        pulse_peak = instrument.pulse.peak_per_s
         rows = []
         for k, r in enumerate(ranges):
             tm, tv = result.target(k)

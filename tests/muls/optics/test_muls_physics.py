@@ -55,6 +55,16 @@ def test_band_limited_pulse_keeps_unit_area_and_is_later_and_lower():
     assert mean_filtered - mean_raw == pytest.approx(1.0 / (2 * math.pi * 200e6), rel=1e-4)
 
 
+@pytest.mark.parametrize("bandwidth_hz", [None, 200e6, 2e9])
+def test_pulse_peak_is_its_maximum_over_a_fine_grid(bandwidth_hz):
+    """``peak_per_s`` bounds the pulse (the dropout causes set faint pulses aside with it): no sample of a 10 ps grid
+    over its duration exceeds it, and the grid's highest is within a millionth of it."""
+    pulse = PulseShape(10e-9, bandwidth_hz)
+    grid_max = pulse(np.arange(0.0, pulse.duration_s, 1e-11)).max()
+    assert grid_max <= pulse.peak_per_s
+    assert grid_max == pytest.approx(pulse.peak_per_s, rel=1e-6)
+
+
 @pytest.mark.parametrize("bandwidth_hz", [None, 200e6])
 def test_pulse_rms_width_is_the_standard_deviation_of_its_profile(bandwidth_hz):
     """rms_width_s against the profile's second central moment integrated numerically."""

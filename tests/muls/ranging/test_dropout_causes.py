@@ -14,7 +14,7 @@ import pytest
 from muls import mul2023
 from muls.optics.optical_model import OpticalModel, PulseBatch
 from muls.presets import study_water
-from muls.ranging.returns import DROPOUT_CAUSES, NO_DROPOUT, echo_span_samples
+from muls.ranging.returns import DROPOUT_CAUSES, NO_DROPOUT, echo_span
 from muls.simulate import simulate
 from scanner_sim.config.loading import load_scene
 from scanner_sim.survey.setup import PassOptions, PassSetup
@@ -253,7 +253,7 @@ def test_echo_span_is_every_sample_from_the_echo_start_to_the_end_of_its_pulse()
     dt, pre = dig.sample_interval_s, dig.pretrigger_s
     phase = np.array([0.0, 0.3e-9, 0.0, 0.7e-9])
     start = np.array([20e-9, 20e-9, 20.5e-9, 20e-9])
-    first, count = echo_span_samples(start, 4e-9, dig, phase)
+    first, count = np.array([echo_span(s, 4e-9, pre, dt, ph) for s, ph in zip(start, phase)]).T
     by_hand = [[k for k in range(60) if s - 1e-15 <= -pre + k * dt + ph <= s + 4e-9 + 1e-15] for s, ph in zip(start, phase)]
     assert [len(h) for h in by_hand] == [5, 4, 4, 4]
     assert [list(range(f, f + c)) for f, c in zip(first, count)] == by_hand
@@ -291,3 +291,32 @@ def test_dark_plate_in_turbid_water_behind_far_gate_is_masked_not_outside_gate()
     gated = _dark_plate_scene(25.0)
     assert _lost_to(*gated) == {"masked_by_backscatter": 60}
     assert assert_causes_match_definitions(*gated) == {"masked_by_backscatter": 60}
+
+
+def test_pulses_too_faint_to_see_keep_the_causes_their_spans_give(monkeypatch):
+    """Plates from 2 to 14 m down in turbid harbour water, dark to bright, the far channel open from 20 ns: some
+    pulses are ranged, some lost to the column, and the farthest and darkest are too faint for any channel. Those are
+    set aside as ``below_threshold`` from their echoes' total energy at the pulse's peak, without their span; with
+    nothing set aside (every span computed), every pulse has the same cause."""
+    import muls.ranging.returns as returns
+
+    model = _model(study_water("turbid_harbor"), 20e-9)
+    ranges = np.repeat(np.linspace(2.0, 14.0, 13), 6)
+    batch = PulseBatch.flat_target(model.instrument, ranges, np.tile([0.01, 0.02, 0.05, 0.1, 0.3, 0.6], 13))
+    set_aside = []
+    faint_of = returns._too_faint_to_see
+
+    def recorded(*args):
+        faint = faint_of(*args)
+        set_aside.append(int(faint.sum()))
+        return faint
+
+    monkeypatch.setattr(returns, "_too_faint_to_see", recorded)
+    _, ranging = simulate(model, batch, seed=4)
+    monkeypatch.setattr(returns, "_too_faint_to_see", lambda model, pulse_of, energy, todo, k: np.zeros(todo.size, bool))
+    _, every_span = simulate(model, batch, seed=4)
+    causes = ranging.dropout_cause
+    assert 0 < sum(set_aside) < np.count_nonzero(causes >= 0)
+    assert {"below_threshold", "masked_by_backscatter"} <= {DROPOUT_CAUSES[c] for c in causes[causes >= 0]}
+    assert (causes == NO_DROPOUT).any()
+    np.testing.assert_array_equal(causes, every_span.dropout_cause)
