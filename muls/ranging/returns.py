@@ -118,6 +118,8 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     record_end = dig.record_length_s
     cause = np.full(batch.n_pulses, NO_DROPOUT, np.int8)
     missing = ~np.asarray(has_return, bool)
+    if not missing.any():
+        return cause
     in_record = np.zeros(batch.n_pulses, bool)
     lit = np.zeros(batch.n_pulses, bool)
     pulse_of = np.repeat(np.arange(batch.n_pulses), np.diff(offsets))
