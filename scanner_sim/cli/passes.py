@@ -193,8 +193,8 @@ def _first_run_notice() -> bool:
     """Say so when the kernels are not cached yet: the pass compiles them first. True when it did."""
     if kernels_cached():
         return False
-    print("first run: compiling the simulation kernels before the pass (measured about 22 s of CPU, 20 s on a quiet "
-          "2-core machine, minutes on a busy one; later runs load them from the cache in seconds)", file=sys.stderr, flush=True)
+    print("first run: compiling the simulation kernels before the pass (measured 20 to 40 s of CPU on 2-core machines, "
+          "minutes on a busy one; later runs load them from the cache in seconds)", file=sys.stderr, flush=True)
     return True
 
 
