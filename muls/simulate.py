@@ -8,8 +8,8 @@ from .receiver.digitiser import Waveforms, digitise
 
 
 def simulate(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed",
-             keep_noise_free: bool = False, noise: bool = True, deciding_only: bool = False, ranging_only: bool = False
-             ) -> tuple[Waveforms, Ranging]:
+             keep_noise_free: bool = False, noise: bool = True, deciding_only: bool = False, ranging_only: bool = False,
+             explain_dropouts: bool = True) -> tuple[Waveforms, Ranging]:
     """Digitise the channels of ``batch`` (Eqs. 1-13) and range it (Eq. 14).
 
     Parameters
@@ -28,6 +28,8 @@ def simulate(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
         Synthesise only the channels that can decide a return (the ``fast`` and ``auto`` levels).
     ranging_only : bool
         Code only the samples the ranging may read: the same ranges for less work.
+    explain_dropouts : bool
+        Give each pulse without a return its dropout cause (False: ``ranging.dropout_cause`` is None).
 
     Returns
     -------
@@ -40,4 +42,4 @@ def simulate(model: OpticalModel, batch: PulseBatch, seed, mode: str = "windowed
     echoes = model.echoes(batch)
     records = digitise(model, batch, seed, mode=mode, keep_noise_free=keep_noise_free, noise=noise, echoes=echoes,
                        deciding_only=deciding_only, ranging_only=ranging_only)
-    return records, range_batch(model, batch, records, echoes)
+    return records, range_batch(model, batch, records, echoes, explain_dropouts)

@@ -25,7 +25,8 @@ class Ranging:
     """Result of ranging a batch: chosen returns, all peaks, and each pulse's dropout cause.
 
     returns: one row per return (channel chosen), with ``return_number`` / ``number_of_returns`` (n,) uint8;
-    dropout_cause: (n_pulses,) int8, index into DROPOUT_CAUSES, or NO_DROPOUT when the pulse has a return.
+    dropout_cause: (n_pulses,) int8, index into DROPOUT_CAUSES, or NO_DROPOUT when the pulse has a return; None
+    when the caller did not ask why pulses were lost (:func:`range_batch`'s ``explain_dropouts``).
     reference_time_s: (n_pulses,) refined CH0 peak time.
     """
 
@@ -33,7 +34,7 @@ class Ranging:
     return_number: np.ndarray
     number_of_returns: np.ndarray
     peaks: Peaks
-    dropout_cause: np.ndarray
+    dropout_cause: np.ndarray | None
     reference_time_s: np.ndarray
 
 
@@ -273,7 +274,8 @@ def _span_terms(pulses, phase, sampling, record_end, col, cuts, echoes, extent, 
     return t_peak, echo_peak, column_peak, base_peak, clipped
 
 
-def range_batch(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoes: Echoes | None = None) -> Ranging:
+def range_batch(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoes: Echoes | None = None,
+                explain_dropouts: bool = True) -> Ranging:
     """Peaks, chosen returns and dropout causes of a digitised batch.
 
     Parameters
@@ -286,6 +288,9 @@ def range_batch(model: OpticalModel, batch: PulseBatch, records: Waveforms, echo
         Their digitised records (:func:`muls.receiver.digitiser.digitise`).
     echoes : Echoes, optional
         ``model.echoes(batch)``, if the caller has it.
+    explain_dropouts : bool
+        Give each pulse without a return its cause (:func:`dropout_causes`); False leaves ``dropout_cause`` None,
+        for a caller that reads only the returns.
 
     Returns
     -------
@@ -298,5 +303,5 @@ def range_batch(model: OpticalModel, batch: PulseBatch, records: Waveforms, echo
     chosen, return_number, number_of_returns, dropped = choose_returns(model, peaks)
     has_return = np.zeros(batch.n_pulses, bool)
     has_return[chosen.pulse] = True
-    cause = dropout_causes(model, batch, has_return, dropped, echoes, records.phase_s)
+    cause = dropout_causes(model, batch, has_return, dropped, echoes, records.phase_s) if explain_dropouts else None
     return Ranging(chosen, return_number, number_of_returns, peaks, cause, ref_time)

@@ -69,15 +69,15 @@ class Physics:
     deciding_only: bool
 
     def __call__(self, batch: PulseBatch, record_mode: str | None = None, every_channel: bool = False,
-                 whole_records: bool = False) -> tuple[Waveforms, Ranging]:
+                 whole_records: bool = False, explain_dropouts: bool = True) -> tuple[Waveforms, Ranging]:
         """``record_mode`` and ``every_channel`` override the level's record mode and its ``deciding_only`` (for
         records kept whole, as waveforms.npz keeps them). Unless ``every_channel`` or ``whole_records``, only the
         samples the ranging reads are synthesised (the same points, :func:`muls.receiver.digitiser.digitise`'s
         ``ranging_only``): of each CH0 record the span of its peak, and of a full record the samples the peak
-        search may read."""
+        search may read. ``explain_dropouts``: as :func:`muls.simulate.simulate`."""
         return simulate(self.model, batch, self.seed, record_mode or self.record_mode,
                         deciding_only=self.deciding_only and not every_channel,
-                        ranging_only=not (every_channel or whole_records))
+                        ranging_only=not (every_channel or whole_records), explain_dropouts=explain_dropouts)
 
 
 def cast_chunk(setup: PassSetup, slots: np.ndarray) -> CastChunk:

@@ -69,3 +69,23 @@ def _cold_flat_targets(options: str, tmp_path) -> list:
         "batch = PulseBatch.flat_target(model.instrument, np.linspace(2.0, 20.0, 50))\n"
         "def run():\n"
         f"    simulate(model, batch, 1, {options})\n", tmp_path)
+
+
+@pytest.mark.slow
+def test_regression_the_ranging_table_compiles_no_dropout_spans(tmp_path):
+    """A cold measurement of the set-up's ranging-precision table in turbid harbour water, where some panel shots are
+    lost to the column (their causes need the span), compiles no ``_span_terms``. Root cause: the table reads the
+    shots' returns only, but its ranging explained every lost shot too, so every first run compiled the span kernel,
+    2 s of CPU, even for a pass that loses no pulse (the main job's)."""
+    names = cold_compiled_kernels(
+        "from muls import mul2023\n"
+        "from muls.optics.optical_model import OpticalModel\n"
+        "from muls.presets import study_water\n"
+        "from scanner_sim.survey.chunk import Physics\n"
+        "from scanner_sim.survey.ranging_precision import measure_ranging_precision\n"
+        "model = OpticalModel.build(mul2023(20e-9, 400e-9), study_water('turbid_harbor'))\n"
+        "physics = Physics(model, 3, 'windowed', False)\n"
+        "def run():\n"
+        "    measure_ranging_precision(physics, model.instrument, (2.0, 4.0, 6.0))\n", tmp_path)
+    assert any(name.endswith("._peaks") for name in names)
+    assert not any(name.endswith("._span_terms") for name in names)
