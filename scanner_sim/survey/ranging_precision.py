@@ -171,14 +171,15 @@ def panel_ranges_m(delays_s: np.ndarray, speed_m_s: float) -> tuple[float, ...]:
 
 def measure_ranging_precision(physics, instrument, ranges_m: tuple[float, ...]) -> RangingPrecision:
     """Range the panels (module doc) with ``physics`` (:class:`scanner_sim.survey.chunk.Physics`: a muls batch ->
-    records and ranging) of ``instrument`` and tabulate the precision."""
+    records and ranging, called with ``explain_dropouts=False``: the table reads the returns only) of ``instrument``
+    and tabulate the precision."""
     ranges = np.asarray(ranges_m, float)
     grid_r, grid_rho = np.meshgrid(ranges, np.asarray(REFLECTANCES), indexing="ij")
     truth = np.repeat(grid_r.ravel(), SHOTS)
     rho = np.repeat(grid_rho.ravel(), SHOTS)
     timed = echo_range_m(truth, np.hypot(truth, instrument.receiver.offset_m))  # out to the panel, back to the receiver
     batch = PulseBatch.flat_target(instrument, timed, rho, pulse_id=FIRST_SHOT_ID + np.arange(truth.size))
-    _, ranging = physics(batch, explain_dropouts=False)  # the table reads the returns only
+    _, ranging = physics(batch, explain_dropouts=False)
     r = ranging.returns
     echo = r.echo_index >= 0
     later = ranging.return_number > 1

@@ -55,7 +55,7 @@ def test_ranging_table_times_its_panels_as_the_pass_times_its_echoes(tmp_path):
     lag_pass = np.median(timed[nadir] / weight[nadir] - sight.axis_range_m[nadir])
     distance = float(np.median(sight.axis_range_m[nadir]))
 
-    def perfect(batch):  # every panel's echo ranged exactly where the echo is timed, on channel 1
+    def perfect(batch, explain_dropouts=True):  # every panel's echo ranged exactly where the echo is timed, on channel 1
         k = batch.return_pulse.size
         returns = type("Returns", (), {"range_m": batch.return_range_m, "pulse": batch.return_pulse,
                                        "echo_index": np.arange(k), "channel": np.ones(k, np.int64),
