@@ -121,7 +121,7 @@ def find_peaks(model: OpticalModel, batch: PulseBatch, records: Waveforms, echoe
     out = PeakSlots.empty(n_windows * n_chan)
     fit = FIT_CODES[proc.peak_fit]
     settings = PeakSettings(proc.threshold_sigma, proc.tail_tolerance, float(dig.max_code), fit,
-                            ins.pulse.peak_delay_s, float(ins.pulse(ins.pulse.peak_delay_s)))
+                            ins.pulse.peak_delay_s, ins.pulse.peak_per_s)
     synthesised = records.synthesised if records.synthesised is not None else np.ones((n_windows, n_chan), np.bool_)
     handed = records.baseline_w is not None
     baselines = records.baseline_w if handed else np.empty((0, 0))

@@ -135,7 +135,8 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     chans = model.channels
     signal = slice(1, len(ins.channels) + 1)
     k = ins.processing.threshold_sigma
-    faint = _too_faint_to_see(model, pulse_of, energy, todo, k)
+    dark = np.sqrt(chans.dark_std_lsb[signal] ** 2 + 1.0 / 12.0)  # each signal channel's dark noise and rounding [LSB]
+    faint = _too_faint_to_see(model, pulse_of, energy, todo, k * dark)
     cause[todo[faint]] = DROPOUT_CAUSES.index("below_threshold")
     todo = todo[~faint]
     if todo.size == 0:
@@ -154,9 +155,8 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
     hidden_if_open = np.zeros(todo.size, bool)
     for c in range(1, len(ins.channels) + 1):
         open_at_peak = (chans.gate_open_s[c] <= t_peak) & (t_peak < chans.gate_close_s[c])
-        dark = math.sqrt(chans.dark_std_lsb[c] ** 2 + 1.0 / 12.0)
-        sigma = np.sqrt(dark**2 + chans.shot_lsb2_per_w[c] * base_peak)
-        visible_alone = chans.lsb_per_w[c] * echo_peak > k * dark  # MULS Eqs. 12-13 in LSB
+        sigma = np.sqrt(dark[c - 1] ** 2 + chans.shot_lsb2_per_w[c] * base_peak)
+        visible_alone = chans.lsb_per_w[c] * echo_peak > k * dark[c - 1]  # MULS Eqs. 12-13 in LSB
         under_column = chans.lsb_per_w[c] * resid_peak <= k * sigma
         masked |= open_at_peak & visible_alone & (under_column | clipped[:, c - 1])
         seen_open |= open_at_peak & visible_alone
@@ -178,17 +178,16 @@ def dropout_causes(model: OpticalModel, batch: PulseBatch, has_return, saturated
 FAINT_MARGIN = 0.01
 
 
-def _too_faint_to_see(model: OpticalModel, pulse_of, energy_j, todo, k: float) -> np.ndarray:
+def _too_faint_to_see(model: OpticalModel, pulse_of, energy_j, todo, threshold_lsb) -> np.ndarray:
     """(len(todo),) bool: the pulses ``todo`` whose echoes (``energy_j`` [J] of batch pulse ``pulse_of``, each (m,))
-    could not clear k sigma of any signal channel's dark noise and rounding even all at their pulse's peak. No echo
+    could not clear any signal channel's ``threshold_lsb`` (channels,) (k sigma of its dark noise and rounding) even
+    all at their pulse's peak. No echo
     sum exceeds its energies' total times the unit-area pulse's maximum, so no channel sees their echo alone (MULS
     Eqs. 12-13 in LSB): they are ``below_threshold`` whatever the column does, without their span."""
-    chans = model.channels
-    signal = slice(1, len(model.instrument.channels) + 1)
+    lsb_per_w = model.channels.signal().lsb_per_w
     total_j = np.bincount(pulse_of, weights=np.maximum(energy_j, 0.0))[todo]  # a lit pulse has echoes
     most_w = total_j * model.instrument.pulse.peak_per_s * (1.0 + FAINT_MARGIN)
-    dark = np.sqrt(chans.dark_std_lsb[signal] ** 2 + 1.0 / 12.0)
-    return ~np.any(chans.lsb_per_w[signal] * most_w[:, None] > k * dark, axis=1)
+    return ~np.any(lsb_per_w * most_w[:, None] > threshold_lsb, axis=1)
 
 
 @kernel(inline="always")

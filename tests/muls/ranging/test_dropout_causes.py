@@ -313,7 +313,7 @@ def test_pulses_too_faint_to_see_keep_the_causes_their_spans_give(monkeypatch):
 
     monkeypatch.setattr(returns, "_too_faint_to_see", recorded)
     _, ranging = simulate(model, batch, seed=4)
-    monkeypatch.setattr(returns, "_too_faint_to_see", lambda model, pulse_of, energy, todo, k: np.zeros(todo.size, bool))
+    monkeypatch.setattr(returns, "_too_faint_to_see", lambda model, pulse_of, energy, todo, threshold: np.zeros(todo.size, bool))
     _, every_span = simulate(model, batch, seed=4)
     causes = ranging.dropout_cause
     assert 0 < sum(set_aside) < np.count_nonzero(causes >= 0)
