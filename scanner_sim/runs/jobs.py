@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import json
 import uuid
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -120,48 +121,107 @@ def run_jobs(jobs: Sequence[PassJob], out_dir: str | Path, client=None, *, retri
     reported failed and the others go on. Without one, they run here one after another, and an error
     propagates.
     """
-    out = Path(out_dir)
     names = [job.name for job in jobs]
     if len(set(names)) != len(names):
         raise ValueError(f"passes: folder names repeat ({sorted({n for n in names if names.count(n) > 1})})")
     if not checked:
         check_jobs(jobs)
-    outcomes: dict[int, PassOutcome] = {}
-    todo = []
+    queue = PassQueue(out_dir, client, retries=retries, redo=redo, progress=progress, checked=True)
     for k, job in enumerate(jobs):
-        summary = None if redo else completed_summary(out / job.name, job)
-        if summary is not None:
-            outcomes[k] = PassOutcome(job, "skipped", summary)
-        else:
-            todo.append(k)
-    bar = tqdm(total=len(jobs), initial=len(jobs) - len(todo), unit="pass", disable=not progress, desc="passes")
-    if client is None:
-        for k in todo:
-            stop_if_signalled()
-            bar.set_postfix_str(jobs[k].name)
-            outcomes[k] = PassOutcome(jobs[k], "ran", write_pass(out / jobs[k].name, compute_pass(jobs[k])))
-            bar.update()
-    else:
-        from dask.distributed import as_completed
-
-        token = uuid.uuid4().hex[:8]
-        futures = {submit_pass(client, jobs[k], retries=retries, token=token): k for k in todo}
-        for future in as_completed(futures):
-            stop_if_signalled()
-            k = futures[future]
-            try:
-                files = future.result()
-                if isinstance(files, Refused):  # a bad input or set-up, tried once
-                    outcomes[k] = PassOutcome(jobs[k], "failed", None, files.error)
-                else:
-                    outcomes[k] = PassOutcome(jobs[k], "ran", write_pass(out / jobs[k].name, files))
-            except Exception as exc:  # the task's own error, after its retries; the others go on
-                outcomes[k] = PassOutcome(jobs[k], "failed", None, f"{type(exc).__name__}: {exc}".splitlines()[0])
-            future.release()
-            bar.set_postfix_str(jobs[k].name)
-            bar.update()
-    bar.close()
+        queue.put(job, k)
+    outcomes = dict(queue.finished())
+    queue.close()
     return [outcomes[k] for k in range(len(jobs))]
+
+
+class PassQueue:
+    """Passes handed in over time (:meth:`put`) and taken back as each finishes (:meth:`next_finished`), written into
+    ``out_dir/JOB.name/`` as :func:`run_jobs` writes them. With a Dask ``client`` a pass runs as a task from the moment
+    it is put, so that a caller can hand in the next pass of one chain of passes while those of the others still run
+    (a plan's confirmations: docs/planning.md); a pass whose task fails (after ``retries``) comes back failed. Without
+    one, a pass runs here when it is taken, the earliest put first, and an error propagates. A pass complete in its
+    folder already comes back ``skipped`` (unless ``redo``). Each pass's set-up is checked as it is put
+    (:func:`check_jobs`, as one of several passes into the folder) unless the caller did (``checked``)."""
+
+    def __init__(self, out_dir: str | Path, client=None, *, retries: int = DEFAULT_RETRIES, redo: bool = False,
+                 progress: bool = True, checked: bool = False):
+        self.out, self.client, self.retries, self.redo, self.checked = Path(out_dir), client, retries, redo, checked
+        self._token = uuid.uuid4().hex[:8]
+        self._names: set[str] = set()
+        self._skipped: deque = deque()  # (key, outcome) of passes complete already
+        self._here: deque = deque()  # (key, job) to run in this process, without a client
+        self._tasks: dict = {}  # future -> (key, job)
+        self._finishing = None  # dask's as_completed over the tasks, from the first submitted
+        self._bar = tqdm(total=0, unit="pass", disable=not progress, desc="passes")
+
+    def put(self, job: PassJob, key=None) -> None:
+        """Hand in ``job``; :meth:`next_finished` gives it back with ``key`` (default its name)."""
+        if job.name in self._names:
+            raise ValueError(f"passes: folder names repeat ({job.name!r})")
+        if not self.checked:
+            check_jobs([job], passes=2)
+        self._names.add(job.name)
+        key = job.name if key is None else key
+        self._bar.total += 1
+        self._bar.refresh()
+        summary = None if self.redo else completed_summary(self.out / job.name, job)
+        if summary is not None:
+            self._skipped.append((key, PassOutcome(job, "skipped", summary)))
+        elif self.client is None:
+            self._here.append((key, job))
+        else:
+            from dask.distributed import as_completed
+
+            future = submit_pass(self.client, job, retries=self.retries, token=self._token)
+            self._tasks[future] = (key, job)
+            if self._finishing is None:
+                self._finishing = as_completed([future])
+            else:
+                self._finishing.add(future)
+
+    def pending(self) -> int:
+        """Passes put and not yet taken back."""
+        return len(self._skipped) + len(self._here) + len(self._tasks)
+
+    def next_finished(self) -> tuple:
+        """(key, :class:`PassOutcome`) of the next pass to finish (a skipped one at once); waits for it. IndexError
+        when none is pending."""
+        if self._skipped:
+            return self._taken(*self._skipped.popleft())
+        stop_if_signalled()
+        if self._here:
+            key, job = self._here.popleft()
+            self._bar.set_postfix_str(job.name)
+            return self._taken(key, PassOutcome(job, "ran", write_pass(self.out / job.name, compute_pass(job))))
+        if not self._tasks:
+            raise IndexError("next_finished: no pass is pending")
+        future = next(self._finishing)
+        stop_if_signalled()
+        key, job = self._tasks.pop(future)
+        try:
+            files = future.result()
+            if isinstance(files, Refused):  # a bad input or set-up, tried once
+                outcome = PassOutcome(job, "failed", None, files.error)
+            else:
+                outcome = PassOutcome(job, "ran", write_pass(self.out / job.name, files))
+        except Exception as exc:  # the task's own error, after its retries; the others go on
+            outcome = PassOutcome(job, "failed", None, f"{type(exc).__name__}: {exc}".splitlines()[0])
+        future.release()
+        self._bar.set_postfix_str(job.name)
+        return self._taken(key, outcome)
+
+    def finished(self):
+        """(key, outcome) of every pending pass, as each finishes."""
+        while self.pending():
+            yield self.next_finished()
+
+    def close(self) -> None:
+        """Close the progress bar."""
+        self._bar.close()
+
+    def _taken(self, key, outcome: PassOutcome) -> tuple:
+        self._bar.update()
+        return key, outcome
 
 
 def run_pass_segmented(config: SceneConfig, out_dir: str | Path, options: PassOptions = PassOptions(),

@@ -15,7 +15,7 @@ from scanner_sim.config import SceneConfig
 from scanner_sim.metrics import s44
 from scanner_sim.metrics.coverage import COVERED, GAP_CAUSES, NOT_REACHED
 from scanner_sim.metrics.feature_cubes import with_cubes
-from scanner_sim.runs.jobs import run_jobs
+from scanner_sim.runs.jobs import PassQueue
 from scanner_sim.runs.tasks import PassJob
 from scanner_sim.studies.planning_prediction import Candidate, line_count, make_candidate, survey_time_s
 from scanner_sim.studies.planning_sampling import SiteArea, all_ran, flown_config, pass_grid
@@ -103,87 +103,99 @@ def confirm_plans(config, out: Path, dask, area, ladders, profiles, k, factor, n
     """Per water: confirm the cheapest feasible candidate by a pass, on a shortfall the next (up to
     MAX_CONFIRMATIONS); once one is confirmed, confirm the plan of one line fewer at its altitude and speed, and
     while that meets the order too, take it and go one line fewer again (the prediction errs on the safe side), up to
-    MAX_DESCENT. ``rate``: the pulses a second the passes fire [Hz]; ``cubes``: feature cubes placed in each
-    confirmation of an order that asks feature detection (:func:`_cubes`). Returns per water (chosen, confirmation), the
-    chosen plans' confirmation configs by water, and the passes run."""
+    MAX_DESCENT. Each water's confirmations are a chain of their own: its next pass is handed in as soon as its last
+    is judged, while the other waters' passes run (:class:`~scanner_sim.runs.jobs.PassQueue`), so the result does not
+    depend on which finishes first. ``rate``: the pulses a second the passes fire [Hz]; ``cubes``: feature cubes placed
+    in each confirmation of an order that asks feature detection (:func:`_cubes`). Returns per water (chosen,
+    confirmation), the chosen plans' confirmation configs by water, and the passes run."""
     results: dict = {w: (None, None) for w in ladders}
     configs: dict = {}
     mode = {w: "search" for w in ladders}
     steps = {w: 0 for w in ladders}
     chosen_at: dict = {}
-    runs = 0
-    while True:
-        round_jobs = {}
-        for w, cands in ladders.items():
+    queue = PassQueue(out, dask, redo=redo, progress=progress)
+
+    def hand_in(w) -> None:
+        """Put water w's next confirmation in the queue, or mark the water done."""
+        cands = ladders[w]
+        if mode[w] == "search":
+            feasible = [i for i, c in enumerate(cands) if c.status == "feasible"]
+            if not feasible or steps[w] >= MAX_CONFIRMATIONS:
+                mode[w] = "done"
+                return
+            i = feasible[0]
+        elif mode[w] == "descend":
+            c = cands[chosen_at[w]]
+            if c.lines <= 2 or steps[w] >= MAX_DESCENT:
+                mode[w] = "done"
+                return
+            spacing = area.size_m[1] / (c.lines - 2)
+            same = [j for j, d in enumerate(cands) if (d.altitude_m, d.speed_m_s, d.lines)
+                    == (c.altitude_m, c.speed_m_s, c.lines - 1)]
+            if same:
+                i = same[0]
+            else:
+                cands.append(make_candidate(profiles[w, c.altitude_m, c.speed_m_s], area, spacing, factor, need))
+                i = len(cands) - 1
+        else:
+            return
+        c = cands[i]
+        flown = confirm_area(area, c, rate, max_pulses)
+        cfg = plan_config(config, w, flown, c).with_overrides({"output.las": True})
+        placed = _cubes(cfg, k, cubes)
+        if placed:
+            cfg = with_cubes(cfg, placed)
+        queue.put(PassJob(f"confirm-{w}-{c.altitude_m:g}m-{c.speed_m_s:g}mps-{c.spacing_m:g}m", cfg,
+                          PassOptions(progress=False, render=False, write_scene=False)), (w, i, flown, placed))
+
+    for w in ladders:
+        hand_in(w)
+    taken = []
+    for (w, i, flown, placed), outcome in queue.finished():
+        taken.append(outcome)
+        if outcome.status == "failed":  # the passes under way finish and are kept; none is handed in after it
+            mode.update(dict.fromkeys(mode, "done"))
+            continue
+        job = outcome.job
+        steps[w] += 1
+        c = ladders[w][i]
+        grid = pass_grid(out / job.name)
+        reading = judged(grid, area_cells(grid, flown, c.spacing_m, built), k)
+        detection = _detection(outcome.summary, placed)
+        met = (reading["compliant_share"] >= need and reading["covered_share"] >= need
+               and (detection is None or detection["detected_share"] >= need))
+        confirmation = {"pass": job.name, "whole_area": flown == area,
+                        "area": {"center_m": list(flown.center_m), "size_m": list(flown.size_m)},
+                        "pulses": outcome.summary["pulses"], "met": met, **reading, "features": detection}
+        short = (f"compliance {100 * reading['compliant_share']:.1f} %, coverage "
+                 f"{100 * reading['covered_share']:.1f} %"
+                 + (f", features detected {detection['detected']} of {detection['placed']}" if detection else "")
+                 + f" (need {100 * need:g} %)")
+        if met:
+            if w in chosen_at:  # the one before, a line more, met too: costlier
+                before = ladders[w][chosen_at[w]]
+                ladders[w][chosen_at[w]] = replace(before, status="rejected", reason=(
+                    f"costlier than the chosen plan, one line fewer, which also met the order "
+                    f"({duration(before.survey_time_s)} against {duration(c.survey_time_s)})"))
+            how = ("confirmed a line fewer than a confirmed plan (the prediction erred safe)" if w in chosen_at
+                   else "the least-time candidate predicted to meet the order, confirmed")
+            ladders[w][i] = replace(c, status="chosen", reason=f"chosen: {how}; one line fewer confirmed short or "
+                                    "not possible", confirmed=confirmation)
+            results[w], configs[w], chosen_at[w] = (ladders[w][i], confirmation), job.config, i
             if mode[w] == "search":
-                feasible = [i for i, c in enumerate(cands) if c.status == "feasible"]
-                if not feasible or steps[w] >= MAX_CONFIRMATIONS:
-                    mode[w] = "done"
-                    continue
-                i = feasible[0]
-            elif mode[w] == "descend":
-                c = cands[chosen_at[w]]
-                if c.lines <= 2 or steps[w] >= MAX_DESCENT:
-                    mode[w] = "done"
-                    continue
-                spacing = area.size_m[1] / (c.lines - 2)
-                same = [j for j, d in enumerate(cands) if (d.altitude_m, d.speed_m_s, d.lines)
-                        == (c.altitude_m, c.speed_m_s, c.lines - 1)]
-                if same:
-                    i = same[0]
-                else:
-                    cands.append(make_candidate(profiles[w, c.altitude_m, c.speed_m_s], area, spacing, factor, need))
-                    i = len(cands) - 1
+                mode[w], steps[w] = "descend", 0
+        else:
+            prefix = "one line fewer than the chosen plan: " if mode[w] == "descend" else ""
+            ladders[w][i] = replace(c, status="rejected", reason=f"{prefix}confirmed short: {short}",
+                                    confirmed=confirmation)
+            if mode[w] == "descend":
+                mode[w] = "done"
             else:
-                continue
-            c = cands[i]
-            flown = confirm_area(area, c, rate, max_pulses)
-            cfg = plan_config(config, w, flown, c).with_overrides({"output.las": True})
-            placed = _cubes(cfg, k, cubes)
-            if placed:
-                cfg = with_cubes(cfg, placed)
-            round_jobs[w] = (i, flown, placed, PassJob(f"confirm-{w}-{c.altitude_m:g}m-{c.speed_m_s:g}mps-{c.spacing_m:g}m", cfg,
-                                               PassOptions(progress=False, render=False, write_scene=False)))
-        if not round_jobs:
-            break
-        outcomes = all_ran(run_jobs([j for *_, j in round_jobs.values()], out, dask, redo=redo, progress=progress))
-        runs += len(outcomes)
-        for (w, (i, flown, placed, job)), outcome in zip(round_jobs.items(), outcomes):
-            steps[w] += 1
-            c = ladders[w][i]
-            grid = pass_grid(out / job.name)
-            reading = judged(grid, area_cells(grid, flown, c.spacing_m, built), k)
-            detection = _detection(outcome.summary, placed)
-            met = (reading["compliant_share"] >= need and reading["covered_share"] >= need
-                   and (detection is None or detection["detected_share"] >= need))
-            confirmation = {"pass": job.name, "whole_area": flown == area,
-                            "area": {"center_m": list(flown.center_m), "size_m": list(flown.size_m)},
-                            "pulses": outcome.summary["pulses"], "met": met, **reading, "features": detection}
-            short = (f"compliance {100 * reading['compliant_share']:.1f} %, coverage "
-                     f"{100 * reading['covered_share']:.1f} %"
-                     + (f", features detected {detection['detected']} of {detection['placed']}" if detection else "")
-                     + f" (need {100 * need:g} %)")
-            if met:
-                if w in chosen_at:  # the one before, a line more, met too: costlier
-                    before = ladders[w][chosen_at[w]]
-                    ladders[w][chosen_at[w]] = replace(before, status="rejected", reason=(
-                        f"costlier than the chosen plan, one line fewer, which also met the order "
-                        f"({duration(before.survey_time_s)} against {duration(c.survey_time_s)})"))
-                how = ("confirmed a line fewer than a confirmed plan (the prediction erred safe)" if w in chosen_at
-                       else "the least-time candidate predicted to meet the order, confirmed")
-                ladders[w][i] = replace(c, status="chosen", reason=f"chosen: {how}; one line fewer confirmed short or "
-                                        "not possible", confirmed=confirmation)
-                results[w], configs[w], chosen_at[w] = (ladders[w][i], confirmation), job.config, i
-                if mode[w] == "search":
-                    mode[w], steps[w] = "descend", 0
-            else:
-                prefix = "one line fewer than the chosen plan: " if mode[w] == "descend" else ""
-                ladders[w][i] = replace(c, status="rejected", reason=f"{prefix}confirmed short: {short}",
-                                        confirmed=confirmation)
-                if mode[w] == "descend":
-                    mode[w] = "done"
-                else:
-                    results[w] = (None, confirmation)
+                results[w] = (None, confirmation)
+        hand_in(w)
+    queue.close()
+    all_ran(taken)
+    configs = {w: configs[w] for w in ladders if w in configs}  # in the waters' order, whichever finished first
     for w, cands in ladders.items():
         chosen = results[w][0]
         for i, c in enumerate(cands):
@@ -193,7 +205,7 @@ def confirm_plans(config, out: Path, dask, area, ladders, profiles, k, factor, n
                     f"{duration(chosen.survey_time_s)})" if chosen else f"not confirmed: {MAX_CONFIRMATIONS} "
                     "cheaper candidates were confirmed short first"))
         cands.sort(key=lambda c: (c.status != "chosen", c.survey_time_s, c.altitude_m, c.speed_m_s))
-    return results, configs, runs
+    return results, configs, len(taken)
 
 
 def _cubes(config: SceneConfig, k: int, count: int) -> list[dict]:

@@ -77,14 +77,26 @@ def test_the_chosen_plan_meets_special_order_and_the_next_cheaper_falls_short(sp
     assert (again / "coverage_grid.npz").read_bytes() == (out / name / "coverage_grid.npz").read_bytes()
 
 
+#: The plans over clean ocean and turbid harbour water at 2 and 3 m, 1 m/s, soundings alone (no cubes).
+TWO_WATERS = (["clean_ocean", "turbid_harbor"], [2.0, 3.0], [1.0])
+
+
+@pytest.fixture(scope="module")
+def two_waters(site, turbid_passes):
+    """The serial plan, and its confirmations' points.las bytes by pass as it left them (the blind-zone test's plan,
+    with cubes, flies a confirmation of the same name into the same folder)."""
+    plan = plan_survey(site, "special", *TWO_WATERS, out_dir=turbid_passes, feature_cubes=0, **SAMPLES)
+    names = (w.confirmation["pass"] for w in plan.waters)
+    return plan, {name: (turbid_passes / name / "points.las").read_bytes() for name in names}
+
+
 @pytest.mark.slow
-def test_the_chosen_spacing_follows_the_swath_each_water_measured(site, turbid_passes):
+def test_the_chosen_spacing_follows_the_swath_each_water_measured(two_waters):
     """At 3 m, turbid harbour water narrows the swath that meets Special Order (backscatter masks the far beams) and
     its neighbours' poor far soundings spoil the overlap, where clean ocean water keeps the scan's geometric swath: the
     turbid plan drops to 2 m and a narrower line spacing than the clean one over the same site. Soundings alone
     (no cubes): at 2 m the top of a 1 m cube lies in the lidar's blind zone, which the next test shows."""
-    plan = plan_survey(site, "special", ["clean_ocean", "turbid_harbor"], [2.0, 3.0], [1.0], out_dir=turbid_passes,
-                       feature_cubes=0, **SAMPLES)
+    plan, _ = two_waters
     clean, turbid = plan.waters
     swath = {(p.water, p.altitude_m): p.swath_m(0.95) for p in plan.profiles}
     assert swath["turbid_harbor", 3.0] < swath["clean_ocean", 3.0]
@@ -102,6 +114,18 @@ def test_cubes_in_the_blind_zone_make_a_water_not_achievable_and_say_why(site, t
     turbid = plan.waters[0]
     assert not turbid.achievable
     assert "feature detection" in turbid.limiting_cause and "blind_zone" in turbid.limiting_cause
+
+
+@pytest.mark.slow
+def test_confirmations_on_two_workers_give_the_plan_of_the_serial_run(site, two_waters, tmp_path):
+    """On a cluster of two workers each water's confirmations are a chain handed in as its last one is judged, whichever
+    water's pass finishes first (no longer in rounds that waited for every water): the plan is the serial run's, and
+    its confirmation passes the same bytes."""
+    serial, points = two_waters
+    plan = plan_survey(site, "special", *TWO_WATERS, out_dir=tmp_path, feature_cubes=0, workers=2, **SAMPLES)
+    assert plan.as_json() == serial.as_json()
+    assert plan.confirm_configs == serial.confirm_configs
+    assert {name: (tmp_path / name / "points.las").read_bytes() for name in points} == points
 
 
 def test_bad_inputs_are_refused_before_anything_is_written(site, tmp_path):
