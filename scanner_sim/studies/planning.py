@@ -154,9 +154,11 @@ def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_o
     lines = choose_sample_lines(built, area, sample_length_m, half_band, sample_lines)
     trim = max(2.0, 2.0 * s44.order_scales()[k].cell_m)  # the line's ends: the scan's run-in and whole order cells
     combos = [(w, a, v) for w in waters for a in altitudes for v in speeds]
+    # line by line: the passes of one line share its scene (a raster seabed's window), which a worker then keeps from
+    # one pass to the next with its BVH, instead of reading another from the cache for every pass
     jobs = [PassJob(f"sample-{w}-{a:g}m-{v:g}mps-{i + 1}", sample_config(config, w, a, v, line),
                     PassOptions(progress=False, render=False, write_scene=False))
-            for w, a, v in combos for i, line in enumerate(lines)]
+            for i, line in enumerate(lines) for w, a, v in combos]
     from scanner_sim.io.run_dir import hold_output
 
     with _folder(out_dir) as out, hold_output(out), maybe_client(client, scheduler, workers, announce=progress) as dask:
@@ -164,7 +166,7 @@ def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_o
         profiles = []
         for j, (w, a, v) in enumerate(combos):
             parts = [profile_of(pass_grid(out / o.job.name), line, half_band, trim)
-                     for o, line in zip(outcomes[j * len(lines):(j + 1) * len(lines)], lines)]
+                     for o, line in zip(outcomes[j::len(combos)], lines)]
             cells, by_order, covered, gaps, soundings = (np.sum(x, axis=0) for x in zip(*parts))
             offsets = (np.arange(cells.size) + 0.5) * BIN_M - half_band
             profiles.append(Profile(w, a, v, offsets, cells, by_order[k], covered,
