@@ -19,8 +19,7 @@ from scanner_sim.cli import main
 from scanner_sim.config import SCENES_DIR, ConfigError, load_scene
 from scanner_sim.runs.campaign import load_campaign, parse_campaign
 from scanner_sim.runs.cluster import dask_client
-from scanner_sim.runs.jobs import TIMING_KEYS, PassQueue, run_pass_segmented
-from scanner_sim.runs.tasks import PassJob
+from scanner_sim.runs.jobs import TIMING_KEYS, run_pass_segmented
 from scanner_sim.survey.pipeline import run_pass
 from scanner_sim.survey.setup import PassOptions
 
@@ -161,26 +160,6 @@ def test_a_rerun_skips_complete_passes_and_redoes_the_rest(client, example_run, 
     assert (out / campaign.jobs[3].name / "points.las").stat().st_mtime_ns == kept
     for job in campaign.jobs:
         assert_same_pass(out / job.name, example_run / job.name)
-
-
-def test_a_queue_gives_passes_back_as_they_finish_and_runs_one_put_meanwhile(client, tmp_path):
-    """PassQueue (the chains of a plan's confirmations, docs/planning.md): a short pass put after a long one comes back
-    first, and a pass put while the long one still runs starts at once on the free worker and comes back before it."""
-    config = load_scene("cable_survey")
-
-    def job(name, fidelity, pulses):
-        return PassJob(name, config, PassOptions(fidelity=fidelity, max_pulses=pulses, progress=False, render=False,
-                                                 write_scene=False))
-
-    queue = PassQueue(tmp_path, client, progress=False)
-    queue.put(job("long", "balanced", 200_000))
-    queue.put(job("short", "fast", 1_000))
-    key, first = queue.next_finished()
-    assert key == "short" and first.status == "ran"
-    queue.put(job("then", "fast", 1_000))
-    assert [(k, o.status) for k, o in queue.finished()] == [("then", "ran"), ("long", "ran")]
-    queue.close()
-    assert all((tmp_path / name / "summary.json").is_file() for name in ("long", "short", "then"))
 
 
 def test_coverage_on_the_cluster_equals_coverage_in_process(client, tmp_path):
