@@ -14,10 +14,8 @@ from ..infra.runtime import kernel
 from ..optics.optical_model import Echoes, OpticalModel, PulseBatch
 from ..optics.sample_kernels import add_pulse_steps, cut_column_power, uncut_column_value
 from ..receiver.digitiser import Waveforms
+from .causes import DROPOUT_CAUSES, NO_DROPOUT
 from .peaks import Peaks, find_peaks
-
-DROPOUT_CAUSES = ("no_hit", "blind_zone", "below_threshold", "saturated", "masked_by_backscatter", "outside_gate")
-NO_DROPOUT = -1
 
 
 @dataclass(frozen=True)

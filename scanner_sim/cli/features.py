@@ -11,7 +11,7 @@ from scanner_sim.fidelity import FIDELITY_LEVELS
 
 def _add_features(p):
     from scanner_sim.metrics.coverage import CoverageSettings
-    from scanner_sim.studies.features import DEFAULT_COUNT, DEFAULT_SIZES_M
+    from scanner_sim.metrics.feature_cubes import DEFAULT_COUNT, DEFAULT_SIZES_M
 
     p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--cubes-m", nargs="+", type=positive_float("cubes_m"), default=list(DEFAULT_SIZES_M), metavar="M",

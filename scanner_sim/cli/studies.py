@@ -75,7 +75,7 @@ def _cmd_overlap(args) -> int:
 
 # -- tradeoff -----------------------------------------------------------------------------------------------
 def _add_tradeoff(p):
-    from scanner_sim.studies.tradeoff import DEFAULT_PULSES, DEFAULT_REPEAT, DEFAULT_WAVEFORM_PULSES, KNOBS
+    from scanner_sim.studies.defaults import DEFAULT_PULSES, DEFAULT_REPEAT, DEFAULT_WAVEFORM_PULSES, KNOBS
 
     p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--levels", nargs="+", choices=list(FIDELITY_LEVELS), default=list(FIDELITY_LEVELS),
@@ -132,7 +132,7 @@ def _cmd_tradeoff(args) -> int:
 # -- coverage -----------------------------------------------------------------------------------------------
 def _add_coverage(p):
     from scanner_sim.metrics.coverage import CoverageSettings
-    from scanner_sim.studies.coverage_study import DEFAULT_INSTRUMENTS, DEFAULT_WATERS, GATE_MODES, INSTRUMENTS
+    from scanner_sim.studies.defaults import DEFAULT_INSTRUMENTS, DEFAULT_WATERS, GATE_MODES, INSTRUMENTS
 
     p.add_argument("scene", nargs="?", default="cable_survey", type=nonempty(), help="shipped scene name or YAML path")
     p.add_argument("--waters", nargs="+", default=list(DEFAULT_WATERS), metavar="WATER", type=nonempty(),
@@ -286,8 +286,7 @@ def _cmd_campaign(args) -> int:
 # -- plan ---------------------------------------------------------------------------------------------------
 def _add_plan(p):
     from scanner_sim.metrics.s44 import ORDER_NAMES
-    from scanner_sim.studies.coverage_study import DEFAULT_WATERS
-    from scanner_sim.studies.planning import DEFAULT_REQUIRED_SHARE
+    from scanner_sim.studies.defaults import DEFAULT_REQUIRED_SHARE, DEFAULT_WATERS
 
     p.add_argument("scene", type=nonempty(), help="shipped scene name or YAML path (a raster or procedural seabed)")
     p.add_argument("--order", required=True, type=nonempty(), metavar="ORDER",

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from muls.infra.errors import ParameterError
-from muls.ranging.returns import DROPOUT_CAUSES
+from muls.ranging.causes import DROPOUT_CAUSES
 from scanner_sim.metrics import s44
 
 #: Why a pulse reaching a bin gave no valid point (index = failure code).

@@ -25,15 +25,12 @@ from scanner_sim.metrics.coverage import CoverageSettings
 from scanner_sim.runs.cluster import maybe_client
 from scanner_sim.runs.jobs import run_jobs
 from scanner_sim.runs.tasks import PassJob
+from scanner_sim.studies.defaults import DEFAULT_INSTRUMENTS, DEFAULT_WATERS, GATE_MODES, INSTRUMENTS
 from scanner_sim.survey.setup import PassOptions
 from scanner_sim.survey.setup_cache import cached_scene
 
-INSTRUMENTS = ("mul2023", "single_channel", "coaxial")
-GATE_MODES = ("follow", "fixed")
-DEFAULT_WATERS = ("clean_ocean", "coastal_ocean", "turbid_harbor")
 #: The name that asks for the scene's own water (a preset, or a water given by its properties).
 SCENE_WATER = "scene"
-DEFAULT_INSTRUMENTS = ("mul2023", "single_channel")
 #: Picture size of each combination's point-cloud render in the study (the report embeds them all).
 STUDY_RENDER_SIZE = (960, 600)
 

@@ -41,6 +41,7 @@ from scanner_sim.metrics.coverage import GAP_CAUSES
 from scanner_sim.runs.cluster import maybe_client
 from scanner_sim.runs.jobs import run_jobs
 from scanner_sim.runs.tasks import PassJob
+from scanner_sim.studies.defaults import DEFAULT_REQUIRED_SHARE
 from scanner_sim.studies.planning_confirmation import DEFAULT_FEATURE_CUBES, confirm_plans, confirmed_cause
 from scanner_sim.studies.planning_prediction import Candidate, best_order_and_cause, ladder_candidates
 from scanner_sim.studies.planning_sampling import (
@@ -59,8 +60,6 @@ from scanner_sim.studies.planning_sampling import (
 from scanner_sim.survey.setup import PassOptions
 from scanner_sim.survey.setup_cache import cached_scene
 
-#: Share of the planned area on which the order must hold, by default.
-DEFAULT_REQUIRED_SHARE = 0.95  # assumption: S-44's 95 % confidence read over the area (docs/assumptions.md)
 #: Altitudes and speeds tried by default, as multiples of the scene's own.
 DEFAULT_ALTITUDE_FACTORS = (0.5, 1.0, 1.5)
 DEFAULT_SPEED_FACTORS = (0.5, 1.0)

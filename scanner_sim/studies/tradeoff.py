@@ -25,6 +25,7 @@ from scanner_sim.fidelity import FIDELITY_LEVELS, FidelityLevel
 from scanner_sim.io.run_dir import hold_output
 from scanner_sim.records.point_records import PointRecords
 from scanner_sim.studies import accuracy
+from scanner_sim.studies.defaults import DEFAULT_PULSES, DEFAULT_REPEAT, DEFAULT_WAVEFORM_PULSES, KNOBS
 from scanner_sim.survey import sinks
 from scanner_sim.survey.georeference import NO_OBJECT
 from scanner_sim.survey.pipeline import load_sink_kernels, pass_chunks, stream_pass
@@ -33,24 +34,9 @@ from scanner_sim.world.scene import build_scene
 
 #: The level every other is measured against.
 REFERENCE = "reference"
-#: Single changes to ``balanced``, one knob each: name -> the field it sets and its value.
-KNOBS: dict[str, tuple[str, object]] = {
-    "subrays=1": ("subrays", 1), "subrays=7": ("subrays", 7), "subrays=37": ("subrays", 37),
-    "subrays=91": ("subrays", 91), "shadow_rays=off": ("shadow_rays", False), "record_mode=full": ("record_mode", "full"),
-    "column_cut=pulse": ("column_cut", "pulse"), "deciding_only=on": ("deciding_only", True),
-    "multiple_scattering=none": ("multiple_scattering", "none"),
-}
 #: Sub-rays of the reference run again at a finer resolution to show the reference has converged (the densest
 #: ring layout, beams.SUBRAY_COUNTS: 8 rings against the reference's 5).
 CONVERGENCE_SUBRAYS = 217
-#: Pulses each run simulates, by default, and of those, pulses whose waveforms are compared. On 2 shared cores
-#: ``scanner-sim tradeoff cable_survey`` (4 levels, 8 knobs, the convergence run, 3 timed passes) then takes 1.5-3 minutes
-#: (docs/fidelity.md).
-DEFAULT_PULSES = 30000
-#: Timed passes of each run, the fastest kept: one pass of 30,000 pulses lasts about a second, and on a shared
-#: machine two single passes of one level differ by up to a third.
-DEFAULT_REPEAT = 3
-DEFAULT_WAVEFORM_PULSES = 500
 WARM_UP_PULSES = 200
 #: Bytes a run keeps per pulse until the metrics are taken (every run is kept): its points (77 bytes each, about
 #: one a pulse), their hidden flags, its slot numbers and the copies made matching them. Measured: 237 bytes (peak
