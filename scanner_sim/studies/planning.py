@@ -41,7 +41,7 @@ from scanner_sim.metrics.coverage import GAP_CAUSES
 from scanner_sim.runs.cluster import maybe_client
 from scanner_sim.runs.jobs import run_jobs
 from scanner_sim.runs.tasks import PassJob
-from scanner_sim.studies.defaults import DEFAULT_REQUIRED_SHARE
+from scanner_sim.studies.defaults import DEFAULT_REQUIRED_SHARE, DEFAULT_WATERS
 from scanner_sim.studies.planning_confirmation import DEFAULT_FEATURE_CUBES, confirm_plans, confirmed_cause
 from scanner_sim.studies.planning_prediction import Candidate, best_order_and_cause, ladder_candidates
 from scanner_sim.studies.planning_sampling import (
@@ -124,7 +124,7 @@ def order_index(order: str) -> int:
     return s44.ORDER_NAMES.index(order)
 
 
-def plan_survey(scene, order: str = "special", waters=("clean_ocean", "coastal_ocean", "turbid_harbor"),
+def plan_survey(scene, order: str = "special", waters=DEFAULT_WATERS,
                 altitudes_m=None, speeds_m_s=None, *, required_share: float = DEFAULT_REQUIRED_SHARE,
                 sample_lines: int = 3, sample_length_m: float = 20.0, min_spacing_m: float = 0.5,
                 max_confirm_pulses: int = 2_000_000, feature_cubes: int = DEFAULT_FEATURE_CUBES,
